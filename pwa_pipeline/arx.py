@@ -1,0 +1,131 @@
+"""Shared prediction, simulation and scoring of ARX-structured models (PWA and linear)."""
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.utils.validation import check_is_fitted
+
+from ._typing import Float2D, Signals
+from ._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from .metrics import r2_score
+from .regressors import lagged_matrix, n_initial
+
+
+class ARXModelBase(BaseEstimator):
+    """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
+
+    Subclasses set ``na``, ``nb``, ``affine`` as parameters, the fitted ``n_inputs_`` and
+    ``n_outputs_``, and implement :meth:`_predict_phi`.
+    """
+
+    def _predict_phi(self, phi: Float2D) -> Float2D:
+        """y(k) for each row φ(k); shape (n, m)."""
+        raise NotImplementedError
+
+    @property
+    def n_initial_(self) -> int:
+        """Samples needed before the first prediction: max(na, nb)."""
+        return n_initial(self.na, self.nb)
+
+    def _experiments(self, u: Signals, y: Signals, y_name: str):
+        check_is_fitted(self)
+        pairs = as_experiments(u, y, y_name=y_name)
+        for ue, ye in pairs:
+            check_width(ue, self.n_inputs_, "u", "input(s)")
+            check_width(ye, self.n_outputs_, y_name, "output(s)")
+        return pairs
+
+    def predict(self, u: Signals, y: Signals) -> Float2D | list[Float2D]:
+        """One-step-ahead prediction ŷ(k) = f(φ(k)) from measured past outputs.
+
+        Parameters
+        ----------
+        u : array-like of shape (N, r), or a list of such arrays (one per experiment)
+        y : array-like of shape (N, m), or a list of such arrays
+            Measured outputs; only their past values enter φ(k).
+
+        Returns
+        -------
+        ndarray of shape (N, m), or a list of them
+            The first max(na, nb) rows are the given y; the rest are predictions.
+        """
+        pairs = self._experiments(u, y, "y")
+        n0 = self.n_initial_
+        out = []
+        for ue, ye in pairs:
+            yhat = ye.copy()
+            if ye.shape[0] > n0:
+                yhat[n0:] = self._predict_phi(lagged_matrix(ue, ye, self.na, self.nb, self.affine))
+            out.append(yhat)
+        return out if _is_experiment_list(y) else out[0]
+
+    def simulate(self, u: Signals, y_init: Signals) -> Float2D | list[Float2D]:
+        """Free-run simulation: φ(k) is built from the model's own past outputs.
+
+        Parameters
+        ----------
+        u : array-like of shape (N, r), or a list of such arrays
+        y_init : array-like of shape (n_init, m) with n_init ≥ max(na, nb), or a list
+            Initial outputs (a warm-up window); simulation starts at sample n_init.
+
+        Returns
+        -------
+        ndarray of shape (N, m), or a list of them
+            The first n_init rows are ``y_init``. A run that diverges to ±inf or NaN is
+            returned as it is (later rows non-finite), not raised.
+
+        Raises
+        ------
+        ValueError
+            If the input width differs from the fitted one, ``y_init`` has fewer than
+            max(na, nb) rows or more rows than u, or any value is non-finite.
+        """
+        check_is_fitted(self)
+        u_list = list(u) if _is_experiment_list(u) else [u]
+        y_list = list(y_init) if _is_experiment_list(y_init) else [y_init]
+        if len(u_list) != len(y_list):
+            raise ValueError(
+                f"u has {len(u_list)} experiment(s) but y_init has {len(y_list)}"
+            )
+        n0 = self.n_initial_
+        out = []
+        for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
+            ue, ye = as_signal(ue, "u"), as_signal(ye, "y_init")
+            check_width(ue, self.n_inputs_, "u", "input(s)")
+            check_width(ye, self.n_outputs_, "y_init", "output(s)")
+            if ye.shape[0] < n0:
+                raise ValueError(
+                    f"warm-up too short: y_init has {ye.shape[0]} row(s), the model needs at "
+                    f"least max(na, nb) = {n0}"
+                )
+            if ye.shape[0] > ue.shape[0]:
+                raise ValueError(
+                    f"y_init has {ye.shape[0]} rows but u only {ue.shape[0]} (experiment {i})"
+                )
+            out.append(self._free_run(ue, ye))
+        return out if _is_experiment_list(u) else out[0]
+
+    def _free_run(self, u: Float2D, y_init: Float2D) -> Float2D:
+        na, nb = self.na, self.nb
+        n_init, n = y_init.shape[0], u.shape[0]
+        y = np.empty((n, self.n_outputs_))
+        y[:n_init] = y_init
+        tail = [1.0] if self.affine else []
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(n_init, n):
+                phi = np.concatenate(
+                    [y[k - na : k][::-1].T.ravel(), u[k - nb : k][::-1].T.ravel(), tail]
+                )
+                y[k] = self._predict_phi(phi[None, :])[0]
+                if not np.all(np.isfinite(y[k])):
+                    y[k + 1 :] = np.nan
+                    break
+        return y
+
+    def score(self, u: Signals, y: Signals) -> float:
+        """Mean R² (eq. 22, standard form) of the one-step-ahead prediction over outputs."""
+        pairs = self._experiments(u, y, "y")
+        yhat = self.predict([p[0] for p in pairs], [p[1] for p in pairs])
+        n0 = self.n_initial_
+        y_true = np.vstack([p[1][n0:] for p in pairs])
+        y_pred = np.vstack([p[n0:] for p in yhat])
+        return float(np.mean(r2_score(y_true, y_pred)))
