@@ -77,9 +77,10 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 30) -> float:
 
     Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. DBSCAN runs at each (on
     one radius-neighbour graph computed once at the largest), and the largest ε giving the
-    most clusters wins. Over-splitting a mode is harmless where statistically
-    indistinguishable sub-models are merged afterwards; merging two modes is not repairable,
-    which the classic knee of the curve often does when one mode is much larger than another.
+    most clusters wins. Over-splitting a mode is harmless where sub-models that predict
+    alike are merged afterwards (as :class:`pwa_pipeline.identification.PWARX` does);
+    merging two modes is not repairable, and the classic knee of the curve does that when one
+    mode is much larger than another.
     """
     dist = k_distances(emb, min_pts)
     # Distances below 1e-6 of the parameters' size are rounding error (noise-free data).
@@ -87,12 +88,12 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 30) -> float:
     grid = np.unique(np.maximum(np.quantile(dist, np.linspace(0.02, 0.6, n_grid)), floor))
     graph = NearestNeighbors(radius=grid[-1]).fit(emb).radius_neighbors_graph(mode="distance")
     graph.data = np.maximum(graph.data, np.finfo(float).tiny)  # keep exact duplicates
-    best_eps, best_count = grid[-1], -1
-    for eps in grid:
-        count = DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max()
-        if count >= best_count:
-            best_eps, best_count = eps, count
-    return float(best_eps)
+    counts = [
+        DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max() + 1
+        for eps in grid
+    ]
+    best = max(range(len(grid)), key=lambda i: (counts[i], i))
+    return float(grid[best])
 
 
 def relabel_by_size(labels: np.ndarray) -> np.ndarray:

@@ -12,7 +12,8 @@ def literal_embedding(theta: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray of shape (n, d·m·(1 + m(m − 1)))
+    ndarray of shape (n, d·m²)
+        m columns and m(m − 1) differences of d entries each.
     """
     n, d, m = theta.shape
     cols = [theta[:, :, p] for p in range(m)]

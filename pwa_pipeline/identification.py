@@ -21,8 +21,8 @@ from .submodels import (
     margin_weights,
     cluster_centres,
     merge_indistinguishable,
-    own_cost,
     refine,
+    unexplained_cost,
 )
 
 
@@ -325,7 +325,8 @@ def _refined_submodels(
     3. A mode whose local sets were too few to form a cluster shows as rows no sub-model
        explains (normalised residual above the χ²(m) 99.9 % quantile): local models are
        estimated again among those rows alone, where local sets are purer, clustered, and the
-       new clusters join as sub-models, and step 2 repeats (at most three searches).
+       new clusters join as sub-models, and step 2 repeats (at most three searches, and only
+       while each leaves fewer rows unexplained).
     """
     min_size = max(reg.phi.shape[1] + 1, cfg.min_pts)
     limit = chi2.ppf(0.999, reg.target.shape[1])
@@ -333,6 +334,7 @@ def _refined_submodels(
     n_merged, n_iter, searches = 0, 0, 0
     if cfg.merge_tol is not None:
         labels, n_merged = _merge_clustered(reg, labels, cfg.merge_tol)
+    best = None
     while True:
         thetas, labels, margin, sweeps = refine(reg.phi, reg.target, labels, min_size,
                                                 cfg.n_refine, cfg.svm_c)
@@ -342,7 +344,12 @@ def _refined_submodels(
             if more:
                 labels, n_merged = merged, n_merged + more
                 continue
-        poor = own_cost(reg.phi, reg.target, thetas, labels) > limit
+        polished = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)[0]
+        poor = unexplained_cost(reg.phi, reg.target, polished) > limit
+        if best is not None and poor.sum() >= best[0]:
+            labels = best[1]  # the search did not explain more rows: keep the previous state
+            break
+        best = (int(poor.sum()), labels)
         if searches >= cfg.n_search or poor.sum() < cfg.min_pts:
             break
         searches += 1

@@ -69,6 +69,10 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
     if standardize:
         std = phi.std(axis=0)
         keep = std > 0
+        if not keep.any():
+            raise ValueError(
+                "every regressor column is constant (the data do not vary): no local sets"
+            )
         x = (phi[:, keep] - phi[:, keep].mean(axis=0)) / std[keep]
     nn = NearestNeighbors(n_neighbors=n_rho, algorithm="brute" if d > 12 else "auto")
     idx = nn.fit(x).kneighbors(x, return_distance=False)

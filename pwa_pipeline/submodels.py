@@ -186,14 +186,15 @@ def margin_weights(margin: np.ndarray, threshold: float = 4.0) -> np.ndarray:
     return (margin > threshold).astype(float)
 
 
-def own_cost(phi: Float2D, target: Float2D, thetas: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Noise-normalised residual Σ_p r_p² / σ̂_p² of each row under its own sub-model.
+def unexplained_cost(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
+    """Noise-normalised residual Σ_p r_p² / σ̂_p² of each row under its best sub-model.
 
-    σ̂_p² is :func:`robust_noise_var`, so that rows a sub-model does not explain do not
-    inflate the noise estimate that is to expose them.
+    σ̂_p² is :func:`robust_noise_var` of those best residuals, so that rows no sub-model
+    explains do not inflate the noise estimate that is to expose them.
     """
-    own = _sq_residuals(phi, target, thetas)[labels, np.arange(phi.shape[0])]
-    return (own / robust_noise_var(own)).sum(axis=1)
+    sq = _sq_residuals(phi, target, thetas)
+    best = sq[np.argmin(sq.sum(axis=2), axis=0), np.arange(phi.shape[0])]
+    return (best / robust_noise_var(best)).sum(axis=1)
 
 
 def _argmin_labels(sq: np.ndarray, sigma2: np.ndarray | None) -> np.ndarray:

@@ -1,0 +1,36 @@
+"""Shared, seeded test data (built once per session)."""
+
+import numpy as np
+import pytest
+
+from pwa_pipeline.datasets import load_kuka, make_hure_vasak
+
+
+@pytest.fixture(scope="session")
+def sim_clean():
+    """The paper's section 5 system without noise (N = 2000)."""
+    return make_hure_vasak(n_samples=2000, snr_db=None, seed=1)
+
+
+@pytest.fixture(scope="session")
+def sim_30db():
+    """The paper's section 5 system at SNR 30 dB, N = 4000 (the paper's case)."""
+    return make_hure_vasak(n_samples=4000, snr_db=30.0, seed=0)
+
+
+@pytest.fixture(scope="session")
+def robot():
+    """The KUKA KR300 data, or a skip that says where it was looked for."""
+    try:
+        return load_kuka()
+    except FileNotFoundError as exc:
+        pytest.skip(f"KUKA robot data not available: {exc}")
+
+
+def max_param_error(estimated: np.ndarray, true: np.ndarray) -> float:
+    """Largest absolute entry error after matching estimated to true sub-models."""
+    from scipy.optimize import linear_sum_assignment
+
+    cost = np.array([[np.abs(a - b).max() for b in true] for a in estimated])
+    rows, cols = linear_sum_assignment(cost)
+    return float(cost[rows, cols].max())

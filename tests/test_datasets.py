@@ -1,0 +1,62 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+from pwa_pipeline.datasets import (
+    HURE_VASAK_THETAS,
+    hure_vasak_mode,
+    load_kuka,
+    load_table,
+    make_hure_vasak,
+)
+
+
+def test_simulation_follows_eq_11_to_14(sim_30db):
+    d = sim_30db
+    assert d.u.shape == d.y.shape == (4000, 2)
+    assert d.u[:, 0].min() >= -4 and d.u[:, 0].max() <= 6
+    assert d.u[:, 1].min() >= -2 and d.u[:, 1].max() <= 4
+    # noise-free dynamics: y(k) = θ_λᵀ φ(k), λ from y(k-1) (eq. 12)
+    phi = np.column_stack([d.y_clean[:-1], d.u[:-1]])
+    np.testing.assert_array_equal(d.modes[1:], hure_vasak_mode(d.y_clean[:-1]))
+    pred = np.einsum("nd,ndm->nm", phi, HURE_VASAK_THETAS[d.modes[1:]])
+    np.testing.assert_allclose(pred, d.y_clean[1:], atol=1e-12)
+    # eq. (14) holds exactly per output
+    e = d.y - d.y_clean
+    snr = 10 * np.log10((d.y_clean**2).sum(0) / (e**2).sum(0))
+    np.testing.assert_allclose(snr, [30.0, 30.0])
+    assert set(np.unique(d.modes)) == {0, 1, 2, 3}
+
+
+def test_simulation_is_seeded():
+    a, b = make_hure_vasak(200, seed=3), make_hure_vasak(200, seed=3)
+    np.testing.assert_array_equal(a.y, b.y)
+    assert not np.array_equal(a.y, make_hure_vasak(200, seed=4).y)
+
+
+def test_missing_robot_file_names_path_and_download(tmp_path):
+    with pytest.raises(FileNotFoundError, match=rf"not found at {tmp_path}.*DOI 10.26204/DATA/5"):
+        load_kuka(tmp_path)
+
+
+def test_robot_data_is_cut_into_606_sample_experiments(robot):
+    assert len(robot.u_train) == 66 and len(robot.u_test) == 6
+    assert all(u.shape == (606, 6) for u in robot.u_train[:-1] + robot.u_test)
+    assert robot.u_train[-1].shape == (598, 6)
+    assert sum(len(y) for y in robot.y_train) == 39988
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_user_tables_round_trip(tmp_path, suffix):
+    df = pd.DataFrame({"run": [1, 1, 1, 2, 2], "force": [0.1, 0.2, 0.3, 0.4, 0.5],
+                       "pos": [1.0, 2.0, 3.0, 4.0, 5.0]})
+    path = tmp_path / f"data{suffix}"
+    df.to_csv(path, index=False) if suffix == ".csv" else df.to_parquet(path)
+    u, y = load_table(path, ["force"], ["pos"], experiment_column="run")
+    assert [a.shape for a in u] == [(3, 1), (2, 1)]
+    np.testing.assert_array_equal(y[1][:, 0], [4.0, 5.0])
+    with pytest.raises(ValueError, match=r"no column\(s\) \['speed'\]"):
+        load_table(path, ["speed"], ["pos"])
+    with pytest.raises(ValueError, match="unsupported file type '.txt'"):
+        (tmp_path / "x.txt").write_text("a")
+        load_table(tmp_path / "x.txt", ["a"], ["b"])

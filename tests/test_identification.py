@@ -1,0 +1,125 @@
+import numpy as np
+import pytest
+from sklearn.base import clone
+
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.identification import PWARX
+
+from .conftest import max_param_error
+
+PAPER = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
+
+
+@pytest.fixture(scope="module")
+def clean_model(sim_clean):
+    return PWARX(na=1, nb=1).fit(sim_clean.u, sim_clean.y)
+
+
+def test_noise_free_parameters_and_regions_are_recovered(sim_clean, clean_model):
+    m = clean_model
+    assert m.n_submodels_ == 4
+    assert m.thetas_.shape == (4, 4, 2)
+    assert max_param_error(m.thetas_, sim_clean.thetas) < 1e-8
+    phi = np.column_stack([sim_clean.y[:-1], sim_clean.u[:-1]])
+    # map estimated sub-models to true modes by parameters, then score the regions
+    match = [int(np.argmin([np.abs(t - s).max() for s in sim_clean.thetas])) for t in m.thetas_]
+    accuracy = np.mean(np.asarray(match)[m.regions_.predict(phi)] == sim_clean.modes[1:])
+    assert accuracy > 0.98
+
+
+def test_default_recovers_the_four_modes_at_30db(sim_30db):
+    m = PWARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
+    assert m.n_submodels_ == 4
+    assert max_param_error(m.thetas_, sim_30db.thetas) < 0.03
+    assert 0 < m.eps_ < 1 and m.n_rho_ == 12 and m.min_pts_ == 8
+
+
+def test_paper_setting_reproduces_the_papers_method(sim_30db):
+    m = PWARX(na=1, nb=1, **PAPER).fit(sim_30db.u, sim_30db.y)
+    # NOTES.md: with raw regressors the paper's values find 2 of 4 modes, ~81 % noise
+    assert m.n_submodels_ == 2
+    assert 0.7 < m.noise_share_ < 0.9
+    assert m.eps_ == 0.1 and (m.labels_ == -1).mean() == pytest.approx(m.noise_share_)
+    # sub-models are the cluster centres (step 5)
+    centre = m.thetas_[0]
+    assert np.all(np.isfinite(centre))
+
+
+def test_paper_setting_needs_its_values():
+    with pytest.raises(ValueError, match="settings='paper' needs explicit n_rho, eps, min_pts"):
+        PWARX(settings="paper").fit(np.zeros((50, 1)), np.zeros((50, 1)))
+
+
+def test_predict_and_simulate_shapes_and_initial_rows(sim_clean, clean_model):
+    u, y = sim_clean.u[:300], sim_clean.y[:300]
+    yhat = clean_model.predict(u, y)
+    assert yhat.shape == y.shape
+    np.testing.assert_array_equal(yhat[:1], y[:1])
+    # noise-free one-step prediction is exact except where a linear region boundary
+    # misclassifies a regressor near the true (axis-aligned) switching threshold
+    exact = np.all(np.abs(yhat - y) < 1e-8, axis=1)
+    assert exact.mean() > 0.97
+    ysim = clean_model.simulate(u, y[:5])
+    assert ysim.shape == y.shape
+    np.testing.assert_array_equal(ysim[:5], y[:5])
+    sims = clean_model.simulate([u, u[:100]], [y[:1], y[:3]])
+    assert [s.shape for s in sims] == [(300, 2), (100, 2)]
+    assert clean_model.score(u, y) > 0.999
+
+
+def test_three_outputs_with_affine_term():
+    rng = np.random.default_rng(5)
+    thetas = np.array([
+        [[0.5, 0.1, 0.0], [0.0, 0.4, 0.1], [0.1, 0.0, 0.3], [1.0, -0.5, 0.2], [0.2, 0.1, -0.3]],
+        [[0.2, 0.0, 0.1], [0.1, 0.6, 0.0], [0.0, 0.1, 0.5], [-1.0, 0.5, 0.4], [-0.4, 0.3, 0.2]],
+    ])  # (s, d, m) with d = 3·1 + 1·1 + 1 (affine), m = 3
+    n = 3000
+    u = rng.uniform(-2, 2, size=(n, 1))
+    y = np.zeros((n, 3))
+    for k in range(1, n):
+        phi = np.r_[y[k - 1], u[k - 1], 1.0]
+        y[k] = phi @ thetas[int(u[k - 1, 0] > 0)]
+    y_noisy = y + 1e-4 * rng.standard_normal(y.shape)
+    m = PWARX(na=1, nb=1, affine=True).fit(u, y_noisy)
+    assert m.n_submodels_ == 2 and m.thetas_.shape == (2, 5, 3)
+    assert max_param_error(m.thetas_, thetas) < 0.01
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "u", "y", "message"),
+    [
+        ({}, np.arange(6.0), np.arange(6.0), "too few samples for n_rho = 6.*only 5"),
+        ({"n_rho": 2}, np.arange(40.0), np.sin(np.arange(40.0)), "n_rho = 2 must exceed .* d = 2"),
+        ({}, np.ones((40, 1)), np.ones((40, 1)), "every regressor column is constant"),
+        ({"n_rho": 5, "eps": 1e-9, "min_pts": 30, "settings": "paper"},
+         *(lambda r: (r.normal(size=(60, 1)), r.normal(size=(60, 1))))(np.random.default_rng(0)),
+         "no cluster with eps = 1e-09 and min_pts = 30"),
+        ({}, np.zeros((50, 1)), np.full((50, 1), np.nan), "y contains 50 non-finite"),
+        ({}, np.zeros((50, 2)), np.zeros((49, 1)), "different lengths: 50 and 49"),
+    ],
+)
+def test_bad_fit_input(kwargs, u, y, message):
+    with pytest.raises(ValueError, match=message):
+        PWARX(**kwargs).fit(u, y)
+
+
+def test_bad_prediction_input(sim_clean, clean_model):
+    u, y = sim_clean.u[:50], sim_clean.y[:50]
+    with pytest.raises(ValueError, match="u has 3 input.*fitted with 2"):
+        clean_model.simulate(np.zeros((50, 3)), y[:1])
+    with pytest.raises(ValueError, match="warm-up too short: y_init has 0 row"):
+        clean_model.simulate(u, y[:0])
+    with pytest.raises(ValueError, match="y_init contains 1 non-finite"):
+        clean_model.simulate(u, np.array([[np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="y has 1 output.*fitted with 2"):
+        clean_model.predict(u, y[:, :1])
+
+
+def test_scikit_learn_conventions():
+    est = PWARX(na=2, nb=1, eps=0.2)
+    assert clone(est).get_params() == est.get_params()
+    with pytest.raises(ValueError, match="settings"):
+        PWARX(settings="fast").fit(np.zeros((50, 1)), np.zeros((50, 1)))
+    from sklearn.exceptions import NotFittedError
+    with pytest.raises(NotFittedError):
+        PWARX().predict(np.zeros((5, 1)), np.zeros((5, 1)))
