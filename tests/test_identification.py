@@ -64,7 +64,7 @@ def test_predict_and_simulate_shapes_and_initial_rows(sim_clean, clean_model):
     np.testing.assert_array_equal(ysim[:5], y[:5])
     sims = clean_model.simulate([u, u[:100]], [y[:1], y[:3]])
     assert [s.shape for s in sims] == [(300, 2), (100, 2)]
-    assert clean_model.score(u, y) > 0.999
+    assert clean_model.score(u, y) > 0.99
 
 
 def test_three_outputs_with_affine_term():
