@@ -34,7 +34,9 @@ class ARXModelBase(BaseEstimator):
             check_width(ye, self.n_outputs_, y_name, "output(s)")
         return pairs
 
-    def predict(self, u: Signals, y: Signals) -> Float2D | list[Float2D]:
+    def predict(
+        self, u: Signals, y: Signals, n_init: int | None = None
+    ) -> Float2D | list[Float2D]:
         """One-step-ahead prediction ŷ(k) = f(φ(k)) from measured past outputs.
 
         Parameters
@@ -42,19 +44,23 @@ class ARXModelBase(BaseEstimator):
         u : array-like of shape (N, r), or a list of such arrays (one per experiment)
         y : array-like of shape (N, m), or a list of such arrays
             Measured outputs; only their past values enter φ(k).
+        n_init : int, optional
+            Rows returned as given (a warm-up window); at least and by default max(na, nb).
 
         Returns
         -------
         ndarray of shape (N, m), or a list of them
-            The first max(na, nb) rows are the given y; the rest are predictions.
+            The first ``n_init`` rows are the given y; the rest are predictions.
         """
         pairs = self._experiments(u, y, "y")
         n0 = self.n_initial_
+        keep = n0 if n_init is None else max(n_init, n0)
         out = []
         for ue, ye in pairs:
             yhat = ye.copy()
             if ye.shape[0] > n0:
                 yhat[n0:] = self._predict_phi(lagged_matrix(ue, ye, self.na, self.nb, self.affine))
+                yhat[:keep] = ye[:keep]
             out.append(yhat)
         return out if _is_experiment_list(y) else out[0]
 

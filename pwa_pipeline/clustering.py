@@ -86,7 +86,9 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 30) -> float:
     # Distances below 1e-6 of the parameters' size are rounding error (noise-free data).
     floor = 1e-6 * max(float(np.median(np.linalg.norm(emb, axis=1))), np.finfo(float).tiny)
     grid = np.unique(np.maximum(np.quantile(dist, np.linspace(0.02, 0.6, n_grid)), floor))
-    graph = NearestNeighbors(radius=grid[-1]).fit(emb).radius_neighbors_graph(mode="distance")
+    graph = NearestNeighbors(radius=grid[-1]).fit(emb).radius_neighbors_graph(
+        mode="distance", sort_results=True
+    )
     graph.data = np.maximum(graph.data, np.finfo(float).tiny)  # keep exact duplicates
     counts = [
         DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max() + 1

@@ -1,0 +1,68 @@
+"""Linear ARX baseline with the same regressors as the PWARX model."""
+
+import numpy as np
+from sklearn.base import _fit_context
+from sklearn.utils._param_validation import Interval
+from numbers import Integral
+
+from ._typing import Float2D, Signals
+from ._validation import as_experiments
+from .arx import ARXModelBase
+from .regressors import build_regressors
+
+
+class LinearARX(ARXModelBase):
+    """Linear MIMO ARX model y(k) = θᵀφ(k), fitted by least squares (one sub-model).
+
+    Parameters
+    ----------
+    na, nb : int
+        Orders of eq. (3).
+    affine : bool, default False
+
+    Attributes
+    ----------
+    theta_ : ndarray of shape (d, m)
+    n_inputs_, n_outputs_ : int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pwa_pipeline.linear import LinearARX
+    >>> u = np.random.default_rng(0).normal(size=(200, 1))
+    >>> y = np.zeros((200, 1))
+    >>> for k in range(1, 200):
+    ...     y[k] = 0.5 * y[k - 1] + 2.0 * u[k - 1]
+    >>> np.round(LinearARX(1, 1).fit(u, y).theta_.ravel(), 6)
+    array([0.5, 2. ])
+    """
+
+    _parameter_constraints: dict = {
+        "na": [Interval(Integral, 0, None, closed="left")],
+        "nb": [Interval(Integral, 0, None, closed="left")],
+        "affine": ["boolean"],
+    }
+
+    def __init__(self, na: int = 1, nb: int = 1, affine: bool = False):
+        self.na = na
+        self.nb = nb
+        self.affine = affine
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, u: Signals, y: Signals) -> "LinearARX":
+        """Least-squares fit on one or several experiments (regressors never span two)."""
+        pairs = as_experiments(u, y)
+        reg = build_regressors(pairs, self.na, self.nb, self.affine)
+        if reg.phi.shape[0] < reg.phi.shape[1]:
+            raise ValueError(
+                f"too few samples: {reg.phi.shape[0]} regressor rows for "
+                f"{reg.phi.shape[1]} parameters per output"
+            )
+        self.theta_ = np.linalg.lstsq(reg.phi, reg.target, rcond=None)[0]
+        self.n_inputs_ = pairs[0][0].shape[1]
+        self.n_outputs_ = pairs[0][1].shape[1]
+        self.n_features_in_ = self.n_inputs_
+        return self
+
+    def _predict_phi(self, phi: Float2D) -> Float2D:
+        return phi @ self.theta_

@@ -1,0 +1,241 @@
+"""Linear state-space baseline identified by a subspace (N4SID-type) method.
+
+x(k+1) = A x(k) + B u(k) + K e(k),  y(k) = C x(k) + D u(k) + e(k)   (paper eq. 20, discrete)
+
+The state sequence is estimated from an LQ factorisation of block Hankel matrices and an
+oblique projection (Van Overschee & De Moor 1996, ch. 4; "robust" state-sequence variant),
+then (A, B, C, D) by least squares on consecutive states, and K from the residual covariances
+through the Riccati equation. Only (k·(r+m)) × (k·(r+m)) matrices are factorised, never
+N × N ones, so 40k samples need a few hundred MB at most.
+"""
+
+from numbers import Integral
+
+import numpy as np
+from scipy.linalg import solve_discrete_are
+from sklearn.base import BaseEstimator, _fit_context
+from sklearn.utils._param_validation import Interval
+from sklearn.utils.validation import check_is_fitted
+
+from ._typing import Float2D, Signals
+from ._validation import _is_experiment_list, as_experiments, as_signal, check_width
+
+
+def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:
+    """Block Hankel matrix with ``rows`` block rows of x(start + i + j), j < cols."""
+    return np.vstack([x[start + i : start + i + cols].T for i in range(rows)])
+
+
+class SubspaceSS(BaseEstimator):
+    """Linear innovation state-space model identified by a subspace method.
+
+    Parameters
+    ----------
+    order : int, optional
+        State dimension n. None chooses it at the largest gap of the singular values
+        (``singular_values_``), at most ``horizon``·m.
+    horizon : int, default 10
+        Past and future block rows k of the Hankel matrices (k·m ≥ n).
+    warmup : int, default 10
+        Samples used to estimate the initial state when :meth:`predict` is not told.
+
+    Attributes
+    ----------
+    A_, B_, C_, D_, K_ : ndarrays
+        System matrices (n×n, n×r, m×n, m×r, n×m).
+    order_ : int
+    singular_values_ : ndarray
+        Of the weighted oblique projection, for choosing the order.
+    n_inputs_, n_outputs_ : int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from pwa_pipeline.subspace import SubspaceSS
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.normal(size=(2000, 1)); y = np.zeros((2000, 1)); x = 0.0
+    >>> for k in range(2000):
+    ...     y[k] = x; x = 0.9 * x + u[k, 0]
+    >>> model = SubspaceSS(order=1).fit(u, y)
+    >>> round(float(model.A_[0, 0]), 6)
+    0.9
+    """
+
+    _parameter_constraints: dict = {
+        "order": [Interval(Integral, 1, None, closed="left"), None],
+        "horizon": [Interval(Integral, 1, None, closed="left")],
+        "warmup": [Interval(Integral, 1, None, closed="left")],
+    }
+
+    def __init__(self, order: int | None = None, horizon: int = 10, warmup: int = 10):
+        self.order = order
+        self.horizon = horizon
+        self.warmup = warmup
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, u: Signals, y: Signals) -> "SubspaceSS":
+        """Identify (A, B, C, D, K) from one or several experiments.
+
+        Raises
+        ------
+        ValueError
+            On bad input, experiments all shorter than 2·horizon + 1, or an order larger than
+            horizon·m.
+        """
+        pairs = as_experiments(u, y)
+        k = self.horizon
+        r, m = pairs[0][0].shape[1], pairs[0][1].shape[1]
+        if self.order is not None and self.order > k * m:
+            raise ValueError(
+                f"order {self.order} exceeds horizon·m = {k * m}: raise horizon to at least "
+                f"{-(-self.order // m)}"
+            )
+        blocks = [p for p in pairs if p[0].shape[0] >= 2 * k + 2]
+        if not blocks:
+            raise ValueError(
+                f"every experiment is shorter than 2·horizon + 2 = {2 * k + 2} samples"
+            )
+        hank = []
+        for ue, ye in blocks:
+            j = ue.shape[0] - 2 * k
+            hank.append(np.vstack([
+                _block_hankel(ue, k, k, j), _block_hankel(ue, 0, k, j),
+                _block_hankel(ye, 0, k, j), _block_hankel(ye, k, k, j),
+            ]))
+        h = np.hstack(hank)
+        # LQ of H through QR of its transpose: only the (rows × rows) factor is kept.
+        lower = np.linalg.qr(h.T, mode="r").T
+        nu, nw = k * r, k * (r + m)
+        l22 = lower[nu : nu + nw, nu : nu + nw]
+        l32 = lower[nu + nw :, nu : nu + nw]
+        # Oblique projection of future outputs along future inputs onto the past.
+        proj = l32 @ np.linalg.pinv(l22) @ h[nu : nu + nw]
+        left, sv, right = np.linalg.svd(proj, full_matrices=False)
+        self.singular_values_ = sv
+        n = self.order if self.order is not None else _order_from_gap(sv, k * m)
+        states = np.sqrt(sv[:n])[:, None] * right[:n]
+        # Consecutive states within each experiment give (A, B, C, D) by least squares.
+        x_now, x_next, u_now, y_now = [], [], [], []
+        col = 0
+        for ue, ye in blocks:
+            j = ue.shape[0] - 2 * k
+            xs = states[:, col : col + j]
+            x_now.append(xs[:, :-1])
+            x_next.append(xs[:, 1:])
+            u_now.append(ue[k : k + j - 1].T)
+            y_now.append(ye[k : k + j - 1].T)
+            col += j
+        xu = np.vstack([np.hstack(x_now), np.hstack(u_now)])
+        target = np.vstack([np.hstack(x_next), np.hstack(y_now)])
+        theta = np.linalg.lstsq(xu.T, target.T, rcond=None)[0].T
+        self.A_, self.B_ = theta[:n, :n], theta[:n, n:]
+        self.C_, self.D_ = theta[n:, :n], theta[n:, n:]
+        res = target - theta @ xu
+        cov = res @ res.T / res.shape[1]
+        self.K_ = _kalman_gain(self.A_, self.C_, cov[:n, :n], cov[n:, n:], cov[:n, n:])
+        self.order_ = n
+        self.n_inputs_, self.n_outputs_ = r, m
+        self.n_features_in_ = r
+        return self
+
+    @property
+    def poles_(self) -> np.ndarray:
+        """Eigenvalues of A."""
+        return np.linalg.eigvals(self.A_)
+
+    def initial_state(self, u: Float2D, y: Float2D) -> np.ndarray:
+        """Least-squares x(0) from a window of data through the Kalman predictor.
+
+        With Ā = A − KC the predictor's output is ŷ(k) = C Āᵏ x0 + (terms of u and y), linear
+        in x0; the window's one-step errors are minimised over x0.
+        """
+        n, w = self.order_, y.shape[0]
+        if w * self.n_outputs_ < n:
+            raise ValueError(
+                f"warm-up too short: {w} sample(s) of {self.n_outputs_} output(s) cannot fix "
+                f"{n} states; use at least {-(-n // self.n_outputs_)}"
+            )
+        abar = self.A_ - self.K_ @ self.C_
+        bbar = self.B_ - self.K_ @ self.D_
+        obs = np.empty((w, self.n_outputs_, n))
+        forced = np.empty((w, self.n_outputs_))
+        power, x = np.eye(n), np.zeros(n)
+        for k in range(w):
+            obs[k] = self.C_ @ power
+            forced[k] = self.C_ @ x + self.D_ @ u[k]
+            power = abar @ power
+            x = abar @ x + bbar @ u[k] + self.K_ @ y[k]
+        lhs = obs.reshape(w * self.n_outputs_, n)
+        return np.linalg.lstsq(lhs, (y - forced).ravel(), rcond=None)[0]
+
+    def _check(self, u, y, y_name):
+        check_is_fitted(self)
+        ue, ye = as_signal(u, "u"), as_signal(y, y_name)
+        check_width(ue, self.n_inputs_, "u", "input(s)")
+        check_width(ye, self.n_outputs_, y_name, "output(s)")
+        return ue, ye
+
+    def predict(self, u: Signals, y: Signals, n_init: int | None = None):
+        """One-step-ahead prediction by the Kalman predictor, from x(0) fitted on the first
+        ``n_init`` samples (default ``warmup``); those rows are returned as given.
+
+        Lists of experiments give lists of predictions.
+        """
+        if _is_experiment_list(u):
+            return [self.predict(a, b, n_init) for a, b in zip(u, y, strict=True)]
+        ue, ye = self._check(u, y, "y")
+        as_experiments(ue, ye)
+        w = self.warmup if n_init is None else n_init
+        x = self.initial_state(ue[:w], ye[:w])
+        out = ye.copy()
+        for k in range(ye.shape[0]):
+            yk = self.C_ @ x + self.D_ @ ue[k]
+            if k >= w:
+                out[k] = yk
+            x = self.A_ @ x + self.B_ @ ue[k] + self.K_ @ (ye[k] - yk)
+        return out
+
+    def simulate(self, u: Signals, y_init: Signals):
+        """Free-run simulation from x(0) fitted on the warm-up window ``y_init``.
+
+        Returns an array of u's length whose first len(y_init) rows are ``y_init``; a run that
+        diverges is returned as it is.
+
+        Raises
+        ------
+        ValueError
+            Wrong input width, a warm-up shorter than 1 sample or longer than u, or NaN.
+        """
+        if _is_experiment_list(u):
+            return [self.simulate(a, b) for a, b in zip(u, y_init, strict=True)]
+        ue, ye = self._check(u, y_init, "y_init")
+        w = ye.shape[0]
+        if w < 1 or w > ue.shape[0]:
+            raise ValueError(
+                f"warm-up too short or too long: y_init has {w} rows, u has {ue.shape[0]}"
+            )
+        x = self.initial_state(ue[:w], ye)
+        out = np.empty((ue.shape[0], self.n_outputs_))
+        out[:w] = ye
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(ue.shape[0]):
+                if k >= w:
+                    out[k] = self.C_ @ x + self.D_ @ ue[k]
+                x = self.A_ @ x + self.B_ @ ue[k]
+        return out
+
+
+def _order_from_gap(sv: np.ndarray, max_order: int) -> int:
+    """The order at the largest drop of log singular value, 1 … max_order."""
+    s = np.maximum(sv[: max_order + 1], np.finfo(float).tiny)
+    return int(np.argmax(-np.diff(np.log(s)))) + 1
+
+
+def _kalman_gain(a, c, q, r, s) -> np.ndarray:
+    """Steady-state Kalman gain from the process/measurement covariances (zero if none)."""
+    n, m = a.shape[0], c.shape[0]
+    try:
+        p = solve_discrete_are(a.T, c.T, q, r, s=s)
+        return (a @ p @ c.T + s) @ np.linalg.inv(c @ p @ c.T + r)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.zeros((n, m))
