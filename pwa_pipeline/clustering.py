@@ -43,8 +43,8 @@ class Clustering:
 
     @property
     def noise_share(self) -> float:
-        """Share of all local models labelled noise (−1)."""
-        return float(np.mean(self.labels < 0))
+        """Share of the local models passed to DBSCAN that it labelled noise (−1)."""
+        return float(np.mean(self.labels[self.clustered] < 0))
 
 
 def confident_models(residual_var: np.ndarray, factor: float) -> np.ndarray:

@@ -33,3 +33,16 @@ def table1(scores: pd.DataFrame, dataset: str, mode: str) -> pd.DataFrame:
     wide.columns = [f"{m} {'NRMSE' if k == 'nrmse' else 'R² %'}" for k, m in wide.columns]
     order = [c for m in METHODS for c in wide.columns if c.startswith(m + " ")]
     return wide[order]
+
+
+def mean_scores(table: pd.DataFrame) -> pd.DataFrame:
+    """Output-averaged NRMSE and R² per method (rows) and mode (columns), diverged runs
+    marked; ``table`` has columns method, mode, output, nrmse, r2 and diverged."""
+    means = table[table["output"] == "mean"]
+    wide = means.pivot_table(index="method", columns="mode", values=["nrmse", "r2"],
+                             sort=False)
+    wide.columns = [f"{'NRMSE' if k == 'nrmse' else 'R²'} {mode}" for k, mode in wide.columns]
+    if "diverged" in means:
+        wide["free-run diverged"] = means[means["mode"] == "free_run"].set_index(
+            "method")["diverged"]
+    return wide

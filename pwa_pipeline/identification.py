@@ -43,13 +43,15 @@ class Settings:
     n_search: int
     ridge: float
     svm_c: float
+    max_cluster: int | None
+    seed: int
 
 
 _PRESETS = {
     "paper": dict(standardize=False, scale_theta=False, confidence=None, submodel="centre",
-                  merge_tol=None, n_refine=0, n_search=0),
+                  merge_tol=None, n_refine=0, n_search=0, max_cluster=None),
     "default": dict(standardize=True, scale_theta=True, confidence=3.0, submodel="refit",
-                    merge_tol=1.0, n_refine=20, n_search=3),
+                    merge_tol=1.0, n_refine=20, n_search=3, max_cluster=5000),
 }
 
 
@@ -81,7 +83,8 @@ class PWARX(ARXModelBase):
         θ_k as it is, sub-models as cluster centres (step 5), SVM trained on the clustered
         rows, noise rows left out. ``"default"`` is the robust variant: z-scored neighbour
         search, θ_k made unit-free (scaled by the regressors' and outputs' RMS) before the
-        Vθ distance, local models with a residual variance over 3× the median left out,
+        Vθ distance, local models with a residual variance over 3× the median left out (and
+        at most 5,000 of them clustered),
         sub-models refitted by least squares, statistically indistinguishable ones merged
         (predictions closer than the noise), then rows re-assigned by residual and by SVM regions until the
         assignment is stable.
@@ -92,6 +95,9 @@ class PWARX(ARXModelBase):
         Tikhonov term for degenerate local sets (0: a singular local set raises).
     svm_c : float, default 1
         Regularisation of the region SVM.
+    random_state : int, default 0
+        Seed of the subset of local models the default setting clusters on long records
+        (at most 5,000 confident local models go to DBSCAN; all rows are used afterwards).
 
     Attributes
     ----------
@@ -134,6 +140,7 @@ class PWARX(ARXModelBase):
         "embedding": [StrOptions({"exact", "literal"})],
         "ridge": [Interval(Real, 0, None, closed="left")],
         "svm_c": [Interval(Real, 0, None, closed="neither")],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
     }
 
     def __init__(
@@ -148,6 +155,7 @@ class PWARX(ARXModelBase):
         embedding: str = "exact",
         ridge: float = 0.0,
         svm_c: float = 1.0,
+        random_state: int = 0,
     ):
         self.na = na
         self.nb = nb
@@ -159,6 +167,7 @@ class PWARX(ARXModelBase):
         self.embedding = embedding
         self.ridge = ridge
         self.svm_c = svm_c
+        self.random_state = random_state
 
     def resolve_settings(self, d: int) -> Settings:
         """The settings a fit uses for regressor dimension d (automatic values filled in)."""
@@ -177,6 +186,7 @@ class PWARX(ARXModelBase):
             embedding=self.embedding,
             ridge=self.ridge,
             svm_c=self.svm_c,
+            seed=self.random_state,
             **_PRESETS[self.settings],
         )
 
@@ -230,8 +240,7 @@ class PWARX(ARXModelBase):
     ) -> Clustering:
         """Step 4: DBSCAN on the (optionally unit-free) local parameter matrices."""
         t0 = time.perf_counter()
-        keep = None if cfg.confidence is None else confident_models(local.residual_var,
-                                                                    cfg.confidence)
+        keep = _clustering_subset(local, cfg)
         clusters = cluster_local_models(_clustering_theta(reg, local, cfg), cfg.eps,
                                         cfg.min_pts, cfg.embedding, keep)
         if timings is not None:
@@ -305,6 +314,20 @@ class PWARX(ARXModelBase):
         return regressor_dim(self.n_outputs_, self.n_inputs_, self.na, self.nb, self.affine)
 
 
+def _clustering_subset(local: LocalModels, cfg: Settings) -> np.ndarray | None:
+    """Local models passed to DBSCAN: the confident ones, at most ``max_cluster`` of them
+    (a seeded random subset) so that DBSCAN's cost stays bounded on long records."""
+    n = local.theta.shape[0]
+    keep = np.ones(n, bool) if cfg.confidence is None else confident_models(
+        local.residual_var, cfg.confidence)
+    if cfg.max_cluster is not None and keep.sum() > cfg.max_cluster:
+        rows = np.random.default_rng(cfg.seed).choice(np.nonzero(keep)[0], cfg.max_cluster,
+                                                      replace=False)
+        keep = np.zeros(n, bool)
+        keep[rows] = True
+    return keep
+
+
 def _clustering_theta(reg: Regressors, local: LocalModels, cfg: Settings) -> np.ndarray:
     """θ_k as DBSCAN sees it: unit-free (θ·rms(φ)/rms(y)) with ``scale_theta``, else raw."""
     if not cfg.scale_theta:
@@ -374,9 +397,8 @@ def _cluster_subset(reg: Regressors, rows: np.ndarray, cfg: Settings) -> Cluster
                      experiment=reg.experiment[rows], time=reg.time[rows])
     try:
         local = estimate_local_models(sub.phi, sub.target, n_rho, cfg.standardize, cfg.ridge)
-        keep = confident_models(local.residual_var, cfg.confidence or np.inf)
         return cluster_local_models(_clustering_theta(sub, local, cfg), None, cfg.min_pts,
-                                    cfg.embedding, keep)
+                                    cfg.embedding, _clustering_subset(local, cfg))
     except ValueError:
         return None
 
