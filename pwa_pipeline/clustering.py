@@ -72,7 +72,7 @@ def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0) -> np.ndarray:
     return np.sort(nn.kneighbors(query)[0][:, -1])
 
 
-def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 30) -> float:
+def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     """ε from the k-distance curve: the candidate that separates the most clusters.
 
     Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. DBSCAN runs at each (on

@@ -51,7 +51,7 @@ _PRESETS = {
     "paper": dict(standardize=False, scale_theta=False, confidence=None, submodel="centre",
                   merge_tol=None, n_refine=0, n_search=0, max_cluster=None),
     "default": dict(standardize=True, scale_theta=True, confidence=3.0, submodel="refit",
-                    merge_tol=1.0, n_refine=20, n_search=3, max_cluster=5000),
+                    merge_tol=1.0, n_refine=20, n_search=3, max_cluster=3000),
 }
 
 
@@ -84,7 +84,7 @@ class PWARX(ARXModelBase):
         rows, noise rows left out. ``"default"`` is the robust variant: z-scored neighbour
         search, θ_k made unit-free (scaled by the regressors' and outputs' RMS) before the
         Vθ distance, local models with a residual variance over 3× the median left out (and
-        at most 5,000 of them clustered),
+        at most 3,000 of them clustered),
         sub-models refitted by least squares, statistically indistinguishable ones merged
         (predictions closer than the noise), then rows re-assigned by residual and by SVM regions until the
         assignment is stable.
@@ -97,7 +97,7 @@ class PWARX(ARXModelBase):
         Regularisation of the region SVM.
     random_state : int, default 0
         Seed of the subset of local models the default setting clusters on long records
-        (at most 5,000 confident local models go to DBSCAN; all rows are used afterwards).
+        (at most 3,000 confident local models go to DBSCAN; all rows are used afterwards).
 
     Attributes
     ----------
