@@ -1,5 +1,6 @@
 """Named hyper-parameter sets (``data/hparams.toml``) and the models they configure."""
 
+import os
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -8,7 +9,7 @@ from .identification import PWARX
 from .linear import LinearARX
 from .subspace import SubspaceSS
 
-DEFAULT_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
+BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
 BASELINES = "baselines"
 
 
@@ -58,9 +59,15 @@ class HParams:
                           warmup=self.warmup)
 
 
+def default_hparams_path() -> Path:
+    """``$PWA_HPARAMS`` if set (the pipeline's partitions follow it), else ``data/hparams.toml``."""
+    env = os.environ.get("PWA_HPARAMS")
+    return Path(env) if env else BUNDLED_HPARAMS
+
+
 def read_hparams(path: str | Path | None = None) -> dict[str, dict[str, dict]]:
     """The raw tables of the hyper-parameter file: ``{set: {dataset: {key: value}}}``."""
-    p = Path(path) if path is not None else DEFAULT_HPARAMS
+    p = Path(path) if path is not None else default_hparams_path()
     if not p.is_file():
         raise FileNotFoundError(f"hyper-parameter file not found: {p}")
     with p.open("rb") as fh:

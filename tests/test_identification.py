@@ -123,3 +123,27 @@ def test_scikit_learn_conventions():
     from sklearn.exceptions import NotFittedError
     with pytest.raises(NotFittedError):
         PWARX().predict(np.zeros((5, 1)), np.zeros((5, 1)))
+
+
+@pytest.mark.parametrize("seed", [3, 7, 12])
+def test_default_finds_every_mode_on_fixed_seeds(seed):
+    data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=seed)
+    m = PWARX(na=1, nb=1).fit(data.u, data.y)
+    assert m.n_submodels_ == 4
+    assert max_param_error(m.thetas_, data.thetas) < 0.05
+    phi = np.column_stack([data.y[:-1], data.u[:-1]])
+    match = [int(np.argmin([np.abs(t - s).max() for s in data.thetas])) for t in m.thetas_]
+    assert np.mean(np.asarray(match)[m.regions_.predict(phi)] == data.modes[1:]) > 0.95
+
+
+@pytest.mark.slow
+def test_default_on_twenty_seeds_meets_the_targets():
+    """The Monte-Carlo targets (benchmarks/monte_carlo.py measures them); slow: ~20 s."""
+    found, errors = 0, []
+    for seed in range(20):
+        data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=seed)
+        m = PWARX(na=1, nb=1).fit(data.u, data.y)
+        if m.n_submodels_ == 4:
+            found += 1
+            errors.append(max_param_error(m.thetas_, data.thetas))
+    assert found >= 19 and np.median(errors) <= 0.02
