@@ -19,6 +19,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._typing import Float2D, Signals
 from ._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from .local_models import column_rms
 
 
 def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:
@@ -83,6 +84,10 @@ class SubspaceSS(BaseEstimator):
             horizon·m.
         """
         pairs = as_experiments(u, y)
+        # Identify on unit-RMS channels (conditioning of the LQ factor), then map back.
+        su = column_rms(np.vstack([p[0] for p in pairs]))
+        sy = column_rms(np.vstack([p[1] for p in pairs]))
+        pairs = [(ue / su, ye / sy) for ue, ye in pairs]
         k = self.horizon
         r, m = pairs[0][0].shape[1], pairs[0][1].shape[1]
         if self.order is not None and self.order > k * m:
@@ -133,6 +138,8 @@ class SubspaceSS(BaseEstimator):
         res = target - theta @ xu
         cov = res @ res.T / res.shape[1]
         self.K_ = _kalman_gain(self.A_, self.C_, cov[:n, :n], cov[n:, n:], cov[:n, n:])
+        self.B_, self.C_ = self.B_ / su, sy[:, None] * self.C_
+        self.D_, self.K_ = sy[:, None] * self.D_ / su, self.K_ / sy
         self.order_ = n
         self.n_inputs_, self.n_outputs_ = r, m
         self.n_features_in_ = r
