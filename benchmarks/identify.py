@@ -6,7 +6,7 @@
 2. The full KUKA training record (39,988 samples, na = nb = 2): fit time of the paper setting
    (n_rho = 61, eps = 8, MinPts = 22) and of the default with n_rho = 61, median of
    ``--repeats`` runs, with the time of each step; the subspace baseline's fit time and peak
-   memory (tracemalloc, numpy allocations included).
+   memory (tracemalloc, numpy allocations included), as configured in data/hparams.toml.
 
 Writes results/identify.json and results/identify.md.
 Usage: python benchmarks/identify.py [--repeats 3]
@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks._common import RESULTS, Timer, write_json  # noqa: E402
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak  # noqa: E402
 from pwa_pipeline.identification import PWARX  # noqa: E402
-from pwa_pipeline.subspace import SubspaceSS  # noqa: E402
+from pwa_pipeline.config import get_hparams  # noqa: E402
 
 PAPER_SIM = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
 PAPER_KUKA = dict(n_rho=61, eps=8.0, min_pts=22, settings="paper")
@@ -80,10 +80,12 @@ def kuka_speed(repeats: int) -> list[dict]:
               f"({', '.join(f'{x:.2f}' for x in times)}); steps {med}")
     tracemalloc.start()
     with Timer() as t:
-        ss = SubspaceSS(order=12).fit(robot.u_train, robot.y_train)
+        ss = get_hparams("default", "kuka_robot").subspace_model().fit(robot.u_train,
+                                                                       robot.y_train)
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
-    rows.append({"setting": "subspace, order 12", "median_seconds": t.seconds,
+    rows.append({"setting": f"subspace, order {ss.order_}, horizon {ss.horizon}",
+                 "median_seconds": t.seconds,
                  "peak_memory_mb": peak, "max_abs_pole": float(np.abs(ss.poles_).max())})
     print(f"KUKA subspace fit: {t.seconds:.2f} s, peak traced memory {peak:.0f} MB")
     return rows

@@ -27,19 +27,6 @@ def _prepare_dagster_home() -> str:
     return str(home)
 
 
-def _default_keys() -> list[str]:
-    from .datasets import load_kuka
-    from .pipeline.partitions import DEFAULT_SETS
-
-    datasets = ["hure_vasak"]
-    try:
-        load_kuka()
-        datasets.append("kuka_robot")
-    except FileNotFoundError as exc:
-        print(f"note: skipping kuka_robot partitions ({exc})", file=sys.stderr)
-    return [f"{ds}|{hp}" for ds in datasets for hp in DEFAULT_SETS]
-
-
 def run(args: argparse.Namespace) -> int:
     """Materialise the requested partitions and print their comparison tables."""
     import dagster as dg
@@ -47,11 +34,11 @@ def run(args: argparse.Namespace) -> int:
     from .comparison import mean_scores
     from .definitions import defs
     from .pipeline.assets import ASSETS
-    from .pipeline.partitions import all_keys, split_key
+    from .pipeline.partitions import all_keys, default_keys, split_key
     from .pipeline.resources import MLflowTracker
 
     home = _prepare_dagster_home()
-    keys = all_keys() if args.all else (args.partition or _default_keys())
+    keys = all_keys() if args.all else (args.partition or default_keys())
     for key in keys:
         split_key(key)  # a clear error for a mistyped key before anything runs
     resources = dict(defs.resources)

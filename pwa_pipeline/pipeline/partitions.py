@@ -3,7 +3,7 @@
 import dagster as dg
 
 from ..config import set_names
-from ..datasets import DATASETS
+from ..datasets import DATASETS, KUKA_FILES
 
 dataset_partitions = dg.StaticPartitionsDefinition(list(DATASETS))
 hparams_partitions = dg.StaticPartitionsDefinition(set_names())
@@ -29,6 +29,22 @@ def split_key(key: str | dg.MultiPartitionKey) -> tuple[str, str]:
         )
     dims = dict(zip(("dataset", "hparams"), text.split("|"), strict=True))
     return dims["dataset"], dims["hparams"]
+
+
+def default_keys() -> list[str]:
+    """``<dataset>|<set>`` for :data:`DEFAULT_SETS`, with ``kuka_robot`` only if its data are
+    present (a note on stderr says why it is left out otherwise)."""
+    import sys
+
+    from ..datasets import default_kuka_path
+
+    datasets = ["hure_vasak"]
+    kuka = default_kuka_path()
+    if any((kuka / f).is_file() for f in KUKA_FILES) or (kuka.suffix == ".mat" and kuka.is_file()):
+        datasets.append("kuka_robot")
+    else:
+        print(f"note: kuka_robot partitions left out: no KUKA data at {kuka}", file=sys.stderr)
+    return [f"{ds}|{hp}" for ds in datasets for hp in DEFAULT_SETS]
 
 
 def all_keys() -> list[str]:
