@@ -25,9 +25,9 @@ from scipy.optimize import linear_sum_assignment
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks._common import RESULTS, Timer, write_json  # noqa: E402
+from pwa_pipeline.config import get_hparams  # noqa: E402
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak  # noqa: E402
 from pwa_pipeline.identification import PWARX  # noqa: E402
-from pwa_pipeline.config import get_hparams  # noqa: E402
 
 PAPER_SIM = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
 PAPER_KUKA = dict(n_rho=61, eps=8.0, min_pts=22, settings="paper")

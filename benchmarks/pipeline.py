@@ -6,8 +6,8 @@
    (paper setting, n_rho = 18): every asset of every set, once with the local-model cache and
    once without; the saving is the difference (medians of the local_models step reported too).
    A set whose ε / MinPts leave DBSCAN without a cluster fails at `clusters` (as it should)
-   and is timed all the same. The sweep's sets are written to a temporary hyper-parameter file that the pipeline reads
-   through PWA_HPARAMS, so this part runs in a subprocess.
+   and is timed all the same. The sweep's sets are written to a temporary hyper-parameter
+   file that the pipeline reads through PWA_HPARAMS, so this part runs in a subprocess.
 
 Writes results/pipeline.json and results/pipeline.md. Usage: python benchmarks/pipeline.py
 """

@@ -13,13 +13,13 @@ from ._typing import Float2D, Signals
 from ._validation import as_experiments
 from .arx import ARXModelBase
 from .clustering import Clustering, cluster_local_models, confident_models
-from .local_models import LocalModels, estimate_local_models, column_rms
+from .local_models import LocalModels, column_rms, estimate_local_models
 from .regions import Regions, fit_regions
 from .regressors import Regressors, build_regressors, regressor_dim
 from .submodels import (
     SubModels,
-    margin_weights,
     cluster_centres,
+    margin_weights,
     merge_indistinguishable,
     refine,
     unexplained_cost,
@@ -403,9 +403,10 @@ def _cluster_subset(reg: Regressors, rows: np.ndarray, cfg: Settings) -> Cluster
         return None
 
 
-def _merge_clustered(reg: Regressors, labels: np.ndarray, alpha: float):
+def _merge_clustered(reg: Regressors, labels: np.ndarray, tol: float):
+    """:func:`merge_indistinguishable` on the rows DBSCAN clustered (noise stays −1)."""
     rows = labels >= 0
-    merged, n = merge_indistinguishable(reg.phi[rows], reg.target[rows], labels[rows], alpha)
+    merged, n = merge_indistinguishable(reg.phi[rows], reg.target[rows], labels[rows], tol)
     out = labels.copy()
     out[rows] = merged
     return out, n

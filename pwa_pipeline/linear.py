@@ -1,9 +1,10 @@
 """Linear ARX baseline with the same regressors as the PWARX model."""
 
+from numbers import Integral
+
 import numpy as np
 from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
-from numbers import Integral
 
 from ._typing import Float2D, Signals
 from ._validation import as_experiments

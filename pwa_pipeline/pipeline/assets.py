@@ -11,8 +11,8 @@ import dagster as dg
 import pandas as pd
 
 from .._validation import as_experiments
-from ..comparison import mean_scores
 from ..clustering import Clustering
+from ..comparison import mean_scores
 from ..datasets import Dataset
 from ..evaluation import evaluate
 from ..identification import PWARX
