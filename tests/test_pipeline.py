@@ -92,7 +92,7 @@ def test_materialise_hure_vasak_paper(resources, tmp_path):
     free = table[(table.method == "pwa") & (table["mode"] == "free_run") & (table.output == "mean")]
     assert pwa.data.metrics["free_run_nrmse_mean"] == pytest.approx(free["nrmse"].iloc[0])
     assert {a.path for a in client.list_artifacts(pwa.info.run_id)} == {
-        "parameter_matrices.json", "scores.csv"}
+        "parameter_matrices.json", "scores.csv", "prediction.png"}
     meta = result.asset_materializations_for_node("validation_metrics")[0].metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
 

@@ -29,7 +29,13 @@ from .checks import (
     sub_model_results,
 )
 from .partitions import partitions_def, split_key
-from .reporting import nrmse_summary, regions_table, score_metrics, theta_table
+from .reporting import (
+    nrmse_summary,
+    prediction_figure,
+    regions_table,
+    score_metrics,
+    theta_table,
+)
 from .resources import MLflowTracker, PipelineConfig
 from .storage import cache_key, load_object, save_object
 
@@ -162,14 +168,16 @@ def _fit_seconds(context: dg.AssetExecutionContext, names: list[str]) -> float:
     return total
 
 
-def _track(context, mlflow: MLflowTracker, hp, method: str, table: pd.DataFrame,
+def _track(context, mlflow: MLflowTracker, hp, method: str, data: Dataset, ev,
            extra_metrics: dict, artifacts: dict) -> str:
     dataset, hparams = split_key(context.partition_key)
+    figure = prediction_figure(data, ev.predictions, f"{method} | {context.partition_key}",
+                               hp.warmup)
     return mlflow.log_run(
         dataset=dataset, hparams=hparams, method=method, params=hp.as_params(),
-        metrics={**score_metrics(table), **extra_metrics},
+        metrics={**score_metrics(ev.table), **extra_metrics},
         tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
-        artifacts={"scores.csv": table, **artifacts})
+        artifacts={"scores.csv": ev.table, "prediction.png": figure, **artifacts})
 
 
 @dg.asset(partitions_def=partitions_def, group_name=GROUP, kinds={"pandas", "mlflow"})
@@ -188,7 +196,7 @@ def validation_metrics(context: dg.AssetExecutionContext, config: PipelineConfig
     fit_seconds = _fit_seconds(context, ["local_models", "clusters", "sub_models",
                                          "svm_regions"])
     thetas = theta_table(model.thetas_, _phi_names(hp, data), data.y_names)
-    run_id = _track(context, mlflow, hp, "pwa", ev.table,
+    run_id = _track(context, mlflow, hp, "pwa", data, ev,
                     {"n_submodels": model.n_submodels_, "noise_share": model.noise_share_,
                      "eps": model.eps_, "fit_seconds": fit_seconds},
                     {"parameter_matrices.json": {"regressors": list(thetas.index),
@@ -212,7 +220,7 @@ def _baseline(context, config, mlflow, data: Dataset, method: str) -> pd.DataFra
         matrices = {"theta": model.theta_.tolist()}
     else:
         matrices = {k: getattr(model, f"{k}_").tolist() for k in "ABCDK"}
-    run_id = _track(context, mlflow, hp, method, ev.table, {"fit_seconds": fit_seconds},
+    run_id = _track(context, mlflow, hp, method, data, ev, {"fit_seconds": fit_seconds},
                     {"parameter_matrices.json": matrices})
     context.add_output_metadata({"mlflow_run_id": run_id, "fit_seconds": fit_seconds,
                                  "free_run_diverged": ev.diverged(),

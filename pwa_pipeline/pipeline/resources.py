@@ -128,7 +128,8 @@ class MLflowTracker(dg.ConfigurableResource):
     ) -> str:
         """Create, fill and close one run; returns its id.
 
-        ``artifacts`` maps file names to dicts (written as JSON) or DataFrames (as CSV).
+        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV) or
+        matplotlib figures (as PNG).
         """
         from mlflow.entities import Metric, Param, RunTag
 
@@ -149,7 +150,9 @@ class MLflowTracker(dg.ConfigurableResource):
                 tags=[RunTag(k, str(v)) for k, v in tags.items()],
             )
             for name, obj in artifacts.items():
-                if isinstance(obj, pd.DataFrame):
+                if hasattr(obj, "savefig"):
+                    client.log_figure(run_id, obj, name)
+                elif isinstance(obj, pd.DataFrame):
                     client.log_text(run_id, obj.to_csv(index=False), name)
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
