@@ -15,7 +15,7 @@ from .arx import ARXModelBase
 from .clustering import Clustering, cluster_local_models, confident_models
 from .local_models import LocalModels, column_rms, estimate_local_models
 from .regions import Regions, fit_regions
-from .regressors import Regressors, build_regressors, regressor_dim
+from .regressors import Regressors, build_regressors
 from .submodels import (
     SubModels,
     cluster_centres,
@@ -309,11 +309,6 @@ class PWARX(ARXModelBase):
         region = self.regions_.predict(phi)
         return np.einsum("nd,ndm->nm", phi, self.thetas_[region])
 
-    @property
-    def d_(self) -> int:
-        """Regressor dimension d."""
-        return regressor_dim(self.n_outputs_, self.n_inputs_, self.na, self.nb, self.affine)
-
 
 def _clustering_subset(local: LocalModels, cfg: Settings) -> np.ndarray | None:
     """Local models passed to DBSCAN: the confident ones, at most ``max_cluster`` of them
@@ -342,7 +337,8 @@ def _refined_submodels(
     """The default step 5: merge, refine, look for missed modes.
 
     1. DBSCAN clusters that predict alike are merged
-       (:func:`pwa_pipeline.submodels.merge_indistinguishable`).
+       (:func:`pwa_pipeline.submodels.merge_indistinguishable`), and rows re-assigned by
+       residual alone until stable.
     2. Rows are re-assigned by residual and sub-models refitted until stable
        (:func:`pwa_pipeline.submodels.refine`); sub-models that now predict alike are merged
        and step 2 repeats.
@@ -358,6 +354,9 @@ def _refined_submodels(
     n_merged, n_iter, searches = 0, 0, 0
     if cfg.merge_tol is not None:
         labels, n_merged = _merge_clustered(reg, labels, cfg.merge_tol)
+    # Consolidate by residual alone first: an SVM over many small, overlapping clusters can
+    # give all rows to the largest one.
+    labels = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)[1]
     best = None
     while True:
         thetas, labels, margin, sweeps = refine(reg.phi, reg.target, labels, min_size,

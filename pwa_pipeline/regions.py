@@ -79,7 +79,7 @@ def fit_regions(
     cols = std > 0
     z = (x[:, cols] - mean[cols]) / std[cols]
     weight = None if sample_weight is None else np.asarray(sample_weight, float)[keep]
-    svm = LinearSVC(C=C, multi_class="crammer_singer", max_iter=50000)
+    svm = LinearSVC(C=C, multi_class="crammer_singer", max_iter=50000, random_state=0)
     with warnings.catch_warnings():
         # Where classes overlap (noisy boundaries) the Crammer–Singer dual keeps making tiny
         # updates after the hyperplanes have settled; the regions are scored, not trusted.

@@ -147,3 +147,22 @@ def test_default_on_twenty_seeds_meets_the_targets():
             found += 1
             errors.append(max_param_error(m.thetas_, data.thetas))
     assert found >= 19 and np.median(errors) <= 0.02
+
+
+def test_single_output_affine_switching_on_the_output():
+    rng = np.random.default_rng(0)
+    n = 3000
+    u = rng.uniform(-1, 1, (n, 1))
+    y = np.zeros((n, 1))
+    for k in range(1, n):
+        y[k] = 0.5 * y[k - 1] + u[k - 1] if y[k - 1] > 0 else -0.3 * y[k - 1] + 2 * u[k - 1] + 0.5
+    y += 0.01 * rng.normal(size=y.shape)
+    m = PWARX(na=1, nb=1, affine=True).fit(u, y)
+    truth = np.array([[[0.5], [1.0], [0.0]], [[-0.3], [2.0], [0.5]]])
+    assert m.n_submodels_ == 2
+    assert max_param_error(m.thetas_, truth) < 0.01
+    # the region boundary is y(k-1) = 0: the two sub-models' rows must split there
+    phi = np.column_stack([y[:-1], u[:-1], np.ones(n - 1)])
+    region = m.regions_.predict(phi)
+    positive = y[:-1, 0] > 0.05
+    assert len(set(region[positive])) == 1 and len(set(region[y[:-1, 0] < -0.05])) == 1
