@@ -39,6 +39,7 @@ class Settings:
     confidence: float | None
     submodel: str
     merge_tol: float | None
+    copy_tol: float | None
     n_refine: int
     n_search: int
     ridge: float
@@ -49,9 +50,11 @@ class Settings:
 
 _PRESETS = {
     "paper": dict(standardize=False, scale_theta=False, confidence=None, submodel="centre",
-                  merge_tol=None, n_refine=0, n_search=0, max_cluster=None),
+                  merge_tol=None, copy_tol=None, n_refine=0, n_search=0,
+                  max_cluster=None),
     "default": dict(standardize=True, scale_theta=True, confidence=3.0, submodel="refit",
-                    merge_tol=1.0, n_refine=20, n_search=3, max_cluster=3000),
+                    merge_tol=1.0, copy_tol=25.0, n_refine=20, n_search=3,
+                    max_cluster=3000),
 }
 
 
@@ -337,8 +340,10 @@ def _refined_submodels(
     """The default step 5: merge, refine, look for missed modes.
 
     1. DBSCAN clusters that predict alike are merged
-       (:func:`pwa_pipeline.submodels.merge_indistinguishable`), and rows re-assigned by
-       residual alone until stable.
+       (:func:`pwa_pipeline.submodels.merge_indistinguishable`: predictions closer than the
+       noise, or closer than 5 noise standard deviations while no linear classifier on φ
+       tells their rows apart, i.e. copies of one mode), then rows are re-assigned by
+       residual alone until stable, merging again, until nothing merges.
     2. Rows are re-assigned by residual and sub-models refitted until stable
        (:func:`pwa_pipeline.submodels.refine`); sub-models that now predict alike are merged
        and step 2 repeats.
@@ -353,17 +358,25 @@ def _refined_submodels(
     labels = clusters.labels
     n_merged, n_iter, searches = 0, 0, 0
     if cfg.merge_tol is not None:
-        labels, n_merged = _merge_clustered(reg, labels, cfg.merge_tol)
-    # Consolidate by residual alone first: an SVM over many small, overlapping clusters can
-    # give all rows to the largest one.
-    labels = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)[1]
+        labels, n_merged = _merge_clustered(reg, labels, cfg.merge_tol, cfg.copy_tol)
+    # Consolidate by residual alone first, merging copies: an SVM over many small,
+    # overlapping clusters can give all rows to the largest one.
+    more = 1
+    while more:
+        labels = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)[1]
+        more = 0
+        if cfg.merge_tol is not None:
+            labels, more = merge_indistinguishable(reg.phi, reg.target, labels, cfg.merge_tol,
+                                                   cfg.copy_tol)
+            n_merged += more
     best = None
     while True:
         thetas, labels, margin, sweeps = refine(reg.phi, reg.target, labels, min_size,
                                                 cfg.n_refine, cfg.svm_c)
         n_iter += sweeps
         if cfg.merge_tol is not None:
-            merged, more = merge_indistinguishable(reg.phi, reg.target, labels, cfg.merge_tol)
+            merged, more = merge_indistinguishable(reg.phi, reg.target, labels, cfg.merge_tol,
+                                                   cfg.copy_tol)
             if more:
                 labels, n_merged = merged, n_merged + more
                 continue
@@ -403,10 +416,11 @@ def _cluster_subset(reg: Regressors, rows: np.ndarray, cfg: Settings) -> Cluster
         return None
 
 
-def _merge_clustered(reg: Regressors, labels: np.ndarray, tol: float):
+def _merge_clustered(reg: Regressors, labels: np.ndarray, tol: float, copy_tol: float | None):
     """:func:`merge_indistinguishable` on the rows DBSCAN clustered (noise stays −1)."""
     rows = labels >= 0
-    merged, n = merge_indistinguishable(reg.phi[rows], reg.target[rows], labels[rows], tol)
+    merged, n = merge_indistinguishable(reg.phi[rows], reg.target[rows], labels[rows], tol,
+                                        copy_tol)
     out = labels.copy()
     out[rows] = merged
     return out, n

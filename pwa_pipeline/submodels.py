@@ -74,17 +74,21 @@ def robust_noise_var(sq_res: np.ndarray) -> np.ndarray:
 
 
 def merge_indistinguishable(
-    phi: Float2D, target: Float2D, labels: np.ndarray, tol: float
+    phi: Float2D, target: Float2D, labels: np.ndarray, tol: float,
+    copy_tol: float | None = None,
 ) -> tuple[np.ndarray, int]:
     """Greedily merge pairs of sub-models that predict alike on their own data.
 
     For sub-models i, j (least-squares fits on their rows) the statistic is the mean over the
     rows of both of Σ_p ((θ_i − θ_j)ᵀφ)_p² / σ̂_p², the squared difference of their
-    predictions in units of the noise variance σ̂_p² (:func:`robust_noise_var`). The pair
-    with the smallest statistic below ``tol`` is merged, until none is. An effect size and not
-    a significance test: with thousands of rows, the slightly different biases of
-    errors-in-variables estimates in different parts of one mode are significant, but they
-    move predictions by far less than the noise.
+    predictions in units of the noise variance σ̂_p² (:func:`robust_noise_var`). A pair is
+    mergeable when the statistic is below ``tol``, or below ``copy_tol`` while a linear
+    classifier on φ cannot tell their rows apart (:func:`separable` is false): then they are
+    copies of one mode that a residual-based assignment split along the noise, not modes of
+    distinct regions. The mergeable pair with the smallest statistic is merged, until none is.
+    An effect size and not a significance test: with thousands of rows, the slightly
+    different biases of errors-in-variables estimates in different parts of one mode are
+    significant, but they move predictions by far less than the noise.
 
     Returns
     -------
@@ -101,13 +105,15 @@ def merge_indistinguishable(
         rows = labels >= 0
         sq = _sq_residuals(phi[rows], target[rows], thetas)
         sigma2 = robust_noise_var(sq[labels[rows], np.arange(rows.sum())])
-        best, pair = tol, None
+        best, pair = np.inf, None
         for i in range(s):
             for j in range(i + 1, s):
                 both = (labels == i) | (labels == j)
                 diff = phi[both] @ (thetas[i] - thetas[j])
                 stat = float(np.mean((diff**2 / sigma2).sum(axis=1)))
-                if stat < best:
+                copies = (copy_tol is not None and tol <= stat < copy_tol
+                          and not separable(phi[both], labels[both] == i))
+                if (stat < tol or copies) and (pair is None or stat < best):
                     best, pair = stat, (i, j)
         if pair is None:
             break
@@ -115,6 +121,16 @@ def merge_indistinguishable(
         labels = relabel_by_size(labels)
         n_merged += 1
     return labels, n_merged
+
+
+def separable(phi: Float2D, is_first: np.ndarray, accuracy: float = 0.9) -> bool:
+    """Whether a linear SVM on φ tells two groups of rows apart (training accuracy ≥
+    ``accuracy``)."""
+    labels = is_first.astype(int)
+    if labels.min() == labels.max():
+        return True
+    predicted = fit_regions(phi, labels, 2).predict(phi)
+    return bool(np.mean(predicted == labels) >= accuracy)
 
 
 def refine(
