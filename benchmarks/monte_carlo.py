@@ -60,6 +60,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
         out.append({
             "scenario": scenario, "setting": setting, "seeds": len(g),
             "exactly 4 sub-models": f"{int((g.n_submodels == 4).sum())}/{len(g)}",
+            "median sub-models": g.n_submodels.median(),
             "median largest param error": g.max_param_error.median(),
             "worst largest param error": g.max_param_error.max(),
             "median region accuracy": g.region_accuracy.median(),
@@ -68,10 +69,23 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def write_summary(df: pd.DataFrame) -> None:
+    """Write and print the summary of per-seed results."""
+    summary = summarise(df)
+    write_table(summary, "monte_carlo_summary")
+    (RESULTS / "monte_carlo.md").write_text(summary.to_markdown(index=False, floatfmt=".4g") + "\n")
+    print(summary.to_markdown(index=False, floatfmt=".4g"))
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--summary-only", action="store_true",
+                        help="re-summarise results/monte_carlo.csv without refitting")
     args = parser.parse_args(argv)
+    if args.summary_only:
+        write_summary(pd.read_csv(RESULTS / "monte_carlo.csv"))
+        return
     rows = []
     for scenario, (n, snr) in SCENARIOS.items():
         for setting in SETTINGS:
@@ -80,10 +94,7 @@ def main(argv=None) -> None:
             print(f"{scenario}, {setting}: done", flush=True)
     df = pd.DataFrame(rows)
     df.to_csv(RESULTS / "monte_carlo.csv", index=False)
-    summary = summarise(df)
-    write_table(summary, "monte_carlo_summary")
-    (RESULTS / "monte_carlo.md").write_text(summary.to_markdown(index=False, floatfmt=".4g") + "\n")
-    print(summary.to_markdown(index=False, floatfmt=".4g"))
+    write_summary(df)
 
 
 if __name__ == "__main__":
