@@ -141,8 +141,10 @@ class MLflowTracker(dg.ConfigurableResource):
                                       "method": method, **tags})
         run_id = run.info.run_id
         try:
-            finite = {k: float(v) for k, v in metrics.items() if v is not None}
-            finite = {k: (v if np.isfinite(v) else 1e300 * np.sign(v or 1)) for k, v in finite.items()}
+            # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
+            # scores.csv artifact keeps the exact value).
+            values = {k: float(v) for k, v in metrics.items() if v is not None}
+            finite = {k: float(np.clip(v, -1e300, 1e300)) for k, v in values.items()}
             client.log_batch(
                 run_id,
                 metrics=[Metric(k, v, 0, 0) for k, v in finite.items()],
