@@ -88,9 +88,10 @@ class PWARX(ARXModelBase):
         search, θ_k made unit-free (scaled by the regressors' and outputs' RMS) before the
         Vθ distance, local models with a residual variance over 3× the median left out (and
         at most 3,000 of them clustered), then sub-models refitted by least squares, rows
-        re-assigned by residual and by SVM regions until stable, sub-models whose predictions
-        differ by less than the noise merged, and rows no sub-model explains clustered again
-        for modes too small for the first pass (see ``_refined_submodels``).
+        re-assigned by residual and by SVM regions until stable, sub-models merged when their
+        predictions differ by less than the noise (or are copies of one mode that no linear
+        classifier on φ tells apart), and rows no sub-model explains clustered again for
+        modes too small for the first pass (see ``_refined_submodels``).
     embedding : {"exact", "literal"}
         DBSCAN on the literal Vθ of eq. (9), or on the d·m-dimensional map with the same
         distances (faster, same labels).
@@ -380,12 +381,11 @@ def _refined_submodels(
             if more:
                 labels, n_merged = merged, n_merged + more
                 continue
-        polished = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)[0]
-        poor = unexplained_cost(reg.phi, reg.target, polished) > limit
+        polished = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)
+        poor = unexplained_cost(reg.phi, reg.target, polished[0]) > limit
         if best is not None and poor.sum() >= best[0]:
-            labels = best[1]  # the search did not explain more rows: keep the previous state
-            break
-        best = (int(poor.sum()), labels)
+            break  # the search did not explain more rows: keep the previous state
+        best = (int(poor.sum()), polished)
         if searches >= cfg.n_search or poor.sum() < cfg.min_pts:
             break
         searches += 1
@@ -395,7 +395,7 @@ def _refined_submodels(
         labels = labels.copy()
         found = extra.labels >= 0
         labels[np.nonzero(poor)[0][found]] = thetas.shape[0] + extra.labels[found]
-    thetas, labels, margin, sweeps = refine(reg.phi, reg.target, labels, min_size, cfg.n_refine)
+    thetas, labels, margin, sweeps = best[1]  # the state kept, polished by residual
     n_iter += sweeps
     return SubModels(thetas=thetas, labels=labels, weights=margin_weights(margin),
                      n_merged=n_merged, n_iter=n_iter)

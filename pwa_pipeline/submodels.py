@@ -23,7 +23,7 @@ class SubModels:
         How clearly each row belongs to its sub-model (0: as well explained by another), used
         to weight the region SVM; None weighs all rows alike.
     n_merged : int
-        Sub-models merged because their predictions differed by less than the noise.
+        Sub-models merged by :func:`merge_indistinguishable`.
     n_iter : int
         Refinement sweeps run.
     """
