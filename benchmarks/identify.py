@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import linear_sum_assignment
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -28,6 +27,7 @@ from benchmarks._common import RESULTS, Timer, write_json  # noqa: E402
 from pwa_pipeline.config import get_hparams  # noqa: E402
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak  # noqa: E402
 from pwa_pipeline.identification import PWARX  # noqa: E402
+from pwa_pipeline.metrics import match_submodels  # noqa: E402
 
 PAPER_SIM = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
 PAPER_KUKA = dict(n_rho=61, eps=8.0, min_pts=22, settings="paper")
@@ -35,11 +35,11 @@ PAPER_KUKA = dict(n_rho=61, eps=8.0, min_pts=22, settings="paper")
 
 def mode_errors(thetas: np.ndarray, true: np.ndarray) -> list[float | None]:
     """Largest absolute parameter error of each true mode (None: no sub-model matched)."""
-    cost = np.array([[np.abs(a - b).max() for b in true] for a in thetas])
-    rows, cols = linear_sum_assignment(cost)
+    mode_of, error = match_submodels(thetas, true)
     out: list[float | None] = [None] * len(true)
-    for r, c in zip(rows, cols, strict=True):
-        out[c] = float(cost[r, c])
+    for mode, err in zip(mode_of, error, strict=True):
+        if mode >= 0:
+            out[mode] = float(err)
     return out
 
 

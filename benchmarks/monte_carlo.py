@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import linear_sum_assignment
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -25,6 +24,7 @@ from benchmarks._common import RESULTS, Timer, write_table  # noqa: E402
 from pwa_pipeline.datasets import make_hure_vasak  # noqa: E402
 from pwa_pipeline.evaluation import evaluate  # noqa: E402
 from pwa_pipeline.identification import PWARX  # noqa: E402
+from pwa_pipeline.metrics import match_submodels  # noqa: E402
 
 SETTINGS = {"default": {}, "paper": dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")}
 SCENARIOS = {"N=4000, 30 dB": (4000, 30.0), "N=4000, 20 dB": (4000, 20.0),
@@ -40,15 +40,12 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
             model = PWARX(na=1, nb=1, **SETTINGS[setting]).fit(data.u, data.y)
     except ValueError as exc:  # e.g. no cluster found
         return {**row, "n_submodels": 0, "error": str(exc)}
-    cost = np.array([[np.abs(a - b).max() for b in data.thetas] for a in model.thetas_])
-    rows, cols = linear_sum_assignment(cost)
-    mode_of = np.full(model.n_submodels_, -1)
-    mode_of[rows] = cols
+    mode_of, error = match_submodels(model.thetas_, data.thetas)
     phi = np.column_stack([data.y[:-1], data.u[:-1]])
     accuracy = float(np.mean(mode_of[model.regions_.predict(phi)] == data.modes[1:]))
     ev = evaluate(model, fresh.u, fresh.y, warmup=10)
     return {**row, "n_submodels": model.n_submodels_,
-            "max_param_error": float(cost[rows, cols].max()) if model.n_submodels_ == 4 else np.nan,
+            "max_param_error": float(np.nanmax(error)) if model.n_submodels_ == 4 else np.nan,
             "region_accuracy": accuracy, "free_run_nrmse": ev.mean("free_run"),
             "one_step_nrmse": ev.mean("one_step"), "noise_share": model.noise_share_,
             "eps": model.eps_, "fit_seconds": t.seconds}

@@ -1,6 +1,7 @@
 """Scores of identified models: NRMSE and R² per output (paper eq. 21–24)."""
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from ._typing import Float2D
 
@@ -55,3 +56,27 @@ def mean_nrmse(y_true, y_pred) -> float:
 def mean_r2(y_true, y_pred) -> float:
     """Average R² over outputs, eq. (24), as a fraction."""
     return float(np.mean(r2_score(y_true, y_pred)))
+
+
+def match_submodels(estimated: np.ndarray, true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pair estimated sub-models with true ones by parameters (Hungarian assignment).
+
+    Parameters
+    ----------
+    estimated, true : ndarrays of shape (s_est, d, m) and (s_true, d, m)
+
+    Returns
+    -------
+    mode_of : ndarray of shape (s_est,)
+        The true sub-model matched to each estimated one, −1 where none is (more estimated
+        than true).
+    error : ndarray of shape (s_est,)
+        Largest absolute parameter difference to the matched true sub-model (NaN: none).
+    """
+    cost = np.array([[np.abs(a - b).max() for b in true] for a in estimated])
+    rows, cols = linear_sum_assignment(cost)
+    mode_of = np.full(len(estimated), -1)
+    mode_of[rows] = cols
+    error = np.full(len(estimated), np.nan)
+    error[rows] = cost[rows, cols]
+    return mode_of, error

@@ -29,3 +29,15 @@ def test_divergent_prediction_scores_inf_and_shapes_checked():
         nrmse(y, y[:4])
     with pytest.raises(ValueError, match="y_true contains NaN"):
         nrmse(np.array([[np.nan], [1.0]]), np.zeros((2, 1)))
+
+
+def test_match_submodels_pairs_by_parameters():
+    from pwa_pipeline.metrics import match_submodels
+
+    true = np.array([[[1.0]], [[2.0]], [[3.0]]])
+    est = np.array([[[3.1]], [[0.95]]])
+    mode_of, error = match_submodels(est, true)
+    np.testing.assert_array_equal(mode_of, [2, 0])
+    np.testing.assert_allclose(error, [0.1, 0.05])
+    mode_of, error = match_submodels(np.array([[[1.0]], [[1.1]], [[9.0]]]), true[:2])
+    assert (mode_of == -1).sum() == 1 and np.isnan(error[mode_of == -1][0])
