@@ -1,10 +1,22 @@
 """pwa-pipeline: identification of MIMO piecewise-affine ARX models.
 
-The numerical core (this package's top-level modules) depends only on numpy, scipy and
-scikit-learn; the Dagster/MLflow orchestration lives in :mod:`pwa_pipeline.pipeline`.
+The numerical core (:mod:`pwa_pipeline.pwa`, :mod:`~pwa_pipeline.baselines`,
+:mod:`~pwa_pipeline.scoring`, :mod:`~pwa_pipeline.datasets`, :mod:`~pwa_pipeline.config`)
+depends only on numpy, scipy, scikit-learn and pandas; everything that imports Dagster or
+MLflow lives in :mod:`pwa_pipeline.orchestration`.
 """
 
-from .identification import PWARX
+from importlib.metadata import PackageNotFoundError, version
 
-__all__ = ["PWARX"]
-__version__ = "0.1.0"
+from .baselines import LinearARX, SubspaceSS
+from .datasets import load_kuka, load_table, make_hure_vasak
+from .pwa import PWARX
+from .scoring import evaluate
+
+try:
+    __version__ = version("pwa-pipeline")
+except PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
+
+__all__ = ["PWARX", "LinearARX", "SubspaceSS", "evaluate", "load_kuka", "load_table",
+           "make_hure_vasak", "__version__"]

@@ -1,99 +1,187 @@
-"""Named hyper-parameter sets (``data/hparams.toml``) and the models they configure."""
+"""Named hyper-parameter sets (``data/hparams.toml``), read and validated once.
+
+The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys configure
+:class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"`` or ``"paper"``, the
+classmethod that builds its step objects), ``na``, ``nb``, ``affine``, and each step's
+parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
+``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
+subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). Every estimator is
+built and its parameters checked when the file is read, so a bad value fails before any run,
+with the file, set and data set in the message.
+"""
 
 import os
+import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from .identification import PWARX
-from .linear import LinearARX
-from .subspace import SubspaceSS
+from sklearn.base import BaseEstimator
+
+from .methods import METHODS
+from .pwa.estimator import PWARX
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
 BASELINES = "baselines"
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
+#: Evaluation warm-up (samples) when ``[baselines.<dataset>]`` gives none.
+DEFAULT_WARMUP = 10
+_PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
+                 ("clustering", "min_pts"): "min_pts"}
 
 
 @dataclass(frozen=True)
-class HParams:
-    """One named set for one data set.
+class Configuration:
+    """Everything one partition (data set × set) needs, resolved once.
 
     Attributes
     ----------
-    name : str
-    dataset : str
-    pwarx : dict
-        Keyword arguments of :class:`~pwa_pipeline.identification.PWARX`.
-    baselines : dict
-        ``subspace_order``, ``subspace_horizon``, ``warmup``.
+    hparams, dataset : str
+        The set and data set names.
+    estimators : dict
+        The unfitted estimator of each method of :data:`pwa_pipeline.methods.METHODS`.
+    warmup : int
+        Warm-up samples of the evaluation protocol.
+    source : Path
+        The file it was read from.
     """
 
-    name: str
+    hparams: str
     dataset: str
-    pwarx: dict
-    baselines: dict
+    estimators: dict[str, BaseEstimator]
+    warmup: int
+    source: Path = field(compare=False)
 
     @property
-    def warmup(self) -> int:
-        """Warm-up samples of the evaluation protocol."""
-        return int(self.baselines.get("warmup", 10))
-
-    def as_params(self) -> dict:
-        """Flat dict of every value, for tracking."""
-        out = {"hparams": self.name, "dataset": self.dataset, **self.pwarx}
-        out.update({f"baseline_{k}": v for k, v in self.baselines.items()})
-        return out
-
-    def pwa_model(self) -> PWARX:
+    def pwa(self) -> PWARX:
         """The unfitted PWARX estimator."""
-        return PWARX(**self.pwarx)
+        return self.estimators["pwa"]
 
-    def linear_model(self) -> LinearARX:
-        """Linear ARX with the PWA model's regressors."""
-        return LinearARX(self.pwarx.get("na", 1), self.pwarx.get("nb", 1),
-                         self.pwarx.get("affine", False))
-
-    def subspace_model(self) -> SubspaceSS:
-        """The subspace state-space baseline."""
-        return SubspaceSS(order=self.baselines.get("subspace_order"),
-                          horizon=int(self.baselines.get("subspace_horizon", 10)),
-                          warmup=self.warmup)
+    def params(self, method: str) -> dict:
+        """``method``'s parameters as ``get_params(deep=True)`` names them (step objects
+        listed by class name), with the set, data set and warm-up."""
+        params = self.estimators[method].get_params(deep=True)
+        return {"hparams": self.hparams, "dataset": self.dataset, "warmup": self.warmup,
+                **{k: type(v).__name__ if isinstance(v, BaseEstimator) else v
+                   for k, v in params.items()}}
 
 
 def default_hparams_path() -> Path:
-    """``$PWA_HPARAMS`` if set (the pipeline's partitions follow it), else ``data/hparams.toml``."""
+    """``$PWA_HPARAMS`` if set, else the bundled ``data/hparams.toml``."""
     env = os.environ.get("PWA_HPARAMS")
-    return Path(env) if env else BUNDLED_HPARAMS
+    return Path(env).resolve() if env else BUNDLED_HPARAMS
 
 
-def read_hparams(path: str | Path | None = None) -> dict[str, dict[str, dict]]:
-    """The raw tables of the hyper-parameter file: ``{set: {dataset: {key: value}}}``."""
-    p = Path(path) if path is not None else default_hparams_path()
-    if not p.is_file():
-        raise FileNotFoundError(f"hyper-parameter file not found: {p}")
-    with p.open("rb") as fh:
-        return tomllib.load(fh)
+def check_name(name: str, what: str) -> str:
+    """``name`` if it matches :data:`NAME_PATTERN` (it becomes a path and a partition key)."""
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        raise ValueError(
+            f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"
+        )
+    return name
 
 
-def set_names(path: str | Path | None = None) -> list[str]:
-    """Names of the hyper-parameter sets (every table but ``baselines``)."""
-    return [k for k in read_hparams(path) if k != BASELINES]
+def _flatten(table: dict, prefix: str = "") -> dict:
+    out = {}
+    for key, value in table.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}__"))
+        else:
+            out[prefix + key] = value
+    return out
 
 
-def get_hparams(name: str, dataset: str, path: str | Path | None = None) -> HParams:
-    """The set ``name`` for ``dataset``.
+def build_pwarx(table: dict) -> PWARX:
+    """The PWARX estimator a ``[<set>.<dataset>]`` table describes (see the module doc)."""
+    table = {k: (dict(v) if isinstance(v, dict) else v) for k, v in table.items()}
+    preset = table.pop("preset", "default")
+    orders = {k: table.pop(k) for k in ("na", "nb", "affine") if k in table}
+    if preset == "default":
+        model = PWARX.default(**orders)
+    elif preset == "paper":
+        values = {}
+        for (step, key), arg in _PAPER_VALUES.items():
+            if key not in table.get(step, {}):
+                missing = [f"{s}.{k}" for s, k in _PAPER_VALUES if k not in table.get(s, {})]
+                raise ValueError(
+                    f"preset 'paper' needs {', '.join(missing)}: the paper gives them per "
+                    f"data set and no rule"
+                )
+            values[arg] = table[step].pop(key)
+        model = PWARX.paper(**orders, **values)
+    else:
+        raise ValueError(f"unknown preset {preset!r}; use 'default' or 'paper'")
+    model.set_params(**_flatten(table))
+    model._validate_params()
+    for step in model.steps().values():
+        step._validate_params()
+    return model
+
+
+class HParamsFile:
+    """A hyper-parameter file, read, built and validated once.
+
+    Parameters
+    ----------
+    path : path-like, optional
+        Default: :func:`default_hparams_path`.
+
+    Attributes
+    ----------
+    path : Path
+    sets : list of str
+        The set names (every top-level table but ``baselines``), in file order.
 
     Raises
     ------
-    KeyError
-        Naming the unknown set or data set and the known ones.
+    FileNotFoundError
+        Naming the path.
+    ValueError
+        Invalid TOML (with the line), a bad name, an unknown parameter or preset, or a
+        value outside its range; the message names the file, set and data set.
     """
-    tables = read_hparams(path)
-    if name not in tables or name == BASELINES:
-        raise KeyError(f"unknown hyper-parameter set {name!r}; known: {set_names(path)}")
-    if dataset not in tables[name]:
-        raise KeyError(
-            f"hyper-parameter set {name!r} has no values for data set {dataset!r}; "
-            f"it has {sorted(tables[name])}"
-        )
-    return HParams(name=name, dataset=dataset, pwarx=dict(tables[name][dataset]),
-                   baselines=dict(tables.get(BASELINES, {}).get(dataset, {})))
+
+    def __init__(self, path: str | os.PathLike | None = None):
+        self.path = Path(path).resolve() if path is not None else default_hparams_path()
+        if not self.path.is_file():
+            raise FileNotFoundError(f"hyper-parameter file not found: {self.path}")
+        try:
+            with self.path.open("rb") as fh:
+                tables = tomllib.load(fh)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{self.path} is not valid TOML: {exc}") from None
+        baselines = tables.pop(BASELINES, {})
+        self.sets = [check_name(name, "hyper-parameter set") for name in tables]
+        self._configs: dict[tuple[str, str], Configuration] = {}
+        for name, per_dataset in tables.items():
+            for dataset, table in per_dataset.items():
+                check_name(dataset, "data set")
+                where = f"{self.path}, [{name}.{dataset}]"
+                base = {"warmup": DEFAULT_WARMUP, **baselines.get(dataset, {})}
+                try:
+                    pwa = build_pwarx(table)
+                    estimators = {m.name: m.build(pwa, base) for m in METHODS.values()}
+                    for est in estimators.values():
+                        est._validate_params()
+                except (ValueError, TypeError) as exc:
+                    raise ValueError(f"{where}: {exc}") from None
+                self._configs[name, dataset] = Configuration(
+                    hparams=name, dataset=dataset, estimators=estimators,
+                    warmup=int(base["warmup"]), source=self.path)
+
+    def configuration(self, hparams: str, dataset: str) -> Configuration:
+        """The configuration of set ``hparams`` for ``dataset``.
+
+        Raises
+        ------
+        KeyError
+            Naming the unknown set or data set and the known ones.
+        """
+        if hparams not in self.sets:
+            raise KeyError(f"unknown hyper-parameter set {hparams!r} in {self.path}; "
+                           f"known: {self.sets}")
+        if (hparams, dataset) not in self._configs:
+            known = sorted(d for s, d in self._configs if s == hparams)
+            raise KeyError(f"hyper-parameter set {hparams!r} has no values for data set "
+                           f"{dataset!r} in {self.path}; it has {known}")
+        return self._configs[hparams, dataset]

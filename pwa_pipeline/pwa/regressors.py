@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._typing import Float2D
+from .._typing import Float2D
 
 
 @dataclass(frozen=True)
@@ -21,12 +21,26 @@ class Regressors:
         Index of the experiment each row comes from.
     time : ndarray of shape (n,)
         Sample index k of each row inside its experiment.
+    n_inputs : int
+        r, the number of input channels (φ alone does not tell it when nb = 0).
     """
 
     phi: Float2D
     target: Float2D
     experiment: np.ndarray
     time: np.ndarray
+    n_inputs: int
+
+    @property
+    def n_outputs(self) -> int:
+        """m, the number of output channels."""
+        return self.target.shape[1]
+
+    def subset(self, rows: np.ndarray) -> "Regressors":
+        """The rows selected by a boolean or index array."""
+        return Regressors(phi=self.phi[rows], target=self.target[rows],
+                          experiment=self.experiment[rows], time=self.time[rows],
+                          n_inputs=self.n_inputs)
 
 
 def n_initial(na: int, nb: int) -> int:
@@ -102,4 +116,5 @@ def build_regressors(
         target=np.vstack(targets),
         experiment=np.concatenate(exp_idx),
         time=np.concatenate(times),
+        n_inputs=experiments[0][0].shape[1],
     )

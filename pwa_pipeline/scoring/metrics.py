@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ._typing import Float2D
+from .._typing import Float2D
 
 
 def _pair(y_true, y_pred) -> tuple[Float2D, Float2D]:

@@ -17,9 +17,9 @@ from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
-from ._typing import Float2D, Signals
-from ._validation import _is_experiment_list, as_experiments, as_signal, check_width
-from .local_models import column_rms
+from .._arrays import column_rms
+from .._typing import Float2D, Signals
+from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
 
 
 def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:
@@ -52,7 +52,7 @@ class SubspaceSS(BaseEstimator):
     Examples
     --------
     >>> import numpy as np
-    >>> from pwa_pipeline.subspace import SubspaceSS
+    >>> from pwa_pipeline import SubspaceSS
     >>> rng = np.random.default_rng(0)
     >>> u = rng.normal(size=(2000, 1)); y = np.zeros((2000, 1)); x = 0.0
     >>> for k in range(2000):
@@ -144,6 +144,10 @@ class SubspaceSS(BaseEstimator):
         self.n_inputs_, self.n_outputs_ = r, m
         self.n_features_in_ = r
         return self
+
+    def resolved_params(self) -> dict:
+        """:meth:`get_params` with the order chosen at fit filled in."""
+        return {**self.get_params(), "order": self.order_}
 
     @property
     def poles_(self) -> np.ndarray:

@@ -6,10 +6,10 @@ import numpy as np
 from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
 
-from ._typing import Float2D, Signals
-from ._validation import as_experiments
-from .arx import ARXModelBase
-from .regressors import build_regressors
+from .._typing import Float2D, Signals
+from .._validation import as_experiments
+from ..pwa.arx import ARXModelBase
+from ..pwa.regressors import build_regressors
 
 
 class LinearARX(ARXModelBase):
@@ -29,7 +29,7 @@ class LinearARX(ARXModelBase):
     Examples
     --------
     >>> import numpy as np
-    >>> from pwa_pipeline.linear import LinearARX
+    >>> from pwa_pipeline import LinearARX
     >>> u = np.random.default_rng(0).normal(size=(200, 1))
     >>> y = np.zeros((200, 1))
     >>> for k in range(1, 200):
@@ -64,6 +64,10 @@ class LinearARX(ARXModelBase):
         self.n_outputs_ = pairs[0][1].shape[1]
         self.n_features_in_ = self.n_inputs_
         return self
+
+    def resolved_params(self) -> dict:
+        """The parameters (nothing is chosen at fit)."""
+        return self.get_params()
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         return phi @ self.theta_

@@ -1,36 +1,17 @@
 """Local sets and local least-squares parameter matrices (paper steps 2–3, eq. 6–7)."""
 
-from dataclasses import dataclass
+from numbers import Integral, Real
 
 import numpy as np
+from sklearn.base import BaseEstimator, _fit_context
 from sklearn.neighbors import NearestNeighbors
+from sklearn.utils._param_validation import Interval
 
-from ._typing import Float2D
+from .._arrays import column_rms
+from .._typing import Float2D
 
 _RANK_TOL = 1e-10
 _CHUNK = 4096
-
-
-@dataclass(frozen=True)
-class LocalModels:
-    """One local ARX model per regressor row.
-
-    Attributes
-    ----------
-    theta : ndarray of shape (n, d, m)
-        θ_k of eq. (6), in the regressors' own units.
-    residual_var : ndarray of shape (n, m)
-        Residual variance of each local fit, SSR / (n_ρ − d), per output.
-    neighbours : ndarray of shape (n, n_ρ)
-        Row indices of each local set C_k (the row itself first).
-    phi_scale : ndarray of shape (d,)
-        Root-mean-square of each regressor column, used to make θ unit-free.
-    """
-
-    theta: np.ndarray
-    residual_var: Float2D
-    neighbours: np.ndarray
-    phi_scale: np.ndarray
 
 
 def check_n_rho(n_rho: int, d: int) -> None:
@@ -40,12 +21,6 @@ def check_n_rho(n_rho: int, d: int) -> None:
             f"n_rho = {n_rho} must exceed the regressor dimension d = {d}: each local set "
             f"needs more points than parameters per output"
         )
-
-
-def column_rms(x: Float2D) -> np.ndarray:
-    """Root mean square of each column, 1 where a column is all zeros."""
-    rms = np.sqrt(np.mean(x**2, axis=0))
-    return np.where(rms > 0, rms, 1.0)
 
 
 def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
@@ -90,12 +65,21 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
 
 def local_least_squares(
     phi: Float2D, target: Float2D, neighbours: np.ndarray, ridge: float = 0.0
-) -> LocalModels:
+) -> tuple[np.ndarray, Float2D, np.ndarray]:
     """Least-squares θ_k on every local set, batched over k (eq. 6–7).
 
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
     matrix Φ_k; with ``ridge > 0`` the rows √ridge·I are appended (Tikhonov regularisation in
     scaled units), which keeps the problem solvable where a local set is degenerate.
+
+    Returns
+    -------
+    theta : ndarray of shape (n, d, m)
+        θ_k of eq. (6), in the regressors' own units.
+    residual_var : ndarray of shape (n, m)
+        SSR / (n_ρ − d) of each local fit, per output.
+    phi_scale : ndarray of shape (d,)
+        Root mean square of each regressor column (the column scaling of the solve).
 
     Raises
     ------
@@ -134,15 +118,75 @@ def local_least_squares(
         res = target[idx] - xs[idx] @ th
         theta[start : start + len(idx)] = th / scale[:, None]
         resvar[start : start + len(idx)] = (res**2).sum(axis=1) / (n_rho - d)
-    return LocalModels(theta=theta, residual_var=resvar, neighbours=neighbours, phi_scale=scale)
+    return theta, resvar, scale
 
 
-def estimate_local_models(
-    phi: Float2D, target: Float2D, n_rho: int, standardize: bool, ridge: float = 0.0
-) -> LocalModels:
-    """Steps 2–3 of the method: local sets, then a local θ_k per set.
+class LocalLeastSquares(BaseEstimator):
+    """Steps 2–3 of the method: a local set of n_ρ neighbours around every φ(k) and its
+    least-squares parameter matrix θ_k (eq. 6–7).
 
-    See :func:`local_sets` and :func:`local_least_squares`.
+    Parameters
+    ----------
+    n_rho : int, optional
+        Local set size n_ρ (> d). None: 3·d, resolved at fit as ``n_rho_``.
+    standardize : bool, default True
+        Search neighbours on z-scored regressors. The paper searches on raw regressors
+        (False), where large-valued channels (the inputs of its section 5 system) dominate the
+        distance and few local sets are pure (``shared/paper/NOTES.md``).
+    ridge : float, default 0
+        Tikhonov term for degenerate local sets, in column-scaled units (0: a singular local
+        set raises).
+
+    Attributes
+    ----------
+    theta_ : ndarray of shape (n, d, m)
+        θ_k of every local set, in the regressors' own units.
+    residual_var_ : ndarray of shape (n, m)
+        Residual variance of each local fit, SSR / (n_ρ − d), per output.
+    neighbours_ : ndarray of shape (n, n_ρ)
+        Row indices of each local set C_k (the row itself first).
+    phi_scale_ : ndarray of shape (d,)
+        Root mean square of each regressor column, used to make θ unit-free.
+    n_rho_ : int
+        The n_ρ used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> phi = np.random.default_rng(0).normal(size=(200, 2))
+    >>> step = LocalLeastSquares(n_rho=10).fit(phi, phi @ np.array([[1.0], [-2.0]]))
+    >>> step.theta_.shape, bool(np.allclose(step.theta_[:, :, 0], [1.0, -2.0]))
+    ((200, 2, 1), True)
     """
-    check_n_rho(n_rho, phi.shape[1])
-    return local_least_squares(phi, target, local_sets(phi, n_rho, standardize), ridge)
+
+    _parameter_constraints: dict = {
+        "n_rho": [Interval(Integral, 2, None, closed="left"), None],
+        "standardize": ["boolean"],
+        "ridge": [Interval(Real, 0, None, closed="left")],
+    }
+
+    def __init__(self, n_rho: int | None = None, standardize: bool = True, ridge: float = 0.0):
+        self.n_rho = n_rho
+        self.standardize = standardize
+        self.ridge = ridge
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
+        """Local sets (:func:`local_sets`) and local least squares (:func:`local_least_squares`).
+
+        Parameters
+        ----------
+        phi : ndarray of shape (n, d)
+        target : ndarray of shape (n, m)
+        """
+        d = phi.shape[1]
+        self.n_rho_ = self.n_rho if self.n_rho is not None else 3 * d
+        check_n_rho(self.n_rho_, d)
+        self.neighbours_ = local_sets(phi, self.n_rho_, self.standardize)
+        self.theta_, self.residual_var_, self.phi_scale_ = local_least_squares(
+            phi, target, self.neighbours_, self.ridge)
+        return self
+
+    def resolved_params(self) -> dict:
+        """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
+        return {**self.get_params(), "n_rho": self.n_rho_}

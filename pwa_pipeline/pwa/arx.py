@@ -4,9 +4,9 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
-from ._typing import Float2D, Signals
-from ._validation import _is_experiment_list, as_experiments, as_signal, check_width
-from .metrics import r2_score
+from .._typing import Float2D, Signals
+from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from ..scoring.metrics import r2_score
 from .regressors import lagged_matrix, n_initial
 
 

@@ -17,8 +17,8 @@ from typing import Protocol
 import numpy as np
 import pandas as pd
 
-from ._typing import Float2D
-from ._validation import as_experiments
+from .._typing import Float2D
+from .._validation import as_experiments
 from .metrics import nrmse, r2_score, rmse
 
 MODES = ("one_step", "free_run")

@@ -1,0 +1,26 @@
+"""Small array helpers shared across the numerical core (no step of the method lives here)."""
+
+import numpy as np
+
+from ._typing import Float2D
+
+
+def column_rms(x: Float2D) -> np.ndarray:
+    """Root mean square of each column, 1 where a column is all zeros."""
+    rms = np.sqrt(np.mean(x**2, axis=0))
+    return np.where(rms > 0, rms, 1.0)
+
+
+def relabel_by_size(labels: np.ndarray) -> np.ndarray:
+    """Renumber non-negative labels 0 … s−1 by decreasing group size; −1 stays −1."""
+    out = np.full_like(labels, -1)
+    kept = labels[labels >= 0]
+    if kept.size == 0:
+        return out
+    uniq, counts = np.unique(kept, return_counts=True)
+    order = uniq[np.argsort(-counts, kind="stable")]
+    lookup = np.full(int(uniq.max()) + 1, -1)
+    lookup[order] = np.arange(order.size)
+    mask = labels >= 0
+    out[mask] = lookup[labels[mask]]
+    return out

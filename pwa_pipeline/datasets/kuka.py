@@ -1,0 +1,94 @@
+"""The KUKA KR300 forward-identification benchmark (the paper's section 6), read from a
+configured path; the data are never part of this repository."""
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .._typing import Float2D
+
+KUKA_SEGMENT = 606
+KUKA_DOWNLOAD = (
+    "the official archive Robot_Identification_Benchmark_Without_Raw_Data.rar "
+    "(DOI 10.26204/DATA/5, 'Industrial robot' on nonlinearbenchmark.org), which holds "
+    "forward_identification_without_raw_data.mat"
+)
+KUKA_FILES = ("forward_identification_reconstructed.mat", "forward_identification_without_raw_data.mat")
+
+
+@dataclass(frozen=True)
+class RobotData:
+    """KUKA KR300 forward identification data as separate 606-sample experiments.
+
+    Attributes
+    ----------
+    u_train, y_train : lists of ndarrays of shape (≤606, 6)
+        Motor torques (Nm) and joint positions (degrees) of the training record.
+    u_test, y_test : lists of ndarrays of shape (606, 6)
+        The held-out test record.
+    path : Path
+    """
+
+    u_train: list[Float2D]
+    y_train: list[Float2D]
+    u_test: list[Float2D]
+    y_test: list[Float2D]
+    path: Path
+    u_names: list[str] = field(default_factory=lambda: [f"tau{i}" for i in range(1, 7)])
+    y_names: list[str] = field(default_factory=lambda: [f"q{i}" for i in range(1, 7)])
+
+
+def default_kuka_path() -> Path:
+    """``$PWA_KUKA_DATA`` if set, else ``../shared/data/kuka-kr300`` beside the project."""
+    env = os.environ.get("PWA_KUKA_DATA")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "kuka-kr300"
+
+
+def _split(x: Float2D, length: int) -> list[Float2D]:
+    return [x[i : i + length] for i in range(0, x.shape[0], length)]
+
+
+def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT) -> RobotData:
+    """Load the KUKA KR300 forward identification benchmark, cut into experiments.
+
+    Parameters
+    ----------
+    path : path-like, optional
+        The ``.mat`` file or the folder holding it. Default: :func:`default_kuka_path`.
+    segment : int, default 606
+        Experiment length; regressors and simulations must not span two experiments.
+
+    Raises
+    ------
+    FileNotFoundError
+        Naming the path searched and where the official file can be downloaded.
+    ValueError
+        If the file lacks the benchmark's variables.
+    """
+    from scipy.io import loadmat
+
+    base = Path(path) if path is not None else default_kuka_path()
+    candidates = [base] if base.suffix == ".mat" else [base / f for f in KUKA_FILES]
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise FileNotFoundError(
+            f"KUKA robot data not found at {base.resolve()} (looked for "
+            f"{', '.join(str(c.name) for c in candidates)}). Download {KUKA_DOWNLOAD}, and "
+            f"pass its path or set PWA_KUKA_DATA to it"
+        )
+    mat = loadmat(found)
+    missing = [k for k in ("u_train", "y_train", "u_test", "y_test") if k not in mat]
+    if missing:
+        raise ValueError(f"{found} lacks the benchmark variable(s) {', '.join(missing)}")
+    arrays = {k: np.asarray(mat[k], dtype=float).T for k in ("u_train", "y_train", "u_test", "y_test")}
+    return RobotData(
+        u_train=_split(arrays["u_train"], segment),
+        y_train=_split(arrays["y_train"], segment),
+        u_test=_split(arrays["u_test"], segment),
+        y_test=_split(arrays["y_test"], segment),
+        path=found,
+    )

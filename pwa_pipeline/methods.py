@@ -1,0 +1,40 @@
+"""The compared methods, named once: the pipeline's assets and checks, the comparison tables
+and the benchmarks all read this registry."""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sklearn.base import BaseEstimator
+
+from .baselines.linear import LinearARX
+from .baselines.subspace import SubspaceSS
+from .pwa.estimator import PWARX
+
+
+@dataclass(frozen=True)
+class Method:
+    """One identification method.
+
+    Attributes
+    ----------
+    name : str
+        Key in tables, asset names (``<name>_model``, ``<name>_scores``) and MLflow tags.
+    label : str
+        For people: table columns and figure titles.
+    build : callable
+        ``build(pwa, baselines)`` → the unfitted estimator, from a set's PWARX (whose orders
+        the ARX baselines share) and the data set's ``[baselines.<dataset>]`` table.
+    """
+
+    name: str
+    label: str
+    build: Callable[[PWARX, dict], BaseEstimator]
+
+
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("pwa", "PWA", lambda pwa, base: pwa),
+    Method("linear_arx", "linear ARX",
+           lambda pwa, base: LinearARX(na=pwa.na, nb=pwa.nb, affine=pwa.affine)),
+    Method("subspace", "subspace",
+           lambda pwa, base: SubspaceSS(**base.get("subspace", {}), warmup=base["warmup"])),
+)}

@@ -1,0 +1,12 @@
+"""The paper's method, one module per step: regressors (eq. 2–3), local models (eq. 6–7),
+the Vθ embedding (eq. 8–10), clustering (DBSCAN), sub-models (step 5), regions (step 6), and
+the :class:`PWARX` estimator built from those step objects."""
+
+from .clustering import DBSCANClustering
+from .estimator import PWARX, STEPS
+from .local_models import LocalLeastSquares
+from .regions import SVMRegions
+from .submodels import ClusterCentres, RefinedSubModels
+
+__all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "LocalLeastSquares",
+           "RefinedSubModels", "SVMRegions"]

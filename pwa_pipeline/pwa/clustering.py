@@ -1,0 +1,227 @@
+"""Extended DBSCAN on the local parameter matrices (paper step 4, section 4)."""
+
+from numbers import Integral, Real
+
+import numpy as np
+from sklearn.base import BaseEstimator, _fit_context
+from sklearn.cluster import DBSCAN
+from sklearn.neighbors import NearestNeighbors
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from .._arrays import column_rms, relabel_by_size
+from .embedding import EMBEDDINGS
+
+_EPS_SAMPLE = 5000
+
+
+def confident_models(residual_var: np.ndarray, factor: float) -> np.ndarray:
+    """Local models whose residual variance is at most ``factor`` × the median, per output.
+
+    A local set that mixes modes fits badly, so its residual variance is large
+    (Ferrari-Trecate et al. 2003 weight local models by this confidence); pure local sets
+    have a residual variance near the noise variance, i.e. near the median.
+    """
+    ratio = residual_var / np.maximum(np.median(residual_var, axis=0), np.finfo(float).tiny)
+    return np.all(ratio <= factor, axis=1)
+
+
+def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0) -> np.ndarray:
+    """Sorted distance of each point to its MinPts-th neighbour, the point itself included.
+
+    That distance decides whether a point is a DBSCAN core point: the curve is flat inside
+    dense clusters and rises for points between them. At most 5,000 points are queried
+    (against all points) to bound the cost.
+    """
+    n = emb.shape[0]
+    rng = np.random.default_rng(seed)
+    query = emb if n <= _EPS_SAMPLE else emb[rng.choice(n, _EPS_SAMPLE, replace=False)]
+    nn = NearestNeighbors(n_neighbors=min(min_pts, n)).fit(emb)
+    return np.sort(nn.kneighbors(query)[0][:, -1])
+
+
+def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
+    """ε from the k-distance curve: the candidate that separates the most clusters.
+
+    Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. DBSCAN runs at each (on
+    one radius-neighbour graph computed once at the largest), and the largest ε giving the
+    most clusters wins. Over-splitting a mode is harmless where sub-models that predict
+    alike are merged afterwards (as :class:`pwa_pipeline.pwa.submodels.RefinedSubModels`
+    does);
+    merging two modes is not repairable, and the classic knee of the curve does that when one
+    mode is much larger than another.
+    """
+    dist = k_distances(emb, min_pts)
+    # Distances below 1e-6 of the parameters' size are rounding error (noise-free data).
+    floor = 1e-6 * max(float(np.median(np.linalg.norm(emb, axis=1))), np.finfo(float).tiny)
+    grid = np.unique(np.maximum(np.quantile(dist, np.linspace(0.02, 0.6, n_grid)), floor))
+    graph = NearestNeighbors(radius=grid[-1]).fit(emb).radius_neighbors_graph(
+        mode="distance", sort_results=True
+    )
+    graph.data = np.maximum(graph.data, np.finfo(float).tiny)  # keep exact duplicates
+    counts = [
+        DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max() + 1
+        for eps in grid
+    ]
+    best = max(range(len(grid)), key=lambda i: (counts[i], i))
+    return float(grid[best])
+
+
+def cluster_local_models(
+    theta: np.ndarray,
+    eps: float | None,
+    min_pts: int,
+    embedding: str = "exact",
+    clustered: np.ndarray | None = None,
+) -> tuple[np.ndarray, float]:
+    """Cluster local parameter matrices with DBSCAN on the Vθ distance (eq. 8–10).
+
+    Parameters
+    ----------
+    theta : ndarray of shape (n, d, m)
+        Local parameter matrices (possibly rescaled by the caller).
+    eps : float or None
+        DBSCAN radius; None chooses it with :func:`k_distance_eps`.
+    min_pts : int
+        DBSCAN MinPts (the point itself counts, as in scikit-learn's ``min_samples``).
+    embedding : {"exact", "literal"}
+        ``"literal"`` is Vθ of eq. (9); ``"exact"`` the d·m-dimensional map with the same
+        distances (:func:`pwa_pipeline.pwa.embedding.exact_embedding`).
+    clustered : ndarray of bool, optional
+        Which local models to cluster; the others are labelled noise.
+
+    Returns
+    -------
+    labels : ndarray of shape (n,)
+        0 … s−1 by decreasing cluster size, −1 for noise and for rows not clustered.
+    eps : float
+        The ε used.
+
+    Raises
+    ------
+    ValueError
+        If DBSCAN finds no cluster; the message gives ε, MinPts and the noise share.
+    """
+    n = theta.shape[0]
+    mask = np.ones(n, bool) if clustered is None else np.asarray(clustered, bool)
+    if mask.sum() < min_pts:
+        raise ValueError(
+            f"only {int(mask.sum())} local models to cluster, fewer than min_pts = {min_pts}"
+        )
+    emb = EMBEDDINGS[embedding](theta[mask])
+    if eps is None:
+        eps = k_distance_eps(emb, min_pts)
+    labels = np.full(n, -1)
+    labels[mask] = DBSCAN(eps=eps, min_samples=min_pts).fit_predict(emb)
+    labels = relabel_by_size(labels)
+    if labels.max() < 0:
+        raise ValueError(
+            f"DBSCAN found no cluster with eps = {eps:.4g} and min_pts = {min_pts}: all "
+            f"{n} local models are noise (noise share 100%). Increase eps, lower min_pts, "
+            f"or leave eps unset to choose it from the data"
+        )
+    return labels, float(eps)
+
+
+class DBSCANClustering(BaseEstimator):
+    """Step 4 of the method: DBSCAN on the local parameter matrices θ_k (section 4, eq. 8–10).
+
+    Parameters
+    ----------
+    eps : float, optional
+        DBSCAN radius ε. None: chosen from the k-distance curve (:func:`k_distance_eps`).
+    min_pts : int, optional
+        DBSCAN MinPts (the point itself counts). None: 2·d.
+    embedding : {"exact", "literal"}, default "exact"
+        The literal Vθ of eq. (9), or the d·m-dimensional map with the same distances
+        (faster, same labels).
+    unit_free : bool, default True
+        Cluster θ_k·rms(φ)/rms(y) instead of θ_k, so that ε does not depend on the units of
+        the channels. The paper clusters θ_k as it is (False).
+    confidence : float, optional, default 3
+        Leave out local models whose residual variance exceeds ``confidence`` × the median
+        (:func:`confident_models`: mixed local sets). None (the paper) clusters every one.
+    max_clustered : int, optional, default 3000
+        Cluster at most this many local models (a seeded random subset of the confident
+        ones), so DBSCAN's cost stays bounded on long records. None (the paper): all.
+    random_state : int, default 0
+        Seed of that subset.
+
+    Attributes
+    ----------
+    labels_ : ndarray of shape (n,)
+        Cluster of each local model, 0 … s−1 by decreasing size, −1 for noise (and for the
+        local models not clustered).
+    eps_ : float
+        The ε used, given or chosen.
+    eps_auto_ : bool
+        Whether ε was chosen from the data.
+    min_pts_ : int
+    clustered_ : ndarray of shape (n,), bool
+        The local models passed to DBSCAN.
+    n_clusters_ : int
+    noise_share_ : float
+        Share of the clustered local models that DBSCAN labelled noise.
+    """
+
+    _parameter_constraints: dict = {
+        "eps": [Interval(Real, 0, None, closed="neither"), None],
+        "min_pts": [Interval(Integral, 1, None, closed="left"), None],
+        "embedding": [StrOptions(set(EMBEDDINGS))],
+        "unit_free": ["boolean"],
+        "confidence": [Interval(Real, 0, None, closed="neither"), None],
+        "max_clustered": [Interval(Integral, 1, None, closed="left"), None],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
+    }
+
+    def __init__(
+        self,
+        eps: float | None = None,
+        min_pts: int | None = None,
+        embedding: str = "exact",
+        unit_free: bool = True,
+        confidence: float | None = 3.0,
+        max_clustered: int | None = 3000,
+        random_state: int = 0,
+    ):
+        self.eps = eps
+        self.min_pts = min_pts
+        self.embedding = embedding
+        self.unit_free = unit_free
+        self.confidence = confidence
+        self.max_clustered = max_clustered
+        self.random_state = random_state
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, local, target: np.ndarray) -> "DBSCANClustering":
+        """Cluster the local models of a fitted local-model step.
+
+        Parameters
+        ----------
+        local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
+            Its ``theta_``, ``residual_var_`` and ``phi_scale_`` are used.
+        target : ndarray of shape (n, m)
+            The outputs y(k) (their RMS makes θ unit-free).
+        """
+        theta = local.theta_
+        n = theta.shape[0]
+        self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * theta.shape[1]
+        keep = np.ones(n, bool) if self.confidence is None else confident_models(
+            local.residual_var_, self.confidence)
+        if self.max_clustered is not None and keep.sum() > self.max_clustered:
+            rows = np.random.default_rng(self.random_state).choice(
+                np.nonzero(keep)[0], self.max_clustered, replace=False)
+            keep = np.zeros(n, bool)
+            keep[rows] = True
+        if self.unit_free:
+            theta = theta * local.phi_scale_[None, :, None] / column_rms(target)
+        self.labels_, self.eps_ = cluster_local_models(theta, self.eps, self.min_pts_,
+                                                       self.embedding, keep)
+        self.eps_auto_ = self.eps is None
+        self.clustered_ = keep
+        self.n_clusters_ = int(self.labels_.max()) + 1
+        self.noise_share_ = float(np.mean(self.labels_[keep] < 0))
+        return self
+
+    def resolved_params(self) -> dict:
+        """:meth:`get_params` with the values chosen at fit filled in (ε, MinPts)."""
+        return {**self.get_params(), "eps": self.eps_, "min_pts": self.min_pts_}

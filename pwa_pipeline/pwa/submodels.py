@@ -1,0 +1,387 @@
+"""Sub-model parameter matrices θ_i from clusters (paper step 5) and their refinement.
+
+Two step objects: :class:`ClusterCentres`, the paper's step 5, and :class:`RefinedSubModels`,
+the library default. The region estimator (step 6) is passed in by the caller, so this module
+imports no other step.
+"""
+
+from numbers import Integral, Real
+
+import numpy as np
+from scipy.stats import chi2
+from sklearn.base import BaseEstimator, _fit_context, clone
+from sklearn.utils._param_validation import Interval
+
+from .._arrays import relabel_by_size
+from .._typing import Float2D
+
+
+def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """The paper's sub-models: the mean local θ_k of each cluster (step 5)."""
+    s = int(labels.max()) + 1
+    return np.stack([local_theta[labels == i].mean(axis=0) for i in range(s)])
+
+
+def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarray:
+    """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows)."""
+    d, m = phi.shape[1], target.shape[1]
+    thetas = np.full((s, d, m), np.nan)
+    for i in range(s):
+        rows = labels == i
+        if rows.sum() >= d:
+            thetas[i] = np.linalg.lstsq(phi[rows], target[rows], rcond=None)[0]
+    return thetas
+
+
+def _sq_residuals(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
+    """Squared residuals of every row under every sub-model, shape (s, n, m)."""
+    return (target[None] - np.einsum("nd,sdm->snm", phi, thetas)) ** 2
+
+
+def _noise_var(sq_res: np.ndarray, labels: np.ndarray, n_params: int) -> np.ndarray:
+    """Pooled residual variance per output of the rows under their own sub-model."""
+    rows = labels >= 0
+    own = sq_res[labels[rows], np.nonzero(rows)[0]]
+    dof = max(own.shape[0] - n_params, 1)
+    return np.maximum(own.sum(axis=0) / dof, np.finfo(float).tiny)
+
+
+def robust_noise_var(sq_res: np.ndarray) -> np.ndarray:
+    """Noise variance per output from squared residuals (n, m): median / 0.455 (χ²(1) median).
+
+    Robust to the rows a sub-model does not explain, which would inflate a plain mean.
+    """
+    return np.maximum(np.median(sq_res, axis=0) / chi2.ppf(0.5, 1), np.finfo(float).tiny)
+
+
+def merge_indistinguishable(
+    phi: Float2D, target: Float2D, labels: np.ndarray, tol: float,
+    copy_tol: float | None = None, regions=None,
+) -> tuple[np.ndarray, int]:
+    """Greedily merge pairs of sub-models that predict alike on their own data.
+
+    For sub-models i, j (least-squares fits on their rows) the statistic is the mean over the
+    rows of both of Σ_p ((θ_i − θ_j)ᵀφ)_p² / σ̂_p², the squared difference of their
+    predictions in units of the noise variance σ̂_p² (:func:`robust_noise_var`). A pair is
+    mergeable when the statistic is below ``tol``, or below ``copy_tol`` while a linear
+    classifier on φ (``regions``, an unfitted region estimator such as
+    :class:`~pwa_pipeline.pwa.regions.SVMRegions`) cannot tell their rows apart
+    (:func:`separable` is false): then they are
+    copies of one mode that a residual-based assignment split along the noise, not modes of
+    distinct regions. The mergeable pair with the smallest statistic is merged, until none is.
+    An effect size and not a significance test: with thousands of rows, the slightly
+    different biases of errors-in-variables estimates in different parts of one mode are
+    significant, but they move predictions by far less than the noise.
+
+    Returns
+    -------
+    labels : ndarray
+        Relabelled by size.
+    n_merged : int
+
+    Raises
+    ------
+    ValueError
+        If ``copy_tol`` is given without ``regions``.
+    """
+    if copy_tol is not None and regions is None:
+        raise ValueError("merging copies (copy_tol) needs a region estimator (regions)")
+    labels = relabel_by_size(labels)
+    n_merged = 0
+    while (s := int(labels.max()) + 1) > 1:
+        thetas = refit(phi, target, labels, s)
+        if np.isnan(thetas).any():
+            break
+        rows = labels >= 0
+        sq = _sq_residuals(phi[rows], target[rows], thetas)
+        sigma2 = robust_noise_var(sq[labels[rows], np.arange(rows.sum())])
+        best, pair = np.inf, None
+        for i in range(s):
+            for j in range(i + 1, s):
+                both = (labels == i) | (labels == j)
+                diff = phi[both] @ (thetas[i] - thetas[j])
+                stat = float(np.mean((diff**2 / sigma2).sum(axis=1)))
+                copies = (copy_tol is not None and tol <= stat < copy_tol
+                          and not separable(phi[both], labels[both] == i, regions))
+                if (stat < tol or copies) and (pair is None or stat < best):
+                    best, pair = stat, (i, j)
+        if pair is None:
+            break
+        labels[labels == pair[1]] = pair[0]
+        labels = relabel_by_size(labels)
+        n_merged += 1
+    return labels, n_merged
+
+
+def separable(phi: Float2D, is_first: np.ndarray, regions, accuracy: float = 0.9) -> bool:
+    """Whether the region estimator ``regions`` (unfitted) tells two groups of rows apart on
+    φ (training accuracy ≥ ``accuracy``)."""
+    labels = is_first.astype(int)
+    if labels.min() == labels.max():
+        return True
+    predicted = clone(regions).fit(phi, labels, 2).predict(phi)
+    return bool(np.mean(predicted == labels) >= accuracy)
+
+
+def refine(
+    phi: Float2D,
+    target: Float2D,
+    labels: np.ndarray,
+    min_size: int,
+    n_iter: int,
+    regions=None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Re-assign rows to sub-models by residual and refit until the assignment is stable.
+
+    Each sweep: every row goes to the sub-model with the smallest noise-normalised residual
+    Σ_p (y_p − θ_(p),iᵀφ)² / σ̂_p², sub-models left with fewer than ``min_size`` rows are
+    dropped (their rows re-assigned), and every sub-model is refitted by least squares on its
+    rows. Rows labelled −1 (DBSCAN noise) are assigned from the first sweep on. With
+    ``regions`` (an unfitted region estimator) each sweep then fits the regions on the
+    residual labels (rows weighted by :func:`margin_weights`) and re-labels every row by its
+    region, so that the sub-models' rows are region-consistent.
+
+    Returns
+    -------
+    thetas : ndarray of shape (s, d, m)
+    labels : ndarray of shape (n,)
+        Every row labelled.
+    margin : ndarray of shape (n,)
+        Normalised residual cost of the second-best sub-model minus the best one's.
+    n_iter : int
+        Sweeps run.
+    """
+    d = phi.shape[1]
+    labels = relabel_by_size(labels)
+    thetas = refit(phi, target, labels, int(labels.max()) + 1)
+    it = 0
+    for it in range(1, n_iter + 1):
+        thetas = thetas[~np.isnan(thetas).any(axis=(1, 2))]
+        sq = _sq_residuals(phi, target, thetas)
+        sigma2 = _noise_var(sq, _argmin_labels(sq, None), len(thetas) * d)
+        new = _argmin_labels(sq, sigma2)
+        sizes = np.bincount(new, minlength=len(thetas))
+        if (sizes < min_size).any() and (sizes >= min_size).any():
+            new = _argmin_labels(sq[sizes >= min_size], sigma2)
+        new = relabel_by_size(new)
+        thetas = refit(phi, target, new, int(new.max()) + 1)
+        if regions is not None and thetas.shape[0] > 1:
+            cost = np.sort((_sq_residuals(phi, target, thetas) / sigma2).sum(axis=2), axis=0)
+            fitted = clone(regions).fit(phi, new, thetas.shape[0],
+                                        sample_weight=margin_weights(cost[1] - cost[0]))
+            new = fitted.predict(phi)
+            sizes = np.bincount(new, minlength=thetas.shape[0])
+            if (sizes < min_size).any():
+                sq = _sq_residuals(phi, target, thetas[sizes >= min_size])
+                new = _argmin_labels(sq, sigma2)
+            new = relabel_by_size(new)
+            thetas = refit(phi, target, new, int(new.max()) + 1)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+    cost = np.sort((_sq_residuals(phi, target, thetas) / sigma2).sum(axis=2), axis=0)
+    margin = cost[1] - cost[0] if len(thetas) > 1 else np.full(phi.shape[0], np.inf)
+    return thetas, new, margin, it
+
+
+def margin_weights(margin: np.ndarray, threshold: float = 4.0) -> np.ndarray:
+    """Region-SVM weight of each row: 1 where its sub-model beats the next best clearly.
+
+    ``margin`` is the noise-normalised squared residual of the second-best sub-model minus
+    the best one's; below ``threshold`` (4: predictions about two noise standard deviations
+    apart) both explain the row alike, its label says nothing about the regions, and its
+    weight is 0.
+    """
+    return (margin > threshold).astype(float)
+
+
+def unexplained_cost(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
+    """Noise-normalised residual Σ_p r_p² / σ̂_p² of each row under its best sub-model.
+
+    σ̂_p² is :func:`robust_noise_var` of those best residuals, so that rows no sub-model
+    explains do not inflate the noise estimate that is to expose them.
+    """
+    sq = _sq_residuals(phi, target, thetas)
+    best = sq[np.argmin(sq.sum(axis=2), axis=0), np.arange(phi.shape[0])]
+    return (best / robust_noise_var(best)).sum(axis=1)
+
+
+def _argmin_labels(sq: np.ndarray, sigma2: np.ndarray | None) -> np.ndarray:
+    cost = sq.sum(axis=2) if sigma2 is None else (sq / sigma2).sum(axis=2)
+    return np.argmin(cost, axis=0)
+
+
+class ClusterCentres(BaseEstimator):
+    """The paper's step 5: each sub-model θ_i is the mean of the local θ_k of cluster i.
+
+    Rows of local models DBSCAN labelled noise keep the label −1 (the region SVM leaves them
+    out). No parameters.
+
+    Attributes
+    ----------
+    thetas_ : ndarray of shape (s, d, m)
+    labels_ : ndarray of shape (n,)
+        DBSCAN's cluster of each row (−1: noise).
+    weights_ : None
+        Every clustered row weighs alike in the region SVM.
+    n_submodels_ : int
+    n_merged_, n_iter_ : int
+        0 (nothing is merged or refined).
+    """
+
+    _parameter_constraints: dict = {}
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, phi: Float2D, target: Float2D, local, clustering, regions=None
+            ) -> "ClusterCentres":
+        """Average the fitted ``local`` models (``theta_``) over ``clustering.labels_``.
+
+        ``phi``, ``target`` and ``regions`` are not used; the signature is that of every
+        sub-model step.
+        """
+        self.labels_ = clustering.labels_
+        self.thetas_ = cluster_centres(local.theta_, self.labels_)
+        self.weights_ = None
+        self.n_submodels_ = self.thetas_.shape[0]
+        self.n_merged_ = self.n_iter_ = 0
+        return self
+
+
+class RefinedSubModels(BaseEstimator):
+    """The library default's step 5: sub-models refitted on their rows, merged when they
+    predict alike, rows re-assigned by residual and by region until stable, and a search for
+    modes too small to form a cluster.
+
+    1. DBSCAN clusters that predict alike are merged (:func:`merge_indistinguishable`:
+       predictions closer than ``merge_tol`` noise variances, or closer than ``copy_tol``
+       while no linear classifier on φ tells their rows apart, i.e. copies of one mode);
+       then rows are re-assigned by residual alone until stable (:func:`refine`), merging
+       again, until nothing merges.
+    2. Rows are re-assigned by residual and by the regions, and sub-models refitted, until
+       stable (:func:`refine` with the region estimator); sub-models that now predict alike
+       are merged and step 2 repeats.
+    3. A mode whose local sets were too few to form a cluster shows as rows no sub-model
+       explains (:func:`unexplained_cost` above the χ²(m) 99.9 % quantile): local models are
+       estimated again among those rows alone (where local sets are purer) with the same
+       local-model step, clustered with ε from the data, the new clusters join as
+       sub-models, and step 2 repeats; at most ``n_search`` searches, and only while each
+       leaves fewer rows unexplained.
+
+    Sub-models need at least max(d + 1, MinPts) rows.
+
+    Parameters
+    ----------
+    merge_tol : float, default 1
+        Merge two sub-models whose predictions differ by less than this many noise
+        variances (mean over their rows of Σ_p Δŷ_p² / σ̂_p²).
+    copy_tol : float, optional, default 25
+        Merge them below this statistic too when their rows are not separable on φ. None:
+        never.
+    n_refine : int, default 20
+        Largest number of re-assignment sweeps per :func:`refine` call.
+    n_search : int, default 3
+        Largest number of searches for missed modes.
+
+    Attributes
+    ----------
+    thetas_ : ndarray of shape (s, d, m)
+    labels_ : ndarray of shape (n,)
+        Sub-model of every row.
+    weights_ : ndarray of shape (n,)
+        Region-SVM weight of each row (:func:`margin_weights`).
+    n_submodels_ : int
+    n_merged_ : int
+        Merges done.
+    n_iter_ : int
+        Re-assignment sweeps run.
+    """
+
+    _parameter_constraints: dict = {
+        "merge_tol": [Interval(Real, 0, None, closed="left")],
+        "copy_tol": [Interval(Real, 0, None, closed="left"), None],
+        "n_refine": [Interval(Integral, 0, None, closed="left")],
+        "n_search": [Interval(Integral, 0, None, closed="left")],
+    }
+
+    def __init__(self, merge_tol: float = 1.0, copy_tol: float | None = 25.0,
+                 n_refine: int = 20, n_search: int = 3):
+        self.merge_tol = merge_tol
+        self.copy_tol = copy_tol
+        self.n_refine = n_refine
+        self.n_search = n_search
+
+    @_fit_context(prefer_skip_nested_validation=True)
+    def fit(self, phi: Float2D, target: Float2D, local, clustering, regions
+            ) -> "RefinedSubModels":
+        """Steps 1–3 of the class description.
+
+        Parameters
+        ----------
+        phi : ndarray of shape (n, d)
+        target : ndarray of shape (n, m)
+        local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
+            Cloned (with its parameters) for the missed-mode search.
+        clustering : fitted :class:`~pwa_pipeline.pwa.clustering.DBSCANClustering`
+            Its labels start the refinement; cloned for the missed-mode search.
+        regions : unfitted :class:`~pwa_pipeline.pwa.regions.SVMRegions`
+            The region estimator of step 6, used to keep rows region-consistent.
+        """
+        min_pts = clustering.min_pts_
+        min_size = max(phi.shape[1] + 1, min_pts)
+        limit = chi2.ppf(0.999, target.shape[1])
+        merge = dict(tol=self.merge_tol, copy_tol=self.copy_tol, regions=regions)
+        labels = clustering.labels_.copy()
+        rows = labels >= 0
+        labels[rows], n_merged = merge_indistinguishable(phi[rows], target[rows], labels[rows],
+                                                         **merge)
+        n_iter, searches = 0, 0
+        # Consolidate by residual alone first, merging copies: an SVM over many small,
+        # overlapping clusters can give all rows to the largest one.
+        more = 1
+        while more:
+            labels = refine(phi, target, labels, min_size, self.n_refine)[1]
+            labels, more = merge_indistinguishable(phi, target, labels, **merge)
+            n_merged += more
+        best = None
+        while True:
+            thetas, labels, margin, sweeps = refine(phi, target, labels, min_size,
+                                                    self.n_refine, regions)
+            n_iter += sweeps
+            merged, more = merge_indistinguishable(phi, target, labels, **merge)
+            if more:
+                labels, n_merged = merged, n_merged + more
+                continue
+            polished = refine(phi, target, labels, min_size, self.n_refine)
+            poor = unexplained_cost(phi, target, polished[0]) > limit
+            if best is not None and poor.sum() >= best[0]:
+                break  # the search did not explain more rows: keep the previous state
+            best = (int(poor.sum()), polished)
+            if searches >= self.n_search or poor.sum() < min_pts:
+                break
+            searches += 1
+            extra = _missed_mode_clusters(phi[poor], target[poor], local, clustering)
+            if extra is None:
+                break
+            labels = labels.copy()
+            found = extra >= 0
+            labels[np.nonzero(poor)[0][found]] = thetas.shape[0] + extra[found]
+        self.thetas_, self.labels_, margin, sweeps = best[1]  # the state kept, polished
+        self.weights_ = margin_weights(margin)
+        self.n_submodels_ = self.thetas_.shape[0]
+        self.n_merged_, self.n_iter_ = n_merged, n_iter + sweeps
+        return self
+
+
+def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
+                          ) -> np.ndarray | None:
+    """Steps 2–4 again on the rows no sub-model explains: the cluster label of each row, or
+    None when there are too few rows or no cluster."""
+    n_rho = min(local.n_rho_, phi.shape[0] - 1)
+    if n_rho <= phi.shape[1]:
+        return None
+    try:
+        sub_local = clone(local).set_params(n_rho=n_rho).fit(phi, target)
+        sub = clone(clustering).set_params(eps=None, min_pts=clustering.min_pts_)
+        return sub.fit(sub_local, target).labels_
+    except ValueError:
+        return None
