@@ -1,19 +1,6 @@
-"""Dagster definitions of the pwa-pipeline code location."""
+"""The Dagster code location, importable as ``pwa_pipeline.definitions`` (``workspace.yaml``,
+``dagster ... -m pwa_pipeline.definitions``); built in :mod:`pwa_pipeline.orchestration`."""
 
-import dagster as dg
+from .orchestration.definitions import defs
 
-from .pipeline.assets import ASSETS
-from .pipeline.resources import MLflowTracker, PipelineConfig
-from .pipeline.schedules import sweep_job, sweep_schedule
-from .pipeline.storage import PartitionedFileIOManager
-
-defs = dg.Definitions(
-    assets=ASSETS,
-    jobs=[sweep_job],
-    schedules=[sweep_schedule],
-    resources={
-        "io_manager": PartitionedFileIOManager(),
-        "config": PipelineConfig(),
-        "mlflow": MLflowTracker(),
-    },
-)
+__all__ = ["defs"]

@@ -10,12 +10,12 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
-from ..config import HParams, get_hparams
+from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from .paths import default_storage_dir, default_tracking_uri
 
 
-class PipelineConfig(dg.ConfigurableResource):
+class PipelineSettings(dg.ConfigurableResource):
     """Where the pipeline reads its inputs and caches local models.
 
     Attributes
@@ -24,11 +24,13 @@ class PipelineConfig(dg.ConfigurableResource):
         The KUKA ``.mat`` file or its folder; empty: ``$PWA_KUKA_DATA`` or
         ``../shared/data/kuka-kr300`` beside the project.
     hparams_path : str
-        The hyper-parameter file; empty: ``data/hparams.toml``.
+        The hyper-parameter file. :func:`~pwa_pipeline.orchestration.definitions.build_definitions`
+        sets it to the file its partitions were read from; empty: ``$PWA_HPARAMS`` or
+        ``data/hparams.toml``.
     cache_dir : str
         Local-model cache; empty: ``<project>/storage/cache``.
     cache_local_models : bool
-        Reuse local models across hyper-parameter sets that differ only in ε / MinPts.
+        Reuse local models across hyper-parameter sets that differ only in later steps.
     """
 
     kuka_path: str = ""
@@ -36,13 +38,22 @@ class PipelineConfig(dg.ConfigurableResource):
     cache_dir: str = ""
     cache_local_models: bool = True
 
+    def with_hparams(self, path: str | os.PathLike) -> "PipelineSettings":
+        """A copy reading the hyper-parameter file ``path``.
+
+        (pydantic's ``model_copy(update=...)`` changes the attribute but not the
+        configuration Dagster runs with, so the copy is built anew.)
+        """
+        values = {name: getattr(self, name) for name in type(self).model_fields}
+        return type(self)(**{**values, "hparams_path": str(path)})
+
     def dataset(self, name: str) -> Dataset:
         """The named data set (raises FileNotFoundError naming the KUKA path if absent)."""
         return load_dataset(name, kuka_path=self.kuka_path or None)
 
-    def hparams(self, set_name: str, dataset: str) -> HParams:
-        """The named hyper-parameter set for ``dataset``."""
-        return get_hparams(set_name, dataset, self.hparams_path or None)
+    def configuration(self, hparams: str, dataset: str) -> Configuration:
+        """The resolved configuration of one partition (the file read and checked once)."""
+        return HParamsFile(self.hparams_path or None).configuration(hparams, dataset)
 
     def cache_root(self) -> Path:
         """The local-model cache folder."""

@@ -1,10 +1,21 @@
 """Turning core results into UI metadata and MLflow metrics (no numerics here)."""
 
+import dagster as dg
 import numpy as np
 import pandas as pd
 
 from ..datasets import Dataset
-from ..regions import Regions
+
+
+def markdown(table: pd.DataFrame) -> dg.MetadataValue:
+    """A table as Markdown metadata, numbers to 4 significant digits."""
+    return dg.MetadataValue.md(table.to_markdown(floatfmt=".4g"))
+
+
+def params_table(params: dict) -> pd.DataFrame:
+    """Parameters as a two-column table (name, value), values as text."""
+    return pd.DataFrame({"value": [str(v) for v in params.values()]},
+                        index=pd.Index(list(params), name="parameter"))
 
 
 def theta_table(thetas: np.ndarray, phi_names: list[str], y_names: list[str]) -> pd.DataFrame:
@@ -14,11 +25,11 @@ def theta_table(thetas: np.ndarray, phi_names: list[str], y_names: list[str]) ->
     return pd.DataFrame(cols, index=phi_names)
 
 
-def regions_table(regions: Regions, phi_names: list[str]) -> pd.DataFrame:
-    """The region classifier's rows w_i and intercepts b_i."""
-    df = pd.DataFrame(regions.coef, columns=phi_names,
-                      index=[f"H{i + 1}" for i in range(regions.n_regions)])
-    df["b"] = regions.intercept
+def regions_table(regions, phi_names: list[str]) -> pd.DataFrame:
+    """The rows w_i and intercepts b_i of a fitted region step (``coef_``, ``intercept_``)."""
+    df = pd.DataFrame(regions.coef_, columns=phi_names,
+                      index=[f"H{i + 1}" for i in range(regions.n_regions_)])
+    df["b"] = regions.intercept_
     return df
 
 

@@ -4,12 +4,12 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
-from ..clustering import Clustering
-from ..submodels import SubModels
-
 #: Largest share of DBSCAN noise accepted (the paper setting leaves ~81 % on its own
 #: simulation example, see NOTES.md; above 90 % the sub-models rest on too few points).
 NOISE_LIMIT = 0.9
+#: Relative tolerance of the free-run comparison: a PWA model that is one linear sub-model
+#: equals linear ARX up to rounding, which is a tie, not a loss.
+FREE_RUN_RTOL = 1e-6
 
 SUB_MODEL_CHECKS = [
     dg.AssetCheckSpec("finite_parameters", asset="sub_models",
@@ -23,35 +23,38 @@ CLUSTER_CHECKS = [
 ]
 COMPARISON_CHECKS = [
     dg.AssetCheckSpec("pwa_free_run_not_worse_than_linear", asset="comparison",
-                      description="Free-run NRMSE of the PWA model ≤ the linear ARX's (warning)."),
+                      description="Free-run NRMSE of the PWA model ≤ the linear ARX's, within a "
+                                  f"relative {FREE_RUN_RTOL:g} (warning)."),
 ]
 
 
-def sub_model_results(subs: SubModels) -> list[dg.AssetCheckResult]:
-    """Finite parameters and at least one sub-model."""
-    n_bad = int((~np.isfinite(subs.thetas)).sum())
+def sub_model_results(subs) -> list[dg.AssetCheckResult]:
+    """Finite parameters and at least one sub-model, for a fitted sub-model step."""
+    n_bad = int((~np.isfinite(subs.thetas_)).sum())
     return [
         dg.AssetCheckResult(check_name="finite_parameters", passed=n_bad == 0,
                             metadata={"non_finite_entries": n_bad}),
         dg.AssetCheckResult(check_name="at_least_one_sub_model",
-                            passed=subs.thetas.shape[0] >= 1,
-                            metadata={"n_submodels": int(subs.thetas.shape[0])}),
+                            passed=subs.n_submodels_ >= 1,
+                            metadata={"n_submodels": int(subs.n_submodels_)}),
     ]
 
 
-def cluster_results(clusters: Clustering) -> list[dg.AssetCheckResult]:
-    """Noise share below :data:`NOISE_LIMIT`."""
+def cluster_results(clustering) -> list[dg.AssetCheckResult]:
+    """Noise share below :data:`NOISE_LIMIT`, for a fitted clustering step."""
     return [dg.AssetCheckResult(
-        check_name="noise_share_below_limit", passed=clusters.noise_share <= NOISE_LIMIT,
-        metadata={"noise_share": clusters.noise_share, "limit": NOISE_LIMIT})]
+        check_name="noise_share_below_limit", passed=clustering.noise_share_ <= NOISE_LIMIT,
+        metadata={"noise_share": clustering.noise_share_, "limit": NOISE_LIMIT})]
 
 
 def comparison_results(table: pd.DataFrame) -> list[dg.AssetCheckResult]:
-    """PWA free-run mean NRMSE no worse than the linear ARX's; a warning, not an error."""
+    """PWA free-run mean NRMSE no worse than the linear ARX's (within
+    :data:`FREE_RUN_RTOL`); a warning, not an error."""
     sel = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
     score = dict(zip(sel["method"], sel["nrmse"], strict=True))
     pwa, lin = score.get("pwa", np.nan), score.get("linear_arx", np.nan)
     return [dg.AssetCheckResult(
-        check_name="pwa_free_run_not_worse_than_linear", passed=bool(pwa <= lin),
+        check_name="pwa_free_run_not_worse_than_linear",
+        passed=bool(pwa <= lin * (1 + FREE_RUN_RTOL)),
         severity=dg.AssetCheckSeverity.WARN,
         metadata={"pwa_free_run_nrmse": float(pwa), "linear_free_run_nrmse": float(lin)})]

@@ -1,0 +1,262 @@
+"""The identification pipeline as software-defined assets.
+
+configuration, raw_benchmark → regressors → local_models → clusters → sub_models →
+svm_regions → pwa_model; linear_arx_model and subspace_model beside it; each model scored by
+``<method>_scores`` (the evaluation protocol, one MLflow run each); ``comparison`` puts them
+side by side. Every asset is partitioned by data set × hyper-parameter set, and every
+partition's configuration is resolved once, by the ``configuration`` asset. Methods come from
+:data:`pwa_pipeline.methods.METHODS`.
+"""
+
+import time
+
+import dagster as dg
+import pandas as pd
+from sklearn.base import BaseEstimator, clone
+
+from .._validation import as_experiments
+from ..config import Configuration
+from ..datasets import Dataset
+from ..methods import METHODS, Method
+from ..pwa import PWARX
+from ..pwa.regressors import Regressors, build_regressors, regressor_names
+from ..scoring.comparison import mean_scores
+from ..scoring.evaluation import evaluate
+from .checks import (
+    CLUSTER_CHECKS,
+    COMPARISON_CHECKS,
+    SUB_MODEL_CHECKS,
+    cluster_results,
+    comparison_results,
+    sub_model_results,
+)
+from .partitions import split_key
+from .reporting import (
+    markdown,
+    nrmse_summary,
+    params_table,
+    prediction_figure,
+    regions_table,
+    score_metrics,
+    theta_table,
+)
+from .resources import MLflowTracker, PipelineSettings
+from .storage import cache_key, load_object, save_object
+
+GROUP = "identification"
+
+
+def _phi_names(pwa: PWARX, data: Dataset) -> list[str]:
+    return regressor_names(data.y_names, data.u_names, pwa.na, pwa.nb, pwa.affine)
+
+
+def _latest_metadata(context: dg.AssetExecutionContext, asset: str, key: str) -> float:
+    """``key`` of the latest materialisation of ``asset`` for this partition (NaN if none)."""
+    result = context.instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey(asset),
+                              asset_partitions=[context.partition_key]), limit=1)
+    if not result.records:
+        return float("nan")
+    value = result.records[0].asset_materialization.metadata.get(key)
+    return float("nan") if value is None else float(value.value)
+
+
+def _identification_assets(partitions_def) -> list:
+    part = dict(partitions_def=partitions_def, group_name=GROUP)
+
+    @dg.asset(**part, kinds={"python"})
+    def configuration(context: dg.AssetExecutionContext,
+                      settings: PipelineSettings) -> Configuration:
+        """Every estimator of the partition, built from the hyper-parameter file once."""
+        dataset, hparams = split_key(context.partition_key)
+        cfg = settings.configuration(hparams, dataset)
+        context.add_output_metadata({
+            "source": dg.MetadataValue.path(str(cfg.source)), "warmup": cfg.warmup,
+            **{f"{m} parameters": markdown(params_table(cfg.params(m))) for m in METHODS}})
+        return cfg
+
+    @dg.asset(**part, kinds={"numpy"})
+    def raw_benchmark(context: dg.AssetExecutionContext, settings: PipelineSettings) -> Dataset:
+        """Training and held-out experiments of the partition's data set."""
+        dataset, _ = split_key(context.partition_key)
+        data = settings.dataset(dataset)
+        context.add_output_metadata({
+            "train_samples": data.n_train, "test_samples": data.n_test,
+            "train_experiments": len(data.u_train), "test_experiments": len(data.u_test),
+            "inputs": ", ".join(data.u_names), "outputs": ", ".join(data.y_names),
+        })
+        return data
+
+    @dg.asset(**part, kinds={"numpy"})
+    def regressors(context: dg.AssetExecutionContext, configuration: Configuration,
+                   raw_benchmark: Dataset) -> Regressors:
+        """φ(k) and y(k) of the training experiments (eq. 2–3), never spanning two of them."""
+        pwa = configuration.pwa
+        reg = build_regressors(as_experiments(raw_benchmark.u_train, raw_benchmark.y_train),
+                               pwa.na, pwa.nb, pwa.affine)
+        context.add_output_metadata({"rows": reg.phi.shape[0], "d": reg.phi.shape[1],
+                                     "regressors": ", ".join(_phi_names(pwa, raw_benchmark))})
+        return reg
+
+    @dg.asset(**part, kinds={"scikit-learn"})
+    def local_models(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                     configuration: Configuration, regressors: Regressors) -> BaseEstimator:
+        """θ_k of every local set of n_ρ neighbours (eq. 6–7), the fitted ``local_models``
+        step; cached across sets whose later steps alone differ."""
+        step = configuration.pwa.steps()["local_models"]
+        t0 = time.perf_counter()
+        key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
+                        **step.get_params())
+        path = settings.cache_root() / "local_models" / f"{key}.pkl"
+        cached = settings.cache_local_models and path.is_file()
+        if cached:
+            local = load_object(path)
+        else:
+            local = configuration.pwa.fit_step("local_models", regressors)
+            if settings.cache_local_models:
+                save_object(path, local)
+        context.add_output_metadata({"n_rho": local.n_rho_, "from_cache": cached,
+                                     "seconds": time.perf_counter() - t0, "cache_key": key})
+        return local
+
+    @dg.asset(**part, kinds={"scikit-learn"}, check_specs=CLUSTER_CHECKS)
+    def clusters(configuration: Configuration, regressors: Regressors,
+                 local_models: BaseEstimator):
+        """Extended DBSCAN on the Vθ distance of the local models (eq. 8–10), the fitted
+        ``clustering`` step."""
+        t0 = time.perf_counter()
+        step = configuration.pwa.fit_step("clustering", regressors, local_models=local_models)
+        yield dg.Output(step, metadata={
+            "n_clusters": step.n_clusters_, "eps": step.eps_, "eps_from_data": step.eps_auto_,
+            "min_pts": step.min_pts_, "noise_share": step.noise_share_,
+            "seconds": time.perf_counter() - t0})
+        yield from cluster_results(step)
+
+    @dg.asset(**part, kinds={"numpy"}, check_specs=SUB_MODEL_CHECKS)
+    def sub_models(configuration: Configuration, raw_benchmark: Dataset,
+                   regressors: Regressors, local_models: BaseEstimator,
+                   clusters: BaseEstimator):
+        """One parameter matrix θ_i per cluster (step 5), the fitted ``submodels`` step."""
+        t0 = time.perf_counter()
+        step = configuration.pwa.fit_step("submodels", regressors, local_models=local_models,
+                                          clustering=clusters)
+        table = theta_table(step.thetas_, _phi_names(configuration.pwa, raw_benchmark),
+                            raw_benchmark.y_names)
+        yield dg.Output(step, metadata={
+            "n_submodels": step.n_submodels_, "merged": step.n_merged_,
+            "refinement_sweeps": step.n_iter_, "seconds": time.perf_counter() - t0,
+            "parameters": markdown(table)})
+        yield from sub_model_results(step)
+
+    @dg.asset(**part, kinds={"scikit-learn"})
+    def svm_regions(context: dg.AssetExecutionContext, configuration: Configuration,
+                    raw_benchmark: Dataset, regressors: Regressors,
+                    sub_models: BaseEstimator) -> BaseEstimator:
+        """Regions H_i from a multi-class linear SVM on φ (step 6), the fitted ``regions``
+        step."""
+        t0 = time.perf_counter()
+        step = configuration.pwa.fit_step("regions", regressors, submodels=sub_models)
+        table = regions_table(step, _phi_names(configuration.pwa, raw_benchmark))
+        context.add_output_metadata({"n_regions": step.n_regions_,
+                                     "seconds": time.perf_counter() - t0,
+                                     "hyperplanes": markdown(table)})
+        return step
+
+    @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
+    def pwa_model(context: dg.AssetExecutionContext, configuration: Configuration,
+                  regressors: Regressors, local_models: BaseEstimator, clusters: BaseEstimator,
+                  sub_models: BaseEstimator, svm_regions: BaseEstimator) -> PWARX:
+        """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores."""
+        model = clone(configuration.pwa).assemble(
+            regressors, local_models=local_models, clustering=clusters, submodels=sub_models,
+            regions=svm_regions)
+        model.timings_ = {name: _latest_metadata(context, asset, "seconds") for name, asset in
+                          zip(("local_models", "clustering", "submodels", "regions"),
+                              ("local_models", "clusters", "sub_models", "svm_regions"),
+                              strict=True)}
+        context.add_output_metadata({
+            "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
+            "resolved parameters": markdown(params_table(model.resolved_params()))})
+        return model
+
+    return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
+            svm_regions, pwa_model]
+
+
+def _baseline_model_asset(method: Method, partitions_def):
+    @dg.asset(name=f"{method.name}_model", partitions_def=partitions_def, group_name="models",
+              kinds={"scikit-learn"},
+              description=f"The fitted {method.label} model, on the training experiments.")
+    def model(context: dg.AssetExecutionContext, configuration: Configuration,
+              raw_benchmark: Dataset) -> BaseEstimator:
+        t0 = time.perf_counter()
+        fitted = clone(configuration.estimators[method.name]).fit(raw_benchmark.u_train,
+                                                                  raw_benchmark.y_train)
+        context.add_output_metadata({
+            "fit_seconds": time.perf_counter() - t0,
+            "resolved parameters": markdown(params_table(fitted.resolved_params()))})
+        return fitted
+
+    return model
+
+
+def _scores_asset(method: Method, partitions_def):
+    @dg.asset(name=f"{method.name}_scores", partitions_def=partitions_def, group_name="scores",
+              kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model")},
+              description=f"The {method.label} model scored on held-out data by the "
+                          f"evaluation protocol (one-step and free run), tracked in MLflow.")
+    def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
+               configuration: Configuration, raw_benchmark: Dataset, model) -> pd.DataFrame:
+        mlflow.check_reachable()
+        data = raw_benchmark
+        ev = evaluate(model, data.u_test, data.y_test, warmup=configuration.warmup,
+                      output_names=data.y_names)
+        fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")
+        dataset, hparams = split_key(context.partition_key)
+        extra_metrics, artifacts = {"fit_seconds": fit_seconds}, {}
+        if isinstance(model, PWARX):
+            extra_metrics.update(n_submodels=model.n_submodels_,
+                                 noise_share=model.clustering_.noise_share_,
+                                 eps=model.clustering_.eps_)
+            thetas = theta_table(model.thetas_, _phi_names(model, data), data.y_names)
+            artifacts["parameter_matrices.json"] = {
+                "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
+                "outputs": data.y_names}
+        figure = prediction_figure(data, ev.predictions,
+                                   f"{method.label} | {context.partition_key}",
+                                   configuration.warmup)
+        run_id = mlflow.log_run(
+            dataset=dataset, hparams=hparams, method=method.name,
+            params={**configuration.params(method.name), **model.resolved_params()},
+            metrics={**score_metrics(ev.table), **extra_metrics},
+            tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
+            artifacts={"scores.csv": ev.table, "prediction.png": figure, **artifacts})
+        context.add_output_metadata({"mlflow_run_id": run_id,
+                                     "free_run_diverged": ev.diverged(),
+                                     **nrmse_summary(ev.table)})
+        return ev.table
+
+    return scores
+
+
+def _comparison_asset(partitions_def):
+    @dg.asset(partitions_def=partitions_def, group_name="comparison", kinds={"pandas"},
+              check_specs=COMPARISON_CHECKS,
+              ins={name: dg.AssetIn(f"{name}_scores") for name in METHODS})
+    def comparison(**scores: pd.DataFrame):
+        """Every method's scores side by side (one-step and free run)."""
+        table = pd.concat([scores[name].assign(method=name) for name in METHODS],
+                          ignore_index=True)
+        yield dg.Output(table, metadata={"mean_scores": markdown(mean_scores(table))})
+        yield from comparison_results(table)
+
+    return comparison
+
+
+def build_assets(partitions_def: dg.PartitionsDefinition) -> list[dg.AssetsDefinition]:
+    """Every asset of the pipeline on ``partitions_def``."""
+    baselines = [m for m in METHODS.values() if m.name != "pwa"]
+    return [*_identification_assets(partitions_def),
+            *(_baseline_model_asset(m, partitions_def) for m in baselines),
+            *(_scores_asset(m, partitions_def) for m in METHODS.values()),
+            _comparison_asset(partitions_def)]
