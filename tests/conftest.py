@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from pwa_pipeline import PWARX
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak
-from pwa_pipeline.metrics import match_submodels
+from pwa_pipeline.scoring.metrics import match_submodels
 
 
 @pytest.fixture(scope="session")
@@ -17,6 +18,12 @@ def sim_clean():
 def sim_30db():
     """The paper's section 5 system at SNR 30 dB, N = 4000 (the paper's case)."""
     return make_hure_vasak(n_samples=4000, snr_db=30.0, seed=0)
+
+
+@pytest.fixture(scope="session")
+def default_30db(sim_30db):
+    """The default PWARX fitted on :func:`sim_30db` (read-only: tests must not refit it)."""
+    return PWARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
 
 
 @pytest.fixture(scope="session")

@@ -1,9 +1,7 @@
 import numpy as np
 import pytest
 
-from pwa_pipeline.evaluation import evaluate
-from pwa_pipeline.linear import LinearARX
-from pwa_pipeline.subspace import SubspaceSS
+from pwa_pipeline import LinearARX, SubspaceSS, evaluate
 
 A = np.array([[0.9, 0.2, 0.0], [-0.2, 0.9, 0.0], [0.0, 0.0, 0.5]])
 

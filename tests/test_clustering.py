@@ -1,7 +1,10 @@
 import numpy as np
 import pytest
+from sklearn.cluster import DBSCAN
+from sklearn.utils._param_validation import InvalidParameterError
 
-from pwa_pipeline.clustering import cluster_local_models, confident_models, k_distance_eps
+from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
+from pwa_pipeline.pwa.clustering import cluster_local_models, confident_models, k_distance_eps
 
 
 def _blobs(seed=0, spread=0.05):
@@ -11,19 +14,61 @@ def _blobs(seed=0, spread=0.05):
     return pts.reshape(-1, 2, 1)
 
 
+class _Local:
+    """A stand-in fitted local-model step: θ_k given, every residual alike, unit scales."""
+
+    def __init__(self, theta):
+        self.theta_ = theta
+        self.residual_var_ = np.ones((len(theta), theta.shape[2]))
+        self.phi_scale_ = np.ones(theta.shape[1])
+
+
 def test_automatic_eps_is_in_a_sane_range_and_never_mixes_clusters():
     theta = _blobs()
     labels_true = np.repeat([0, 1, 2], (300, 60, 30))
-    emb = theta.reshape(len(theta), -1)
-    eps = k_distance_eps(emb, min_pts=8)
+    eps = k_distance_eps(theta.reshape(len(theta), -1), min_pts=8)
     # within the clusters' own scale (spread 0.05), far below the 1.0 between them
     assert 0.005 < eps < 0.2
-    result = cluster_local_models(theta, None, 8)
-    assert result.eps_auto and result.eps == pytest.approx(eps)
+    step = DBSCANClustering(min_pts=8, unit_free=False, confidence=None,
+                            max_clustered=None).fit(_Local(theta), np.ones((390, 1)))
+    assert step.eps_auto_ and step.eps_ == pytest.approx(eps)
     # every cluster holds one blob only (sparser blobs may be left to the later search for
-    # missed modes in PWARX, tested in test_identification.py)
-    found = {c: set(labels_true[result.labels == c]) for c in range(result.n_clusters)}
-    assert result.n_clusters >= 1 and all(len(v) == 1 for v in found.values())
+    # missed modes of RefinedSubModels, tested in test_submodels.py)
+    found = {c: set(labels_true[step.labels_ == c]) for c in range(step.n_clusters_)}
+    assert step.n_clusters_ >= 1 and all(len(v) == 1 for v in found.values())
+
+
+def test_labels_are_scikit_learns_dbscan_relabelled_by_size():
+    theta = _blobs(seed=3)
+    step = DBSCANClustering(eps=0.08, min_pts=6, unit_free=False, confidence=None,
+                            max_clustered=None).fit(_Local(theta), np.ones((390, 1)))
+    ref = DBSCAN(eps=0.08, min_samples=6).fit_predict(theta.reshape(390, 2))
+    # the same partition: a one-to-one map between the two labellings, noise kept as noise
+    pairs = set(zip(ref.tolist(), step.labels_.tolist(), strict=True))
+    assert len(pairs) == len(set(ref)) == len(set(step.labels_))
+    assert np.array_equal(ref == -1, step.labels_ == -1)
+    sizes = np.bincount(step.labels_[step.labels_ >= 0])
+    assert np.all(np.diff(sizes) <= 0)  # 0 is the largest cluster
+
+
+def test_unit_free_theta_makes_eps_independent_of_the_output_scale():
+    theta = _blobs()
+    y = np.random.default_rng(0).normal(size=(390, 1))
+    base = DBSCANClustering(eps=0.08, min_pts=6, confidence=None, max_clustered=None)
+    a = base.fit(_Local(theta), y).labels_
+    b = DBSCANClustering(**base.get_params()).fit(_Local(theta * 1000), y * 1000).labels_
+    np.testing.assert_array_equal(a, b)
+
+
+def test_subset_and_confidence_filter_mark_rows_not_clustered():
+    theta = _blobs()
+    local = _Local(theta)
+    local.residual_var_[:10] = 100.0  # ten mixed local sets
+    step = DBSCANClustering(min_pts=6, unit_free=False, max_clustered=200).fit(
+        local, np.ones((390, 1)))
+    assert step.clustered_.sum() == 200 and not step.clustered_[:10].any()
+    assert np.all(step.labels_[~step.clustered_] == -1)
+    assert step.noise_share_ == pytest.approx(np.mean(step.labels_[step.clustered_] < 0))
 
 
 def test_no_cluster_names_eps_min_pts_and_noise_share():
@@ -33,13 +78,13 @@ def test_no_cluster_names_eps_min_pts_and_noise_share():
 
 
 def test_bad_settings():
-    theta = _blobs()
-    with pytest.raises(ValueError, match="embedding must be one of"):
-        cluster_local_models(theta, 0.1, 5, embedding="cosine")
-    with pytest.raises(ValueError, match="eps must be positive"):
-        cluster_local_models(theta, -1.0, 5)
+    local, y = _Local(_blobs()), np.ones((390, 1))
+    with pytest.raises(InvalidParameterError, match="'embedding' parameter.*'cosine'"):
+        DBSCANClustering(embedding="cosine").fit(local, y)
+    with pytest.raises(InvalidParameterError, match="'eps' parameter.*-1.0"):
+        DBSCANClustering(eps=-1.0).fit(local, y)
     with pytest.raises(ValueError, match="fewer than min_pts"):
-        cluster_local_models(theta[:3], 0.1, 5)
+        cluster_local_models(_blobs()[:3], 0.1, 5)
 
 
 def test_confidence_filter_drops_large_residuals():
@@ -47,3 +92,12 @@ def test_confidence_filter_drops_large_residuals():
     resvar[3, 1] = 10.0
     keep = confident_models(resvar, 3.0)
     assert keep.sum() == 9 and not keep[3]
+
+
+def test_resolved_params_report_the_values_chosen_from_the_data():
+    rng = np.random.default_rng(0)
+    phi = rng.normal(size=(400, 3))
+    local = LocalLeastSquares().fit(phi, phi @ np.ones((3, 1)))
+    step = DBSCANClustering().fit(local, phi @ np.ones((3, 1)))
+    assert local.resolved_params()["n_rho"] == 9 and step.resolved_params()["min_pts"] == 6
+    assert step.resolved_params()["eps"] == step.eps_ > 0 and step.get_params()["eps"] is None

@@ -2,38 +2,103 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pwa_pipeline.comparison import METHODS, fit_method, table1
-from pwa_pipeline.config import get_hparams, set_names
+from pwa_pipeline import PWARX, LinearARX, SubspaceSS
+from pwa_pipeline.config import BUNDLED_HPARAMS, HParamsFile
 from pwa_pipeline.datasets import DATASETS
-from pwa_pipeline.identification import PWARX
+from pwa_pipeline.methods import METHODS
+from pwa_pipeline.pwa import ClusterCentres, RefinedSubModels
+from pwa_pipeline.scoring.comparison import table1
 
 
-def test_every_set_builds_models_for_every_dataset():
-    names = set_names()
-    assert {"paper", "default"} <= set(names) and len(names) >= 3
-    for name in names:
+def _write(tmp_path, text):
+    path = tmp_path / "hp.toml"
+    path.write_text(text)
+    return path
+
+
+def test_every_set_builds_every_method_for_every_dataset():
+    hp = HParamsFile()
+    assert hp.path == BUNDLED_HPARAMS and {"paper", "default"} <= set(hp.sets)
+    for name in hp.sets:
         for ds in DATASETS:
-            hp = get_hparams(name, ds)
-            assert isinstance(hp.pwa_model(), PWARX)
-            assert hp.subspace_model().order == hp.baselines["subspace_order"]
-    paper = get_hparams("paper", "kuka_robot").pwa_model()
-    assert (paper.n_rho, paper.eps, paper.min_pts, paper.na) == (61, 8.0, 22, 2)
+            cfg = hp.configuration(name, ds)
+            assert list(cfg.estimators) == list(METHODS)
+            assert isinstance(cfg.pwa, PWARX) and isinstance(cfg.estimators["linear_arx"], LinearARX)
+            sub = cfg.estimators["subspace"]
+            assert isinstance(sub, SubspaceSS) and sub.warmup == cfg.warmup == 10
+            assert cfg.estimators["linear_arx"].na == cfg.pwa.na
+    paper = hp.configuration("paper", "kuka_robot").pwa.get_params()
+    # the paper's values are given (it has no rule for them), its steps are the paper's
+    assert None not in (paper["local_models__n_rho"], paper["clustering__eps"],
+                        paper["clustering__min_pts"])
+    assert isinstance(paper["submodels"], ClusterCentres) and not paper["clustering__unit_free"]
+    assert hp.configuration("default", "kuka_robot").estimators["subspace"].order == 12
+
+
+def test_nested_keys_set_step_parameters(tmp_path):
+    path = _write(tmp_path, """
+[fine.hure_vasak]
+na = 2
+clustering.eps = 0.25
+submodels.n_search = 0
+regions.C = 10.0
+[baselines.hure_vasak]
+warmup = 5
+subspace.horizon = 4
+""")
+    cfg = HParamsFile(path).configuration("fine", "hure_vasak")
+    p = cfg.pwa.get_params()
+    assert (p["na"], p["nb"], p["clustering__eps"], p["submodels__n_search"], p["regions__C"]) \
+        == (2, 1, 0.25, 0, 10.0)
+    assert isinstance(p["submodels"], RefinedSubModels) and cfg.warmup == 5
+    assert cfg.estimators["subspace"].get_params() == {"horizon": 4, "order": None, "warmup": 5}
+    assert cfg.params("pwa")["clustering__eps"] == 0.25 and cfg.params("pwa")["hparams"] == "fine"
 
 
 def test_unknown_names_are_reported():
-    with pytest.raises(KeyError, match="unknown hyper-parameter set 'nope'; known: \\['paper'"):
-        get_hparams("nope", "hure_vasak")
+    hp = HParamsFile()
+    with pytest.raises(KeyError, match="unknown hyper-parameter set 'nope'.*known: \\['paper'"):
+        hp.configuration("nope", "hure_vasak")
     with pytest.raises(KeyError, match="no values for data set 'mars'"):
-        get_hparams("paper", "mars")
-    with pytest.raises(ValueError, match="unknown method 'lstm'"):
-        fit_method("lstm", get_hparams("paper", "hure_vasak"), None, None)
+        hp.configuration("paper", "mars")
 
 
-def test_table1_layout():
+@pytest.mark.parametrize(("text", "message"), [
+    ("[a.hure_vasak]\nclustering.epsilon = 0.1\n",
+     r"hp.toml, \[a.hure_vasak\]: Invalid parameter 'epsilon'"),
+    ("[a.hure_vasak]\nclustering.eps = \"0.1\"\n",
+     r"\[a.hure_vasak\]: The 'eps' parameter of DBSCANClustering must be"),
+    ("[a.hure_vasak]\nlocal_models.ridge = -1\n",
+     r"'ridge' parameter of LocalLeastSquares must be a float in the range \[0"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nwarmup = -3\n",
+     r"'warmup' parameter of SubspaceSS must be an int in the range \[1"),
+    ("[a.hure_vasak]\npreset = \"fast\"\n", "unknown preset 'fast'"),
+    ("[a.hure_vasak]\npreset = \"paper\"\nclustering.eps = 0.1\n",
+     "preset 'paper' needs local_models.n_rho, clustering.min_pts"),
+    ("[a.hure_vasak]\nna = \n", r"hp.toml is not valid TOML: .*line 2"),
+    ("[\"eps0.1\".hure_vasak]\n", r"invalid hyper-parameter set name 'eps0.1'"),
+    ("[a.\"../x\"]\n", r"invalid data set name '../x'"),
+])
+def test_bad_files_are_refused_when_read(tmp_path, text, message):
+    with pytest.raises(ValueError, match=message):
+        HParamsFile(_write(tmp_path, text))
+
+
+def test_missing_file_names_the_path(tmp_path):
+    with pytest.raises(FileNotFoundError, match="hyper-parameter file not found: .*none.toml"):
+        HParamsFile(tmp_path / "none.toml")
+
+
+def test_table1_layout_follows_the_method_registry():
     rows = [{"dataset": "d", "method": m, "mode": "free_run", "output": o, "nrmse": 0.1 * i,
-             "r2": 1 - 0.01 * i} for i, m in enumerate(METHODS) for o in ("q1", "mean")]
+             "r2": 1 - 0.01 * i} for i, m in enumerate(reversed(list(METHODS)))
+            for o in ("q1", "mean")]
     t = table1(pd.DataFrame(rows), "d", "free_run")
     assert list(t.index) == ["q1", "mean"]
-    assert t.columns[0] == "pwa_paper NRMSE" and t.columns[1] == "pwa_paper R² %"
-    assert t.loc["q1", "linear_arx R² %"] == pytest.approx(98.0)
-    assert np.isclose(t.loc["mean", "subspace NRMSE"], 0.3)
+    assert list(t.columns[::2]) == [f"{m} NRMSE" for m in METHODS]
+    assert t.loc["q1", "linear_arx R² %"] == pytest.approx(99.0)
+    assert np.isclose(t.loc["mean", "pwa NRMSE"], 0.2)
+    with_sets = pd.DataFrame(rows).assign(hparams="paper")
+    assert table1(with_sets, "d", "free_run").columns[0] == "pwa (paper) NRMSE"
+    with pytest.raises(ValueError, match=r"unknown method\(s\) \['lstm'\]"):
+        table1(pd.DataFrame(rows).replace("subspace", "lstm"), "d", "free_run")

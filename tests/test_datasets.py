@@ -2,13 +2,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pwa_pipeline.datasets import (
-    HURE_VASAK_THETAS,
-    hure_vasak_mode,
-    load_kuka,
-    load_table,
-    make_hure_vasak,
-)
+from pwa_pipeline.datasets import load_kuka, load_table, make_hure_vasak
+from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, hure_vasak_mode
 
 
 def test_simulation_follows_eq_11_to_14(sim_30db):

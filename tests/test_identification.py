@@ -2,12 +2,16 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 
-from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.identification import PWARX
+from pwa_pipeline import PWARX, make_hure_vasak
+from pwa_pipeline.config import HParamsFile
+from pwa_pipeline.scoring.metrics import match_submodels
 
 from .conftest import max_param_error
 
-PAPER = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
+
+def _paper():
+    """The paper's setting for its section 5 system, from data/hparams.toml."""
+    return HParamsFile().configuration("paper", "hure_vasak").pwa
 
 
 @pytest.fixture(scope="module")
@@ -22,32 +26,41 @@ def test_noise_free_parameters_and_regions_are_recovered(sim_clean, clean_model)
     assert max_param_error(m.thetas_, sim_clean.thetas) < 1e-8
     phi = np.column_stack([sim_clean.y[:-1], sim_clean.u[:-1]])
     # map estimated sub-models to true modes by parameters, then score the regions
-    match = [int(np.argmin([np.abs(t - s).max() for s in sim_clean.thetas])) for t in m.thetas_]
-    accuracy = np.mean(np.asarray(match)[m.regions_.predict(phi)] == sim_clean.modes[1:])
+    mode_of = match_submodels(m.thetas_, sim_clean.thetas)[0]
+    accuracy = np.mean(mode_of[m.regions_.predict(phi)] == sim_clean.modes[1:])
     assert accuracy > 0.98
 
 
-def test_default_recovers_the_four_modes_at_30db(sim_30db):
-    m = PWARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
+def test_default_recovers_the_four_modes_at_30db(sim_30db, default_30db):
+    m = default_30db
     assert m.n_submodels_ == 4
     assert max_param_error(m.thetas_, sim_30db.thetas) < 0.03
-    assert 0 < m.eps_ < 1 and m.n_rho_ == 12 and m.min_pts_ == 8
+    resolved = m.resolved_params()
+    assert 0 < resolved["clustering__eps"] < 1 and resolved["local_models__n_rho"] == 12
+    assert resolved["clustering__min_pts"] == 8 and m.get_params()["clustering"] is None
+    assert set(m.timings_) == {"regressors", "local_models", "clustering", "submodels",
+                               "regions"}
 
 
 def test_paper_setting_reproduces_the_papers_method(sim_30db):
-    m = PWARX(na=1, nb=1, **PAPER).fit(sim_30db.u, sim_30db.y)
+    m = _paper().fit(sim_30db.u, sim_30db.y)
     # NOTES.md: with raw regressors the paper's values find 2 of 4 modes, ~81 % noise
     assert m.n_submodels_ == 2
-    assert 0.7 < m.noise_share_ < 0.9
-    assert m.eps_ == 0.1 and (m.labels_ == -1).mean() == pytest.approx(m.noise_share_)
-    # sub-models are the cluster centres (step 5)
-    centre = m.thetas_[0]
-    assert np.all(np.isfinite(centre))
+    assert 0.7 < m.clustering_.noise_share_ < 0.9
+    assert m.clustering_.eps_ == 0.1
+    assert (m.labels_ == -1).mean() == pytest.approx(m.clustering_.noise_share_)
+    # the sub-models are the cluster centres: test_submodels.py checks them exactly
 
 
-def test_paper_setting_needs_its_values():
-    with pytest.raises(ValueError, match="settings='paper' needs explicit n_rho, eps, min_pts"):
-        PWARX(settings="paper").fit(np.zeros((50, 1)), np.zeros((50, 1)))
+def test_default_and_paper_constructors_spell_out_the_steps():
+    default = PWARX.default(na=1, nb=1).get_params()
+    assert default["local_models__standardize"] and default["clustering__unit_free"]
+    assert default["clustering__eps"] is None and default["submodels__n_search"] == 3
+    paper = PWARX.paper(1, 1, n_rho=10, eps=0.5, min_pts=5).get_params()
+    assert (paper["local_models__n_rho"], paper["clustering__eps"]) == (10, 0.5)
+    assert not paper["local_models__standardize"] and paper["clustering__confidence"] is None
+    with pytest.raises(TypeError, match="missing 3 required keyword-only arguments"):
+        PWARX.paper(1, 1)
 
 
 def test_predict_and_simulate_shapes_and_initial_rows(sim_clean, clean_model):
@@ -89,9 +102,10 @@ def test_three_outputs_with_affine_term():
     ("kwargs", "u", "y", "message"),
     [
         ({}, np.arange(6.0), np.arange(6.0), "too few samples for n_rho = 6.*only 5"),
-        ({"n_rho": 2}, np.arange(40.0), np.sin(np.arange(40.0)), "n_rho = 2 must exceed .* d = 2"),
+        ({"local_models__n_rho": 2}, np.arange(40.0), np.sin(np.arange(40.0)),
+         "n_rho = 2 must exceed .* d = 2"),
         ({}, np.ones((40, 1)), np.ones((40, 1)), "every regressor column is constant"),
-        ({"n_rho": 5, "eps": 1e-9, "min_pts": 30, "settings": "paper"},
+        ({"local_models__n_rho": 5, "clustering__eps": 1e-9, "clustering__min_pts": 30},
          *(lambda r: (r.normal(size=(60, 1)), r.normal(size=(60, 1))))(np.random.default_rng(0)),
          "no cluster with eps = 1e-09 and min_pts = 30"),
         ({}, np.zeros((50, 1)), np.full((50, 1), np.nan), "y contains 50 non-finite"),
@@ -100,7 +114,7 @@ def test_three_outputs_with_affine_term():
 )
 def test_bad_fit_input(kwargs, u, y, message):
     with pytest.raises(ValueError, match=message):
-        PWARX(**kwargs).fit(u, y)
+        PWARX.default().set_params(**kwargs).fit(u, y)
 
 
 def test_bad_prediction_input(sim_clean, clean_model):
@@ -116,10 +130,10 @@ def test_bad_prediction_input(sim_clean, clean_model):
 
 
 def test_scikit_learn_conventions():
-    est = PWARX(na=2, nb=1, eps=0.2)
-    assert clone(est).get_params() == est.get_params()
-    with pytest.raises(ValueError, match="settings"):
-        PWARX(settings="fast").fit(np.zeros((50, 1)), np.zeros((50, 1)))
+    est = PWARX.default(na=2, nb=1).set_params(clustering__eps=0.2)
+    assert clone(est).get_params()["clustering__eps"] == 0.2
+    with pytest.raises(ValueError, match="'local_models' parameter of PWARX must be"):
+        PWARX(local_models="fast").fit(np.zeros((50, 1)), np.zeros((50, 1)))
     from sklearn.exceptions import NotFittedError
     with pytest.raises(NotFittedError):
         PWARX().predict(np.zeros((5, 1)), np.zeros((5, 1)))
@@ -132,8 +146,8 @@ def test_default_finds_every_mode_on_fixed_seeds(seed):
     assert m.n_submodels_ == 4
     assert max_param_error(m.thetas_, data.thetas) < 0.05
     phi = np.column_stack([data.y[:-1], data.u[:-1]])
-    match = [int(np.argmin([np.abs(t - s).max() for s in data.thetas])) for t in m.thetas_]
-    assert np.mean(np.asarray(match)[m.regions_.predict(phi)] == data.modes[1:]) > 0.95
+    mode_of = match_submodels(m.thetas_, data.thetas)[0]
+    assert np.mean(mode_of[m.regions_.predict(phi)] == data.modes[1:]) > 0.95
 
 
 @pytest.mark.slow

@@ -1,18 +1,34 @@
 import numpy as np
 import pytest
 
-from pwa_pipeline.local_models import estimate_local_models, local_least_squares, local_sets
+from pwa_pipeline.pwa import LocalLeastSquares
+from pwa_pipeline.pwa.local_models import local_least_squares, local_sets
 
 
 def test_local_fits_recover_a_linear_map_exactly():
     rng = np.random.default_rng(0)
     phi = rng.normal(size=(300, 3)) * [1.0, 100.0, 0.01]  # badly scaled columns
     theta = np.array([[1.0, -2.0], [0.03, 0.5], [40.0, 7.0]])
-    local = estimate_local_models(phi, phi @ theta, n_rho=10, standardize=True)
-    assert local.theta.shape == (300, 3, 2)
-    np.testing.assert_allclose(local.theta, np.broadcast_to(theta, (300, 3, 2)), rtol=1e-8)
-    assert np.all(local.residual_var < 1e-18)
-    assert np.all(local.neighbours[:, 0] == np.arange(300))
+    local = LocalLeastSquares(n_rho=10).fit(phi, phi @ theta)
+    assert local.theta_.shape == (300, 3, 2) and local.n_rho_ == 10
+    np.testing.assert_allclose(local.theta_, np.broadcast_to(theta, (300, 3, 2)), rtol=1e-8)
+    assert np.all(local.residual_var_ < 1e-18)
+    assert np.all(local.neighbours_[:, 0] == np.arange(300))
+
+
+def test_default_n_rho_is_three_times_d():
+    phi = np.random.default_rng(0).normal(size=(100, 4))
+    assert LocalLeastSquares().fit(phi, phi[:, :1]).neighbours_.shape == (100, 12)
+
+
+def test_standardised_search_is_not_dominated_by_a_large_channel():
+    rng = np.random.default_rng(1)
+    phi = np.column_stack([rng.normal(size=200), 1000 * rng.normal(size=200)])
+    raw = local_sets(phi, 5, standardize=False)
+    std = local_sets(phi, 5, standardize=True)
+    # raw neighbours are close in the large column only; z-scored ones in both
+    spread = lambda idx: np.abs(phi[idx, 0] - phi[idx[:, :1], 0]).mean()  # noqa: E731
+    assert spread(std) < 0.5 * spread(raw)
 
 
 def test_duplicate_regressors_keep_own_row_first():
@@ -24,9 +40,9 @@ def test_duplicate_regressors_keep_own_row_first():
 def test_n_rho_too_small_or_too_large():
     phi = np.random.default_rng(0).normal(size=(30, 4))
     with pytest.raises(ValueError, match="n_rho = 4 must exceed the regressor dimension d = 4"):
-        estimate_local_models(phi, phi[:, :1], n_rho=4, standardize=True)
+        LocalLeastSquares(n_rho=4).fit(phi, phi[:, :1])
     with pytest.raises(ValueError, match="too few samples for n_rho = 40.*only 30"):
-        estimate_local_models(phi, phi[:, :1], n_rho=40, standardize=True)
+        LocalLeastSquares(n_rho=40).fit(phi, phi[:, :1])
 
 
 def test_singular_local_problem_is_reported_and_ridge_fixes_it():
@@ -36,5 +52,5 @@ def test_singular_local_problem_is_reported_and_ridge_fixes_it():
     nbrs = local_sets(phi, 6, standardize=False)
     with pytest.raises(ValueError, match="singular for 50 local set.*first: regressor row 0"):
         local_least_squares(phi, x, nbrs)
-    local = local_least_squares(phi, x, nbrs, ridge=1e-8)
-    assert np.all(np.isfinite(local.theta))
+    theta, _, _ = local_least_squares(phi, x, nbrs, ridge=1e-8)
+    assert np.all(np.isfinite(theta))

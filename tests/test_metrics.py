@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pwa_pipeline.metrics import mean_nrmse, mean_r2, nrmse, r2_score, rmse
+from pwa_pipeline.scoring.metrics import mean_nrmse, mean_r2, nrmse, r2_score, rmse
 
 
 def test_hand_computed_values():
@@ -32,7 +32,7 @@ def test_divergent_prediction_scores_inf_and_shapes_checked():
 
 
 def test_match_submodels_pairs_by_parameters():
-    from pwa_pipeline.metrics import match_submodels
+    from pwa_pipeline.scoring.metrics import match_submodels
 
     true = np.array([[[1.0]], [[2.0]], [[3.0]]])
     est = np.array([[[3.1]], [[0.95]]])

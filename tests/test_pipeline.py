@@ -3,15 +3,20 @@
 import shutil
 
 import dagster as dg
+import numpy as np
 import pandas as pd
 import pytest
 
+from pwa_pipeline import PWARX, LinearARX, SubspaceSS
+from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
-from pwa_pipeline.pipeline.assets import ASSETS
-from pwa_pipeline.pipeline.partitions import all_keys, split_key
-from pwa_pipeline.pipeline.resources import MLflowTracker, PipelineConfig
-from pwa_pipeline.pipeline.schedules import sweep_schedule
-from pwa_pipeline.pipeline.storage import PartitionedFileIOManager, atomic_write
+from pwa_pipeline.methods import METHODS
+from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.partitions import all_keys, check_keys, split_key
+from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
+from pwa_pipeline.orchestration.storage import PartitionedFileIOManager, atomic_write
+
+ASSETS = list(defs.assets)
 
 
 @pytest.fixture(scope="session")
@@ -30,7 +35,8 @@ def resources(tmp_path, mlflow_template):
     shutil.copy(mlflow_template, db)
     return {
         "io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
-        "config": PipelineConfig(cache_dir=str(tmp_path / "cache")),
+        "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                     hparams_path=str(BUNDLED_HPARAMS)),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}"),
     }
 
@@ -46,33 +52,54 @@ def _runs(resources, dataset):
 def test_definitions_load():
     repo = defs.get_repository_def()
     keys = {k.to_user_string() for k in repo.asset_graph.get_all_asset_keys()}
-    assert {"raw_benchmark", "regressors", "local_models", "clusters", "sub_models",
-            "svm_regions", "validation_metrics", "subspace_baseline", "comparison"} <= keys
+    assert {"configuration", "raw_benchmark", "regressors", "local_models", "clusters",
+            "sub_models", "svm_regions", "comparison"} <= keys
+    assert {f"{m}_model" for m in METHODS} | {f"{m}_scores" for m in METHODS} <= keys
     assert repo.get_job("sweep") is not None
     assert repo.get_schedule_def("sweep_schedule").default_status == dg.DefaultScheduleStatus.STOPPED
+    assert "config" not in defs.resources  # a name Dagster reserves for run config
 
 
 def test_schedule_requests_every_partition_once():
+    schedule = defs.get_repository_def().get_schedule_def("sweep_schedule")
     ctx = dg.build_schedule_context(scheduled_execution_time=pd.Timestamp("2026-11-21T02:00"))
-    requests = list(sweep_schedule(ctx))
-    assert sorted(r.partition_key for r in requests) == sorted(all_keys())
-    assert len({r.run_key for r in requests}) == len(requests) == len(all_keys())
-    assert "hure_vasak|paper" in all_keys() and "kuka_robot|default" in all_keys()
+    requests = list(schedule(ctx))
+    keys = all_keys(partitions_of(defs))
+    assert sorted(r.partition_key for r in requests) == sorted(keys)
+    assert len({r.run_key for r in requests}) == len(requests) == len(keys)
+    assert "hure_vasak|paper" in keys and "kuka_robot|default" in keys
 
 
 def test_partition_keys_parse_and_reject_typos():
     assert split_key("kuka_robot|paper") == ("kuka_robot", "paper")
-    with pytest.raises(ValueError, match="unknown partition 'kuka|paper'"):
-        split_key("kuka|paper")
+    with pytest.raises(ValueError, match="unknown partition 'kuka|paper'.*hparams in \\['paper'"):
+        check_keys(partitions_of(defs), ["hure_vasak|paper", "kuka|paper"])
+
+
+def test_set_names_and_the_resource_read_the_same_file(tmp_path):
+    path = tmp_path / "sweep.toml"
+    path.write_text("[only_one.hure_vasak]\n[only_one.kuka_robot]\n")
+    custom = build_definitions(path)
+    assert all_keys(partitions_of(custom)) == ["hure_vasak|only_one", "kuka_robot|only_one"]
+    assert custom.resources["settings"].hparams_path == str(path)
+    again = build_definitions(path, settings=PipelineSettings(hparams_path="elsewhere.toml"))
+    assert again.resources["settings"].hparams_path == str(path)
 
 
 def test_materialise_hure_vasak_paper(resources, tmp_path):
     result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources)
     assert result.success
-    subs = result.output_for_node("sub_models")
-    assert subs.thetas.shape == (2, 4, 2)  # the paper's setting finds 2 of the 4 modes
+    model = result.output_for_node("pwa_model")
+    assert isinstance(model, PWARX) and model.thetas_.shape == (2, 4, 2)  # 2 of the 4 modes
+    assert isinstance(result.output_for_node("linear_arx_model"), LinearARX)
+    assert isinstance(result.output_for_node("subspace_model"), SubspaceSS)
+    # the model asset is the one the core would fit: same sub-models as PWARX.fit
+    cfg = result.output_for_node("configuration")
+    data = result.output_for_node("raw_benchmark")
+    direct = cfg.pwa.fit(data.u_train, data.y_train)
+    np.testing.assert_array_equal(model.thetas_, direct.thetas_)
     table = result.output_for_node("comparison")
-    assert set(table["method"]) == {"pwa", "linear_arx", "subspace"}
+    assert list(dict.fromkeys(table["method"])) == list(METHODS)
     assert len(table) == 3 * 2 * 3  # methods × modes × (2 outputs + mean)
     checks = {e.check_name: e.passed for e in result.get_asset_check_evaluations()}
     assert checks["finite_parameters"] and checks["at_least_one_sub_model"]
@@ -80,12 +107,15 @@ def test_materialise_hure_vasak_paper(resources, tmp_path):
     # files written and read back
     stored = pd.read_parquet(tmp_path / "storage" / "comparison" / "hure_vasak" / "paper.parquet")
     pd.testing.assert_frame_equal(stored, table)
-    assert (tmp_path / "storage" / "sub_models" / "hure_vasak" / "paper.pkl").is_file()
+    assert (tmp_path / "storage" / "pwa_model" / "hure_vasak" / "paper.pkl").is_file()
     # MLflow: one run per method with params, metrics, tags and artifacts
     client, runs = _runs(resources, "hure_vasak")
-    assert sorted(r.data.tags["method"] for r in runs) == ["linear_arx", "pwa", "subspace"]
+    assert sorted(r.data.tags["method"] for r in runs) == sorted(METHODS)
     pwa = next(r for r in runs if r.data.tags["method"] == "pwa")
-    assert pwa.data.params["n_rho"] == "18" and pwa.data.params["eps"] == "0.1"
+    given = cfg.pwa.get_params()  # the paper's values, from data/hparams.toml
+    assert pwa.data.params["local_models__n_rho"] == str(given["local_models__n_rho"])
+    assert pwa.data.params["clustering__eps"] == str(given["clustering__eps"])
+    assert pwa.data.params["submodels"] == "ClusterCentres"
     assert pwa.data.tags["partition"] == "hure_vasak|paper"
     assert pwa.data.tags["dagster_run_id"] == result.run_id
     assert pwa.data.metrics["n_submodels"] == 2
@@ -93,21 +123,52 @@ def test_materialise_hure_vasak_paper(resources, tmp_path):
     assert pwa.data.metrics["free_run_nrmse_mean"] == pytest.approx(free["nrmse"].iloc[0])
     assert {a.path for a in client.list_artifacts(pwa.info.run_id)} == {
         "parameter_matrices.json", "scores.csv", "prediction.png"}
-    meta = result.asset_materializations_for_node("validation_metrics")[0].metadata
+    meta = result.asset_materializations_for_node("pwa_scores")[0].metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
+    sub = next(r for r in runs if r.data.tags["method"] == "subspace")
+    assert sub.data.params["order"] == "2" and sub.data.params["warmup"] == "10"
 
 
-def test_local_models_are_reused_when_only_eps_changes(resources):
-    first = dg.materialize(ASSETS[:3], partition_key="hure_vasak|paper", resources=resources)
-    again = dg.materialize(ASSETS[:3], partition_key="hure_vasak|paper", resources=resources)
-    meta = [r.asset_materializations_for_node("local_models")[0].metadata for r in (first, again)]
+def test_resolved_parameters_reach_mlflow_and_the_asset_page(resources):
+    result = dg.materialize(ASSETS, partition_key="hure_vasak|default", resources=resources,
+                            selection=dg.AssetSelection.assets("pwa_scores").upstream())
+    model = result.output_for_node("pwa_model")
+    resolved = model.resolved_params()
+    assert resolved["local_models__n_rho"] == 12 and resolved["clustering__min_pts"] == 8
+    _, runs = _runs(resources, "hure_vasak")
+    params = next(r for r in runs if r.data.tags["method"] == "pwa").data.params
+    assert params["local_models__n_rho"] == "12" and params["clustering__min_pts"] == "8"
+    assert float(params["clustering__eps"]) == pytest.approx(model.clustering_.eps_)
+    page = result.asset_materializations_for_node("pwa_model")[0].metadata
+    table = page["resolved parameters"].value
+    assert "| local_models__n_rho       | 12 " in table and "clustering__eps" in table
+    assert page["fit_seconds"].value > 0
+
+
+def test_local_models_are_reused_when_only_eps_changes(resources, tmp_path):
+    path = tmp_path / "eps.toml"
+    path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"paper\"\nna = 1\nnb = 1\n"
+                            f"local_models.n_rho = 12\nclustering.eps = {eps}\n"
+                            f"clustering.min_pts = 8\n" for i, eps in enumerate((0.1, 0.3))))
+    sweep = build_definitions(path)
+    steps = [a for a in sweep.assets if a.key.to_user_string() in
+             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters")]
+    resources["settings"] = resources["settings"].with_hparams(path)
+    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+            for i in (0, 1)]
+    meta = [r.asset_materializations_for_node("local_models")[0].metadata for r in runs]
     assert not meta[0]["from_cache"].value and meta[1]["from_cache"].value
     assert meta[0]["cache_key"].value == meta[1]["cache_key"].value
+    clusters = [r.output_for_node("clusters") for r in runs]
+    assert [c.eps_ for c in clusters] == [0.1, 0.3]  # the later step did see each set
+    assert not np.array_equal(clusters[0].labels_, clusters[1].labels_)
+    local = [r.output_for_node("local_models") for r in runs]
+    np.testing.assert_array_equal(local[0].theta_, local[1].theta_)
 
 
 def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, tmp_path):
     resources["mlflow"] = MLflowTracker(tracking_uri="http://127.0.0.1:9", timeout_seconds=1)
-    result = dg.materialize(ASSETS, partition_key="hure_vasak|default", resources=resources,
+    result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources,
                             raise_on_error=False)
     assert not result.success
     failures = [e for e in result.all_events if e.event_type_value == "STEP_FAILURE"]
@@ -116,8 +177,9 @@ def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, t
     assert "already materialised are kept" in messages
     # the identification steps before tracking are materialised and stay on disk
     done = {e.asset_key.to_user_string() for e in result.get_asset_materialization_events()}
-    assert {"regressors", "local_models", "clusters", "sub_models", "svm_regions"} <= done
-    assert (tmp_path / "storage" / "svm_regions" / "hure_vasak" / "default.pkl").is_file()
+    assert {"regressors", "local_models", "clusters", "sub_models", "svm_regions",
+            "pwa_model", "linear_arx_model", "subspace_model"} <= done
+    assert (tmp_path / "storage" / "pwa_model" / "hure_vasak" / "paper.pkl").is_file()
 
 
 def test_atomic_write_keeps_the_old_file_when_a_write_fails(tmp_path):
@@ -144,3 +206,14 @@ def test_materialise_kuka_robot(resources, robot):
     assert (one_step["nrmse"] < 0.05).all()  # one-step prediction of 10 Hz positions is easy
     _, runs = _runs(resources, "kuka_robot")
     assert len(runs) == 3
+
+
+def test_cli_lists_partitions_and_refuses_a_mistyped_key(capsys, tmp_path, monkeypatch):
+    from pwa_pipeline.orchestration.cli import main
+
+    assert main(["partitions"]) == 0
+    assert capsys.readouterr().out.split() == all_keys(partitions_of(defs))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    with pytest.raises(ValueError, match="unknown partition 'hure_vasak|papr'"):
+        main(["run", "--partition", "hure_vasak|papr"])
+    assert not (tmp_path / "storage").exists()

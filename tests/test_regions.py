@@ -1,0 +1,71 @@
+"""Step 6 on small hand-built cases."""
+
+import numpy as np
+import pytest
+from sklearn.exceptions import NotFittedError
+
+from pwa_pipeline.pwa import SVMRegions
+
+
+def _halfplane(scale=(1.0, 1.0), n=600, seed=0):
+    """Two classes split by x1 + 2·x2 = 0.5 in unit coordinates, with a margin of 0.1,
+    and φ = the unit coordinates times ``scale`` per column."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1, 1, (n, 2))
+    side = x @ [1.0, 2.0] - 0.5
+    x = x[np.abs(side) > 0.1]
+    return x * scale, (x @ [1.0, 2.0] > 0.5).astype(int), x
+
+
+def test_two_classes_are_separated_along_the_true_boundary():
+    phi, labels, _ = _halfplane()
+    reg = SVMRegions(C=100.0).fit(phi, labels)
+    assert reg.n_regions_ == 2 and np.mean(reg.predict(phi) == labels) == 1.0
+    normal = reg.coef_[1] - reg.coef_[0]
+    cosine = normal @ [1.0, 2.0] / np.linalg.norm(normal) / np.sqrt(5.0)
+    assert cosine > 0.98
+    # the offset: the boundary meets the line t·(1, 2) where x1 + 2·x2 = 5t = 0.5
+    b = reg.intercept_[1] - reg.intercept_[0]
+    assert 5 * -b / (normal @ [1.0, 2.0]) == pytest.approx(0.5, abs=0.03)
+
+
+def test_hyperplanes_are_mapped_back_to_the_units_of_phi():
+    scale = np.array([1000.0, 0.001])
+    phi, labels, x = _halfplane(scale=scale)
+    reg = SVMRegions(C=100.0).fit(phi, labels)
+    unit = SVMRegions(C=100.0).fit(x, labels)
+    np.testing.assert_array_equal(reg.predict(phi), unit.predict(x))
+    # a hyperplane in φ's units equals the unit-coordinate one divided by the column scale
+    np.testing.assert_allclose(reg.coef_ * scale, unit.coef_, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(reg.intercept_, unit.intercept_, rtol=1e-6)
+
+
+def test_a_label_with_no_row_is_never_predicted():
+    rng = np.random.default_rng(2)
+    phi = rng.normal(size=(300, 2))
+    labels = np.where(phi[:, 0] > 0, 2, 0)  # label 1 has no row
+    reg = SVMRegions().fit(phi, labels, n_regions=3)
+    assert reg.intercept_[1] == -np.inf and np.all(reg.coef_[1] == 0)
+    assert 1 not in set(reg.predict(rng.normal(size=(5000, 2)) * 10))
+
+
+def test_noise_and_zero_weight_rows_are_left_out():
+    phi, labels, _ = _halfplane()
+    poisoned = np.concatenate([labels, np.ones(200, int), np.zeros(200, int)])
+    junk = np.random.default_rng(3).uniform(-1, 1, (400, 2))
+    phi2 = np.vstack([phi, junk])
+    clean = SVMRegions(C=100.0).fit(phi, labels)
+    with_noise = SVMRegions(C=100.0).fit(phi2, np.where(np.arange(len(poisoned)) < len(labels),
+                                                        poisoned, -1))
+    weights = (np.arange(len(poisoned)) < len(labels)).astype(float)
+    weighted = SVMRegions(C=100.0).fit(phi2, poisoned, sample_weight=weights)
+    for other in (with_noise, weighted):
+        np.testing.assert_allclose(other.coef_, clean.coef_)
+        np.testing.assert_allclose(other.intercept_, clean.intercept_)
+
+
+def test_one_class_is_one_region_and_predict_needs_fit():
+    reg = SVMRegions().fit(np.ones((10, 2)), np.zeros(10, int))
+    assert reg.n_regions_ == 1 and set(reg.predict(np.zeros((4, 2)))) == {0}
+    with pytest.raises(NotFittedError):
+        SVMRegions().predict(np.ones((2, 2)))
