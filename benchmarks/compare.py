@@ -1,27 +1,30 @@
 """Compare PWA (paper setting and default), linear ARX and subspace models on held-out data.
 
-Every method is scored by the same protocol (pwa_pipeline.evaluation): one-step-ahead and
-free-run, restarted at each held-out experiment after a 10-sample warm-up. Writes
-results/comparison.csv (dataset, method, mode, output, nrmse, r2, rmse), results/comparison.md
-(the paper's Table 1 layout, one block per data set and mode) and results/comparison_fit.csv
-(fit times, sub-model counts, divergence flags).
+Every method of the registry (pwa_pipeline.methods) is scored by the same protocol
+(pwa_pipeline.scoring.evaluation): one-step-ahead and free-run, restarted at each held-out
+experiment after a 10-sample warm-up. PWA runs with the sets ``paper`` and ``default`` of
+data/hparams.toml, the baselines with ``default``. Writes results/comparison.csv (dataset,
+hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
+layout, one block per data set and mode) and results/comparison_fit.csv (fit times, sub-model
+counts, divergence flags).
 
-Usage: python benchmarks/compare.py [--datasets hure_vasak kuka_robot]
+Usage: python -m benchmarks.compare [--datasets hure_vasak kuka_robot]
 """
 
 import argparse
-import sys
-from pathlib import Path
 
 import pandas as pd
+from sklearn.base import clone
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks._common import RESULTS, Timer, write_table
+from pwa_pipeline import evaluate
+from pwa_pipeline.config import HParamsFile
+from pwa_pipeline.datasets import DATASETS, load_dataset
+from pwa_pipeline.methods import METHODS
+from pwa_pipeline.scoring.comparison import table1
 
-from benchmarks._common import RESULTS, Timer, write_table  # noqa: E402
-from pwa_pipeline.comparison import METHODS, fit_method, table1  # noqa: E402
-from pwa_pipeline.config import get_hparams  # noqa: E402
-from pwa_pipeline.datasets import DATASETS, load_dataset  # noqa: E402
-from pwa_pipeline.evaluation import evaluate  # noqa: E402
+#: (set, method) pairs compared: the PWA model in both settings, the baselines once.
+RUNS = [("paper", "pwa")] + [("default", m) for m in METHODS]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -35,21 +38,23 @@ def main(argv: list[str] | None = None) -> None:
         except FileNotFoundError as exc:
             print(f"skipping {name}: {exc}")
             continue
-        for method in METHODS:
-            hp = get_hparams("paper" if method == "pwa_paper" else "default", name)
+        for hparams, method in RUNS:
+            cfg = HParamsFile().configuration(hparams, name)
             with Timer() as t:
-                model = fit_method(method, hp, data.u_train, data.y_train)
-            ev = evaluate(model, data.u_test, data.y_test, warmup=hp.warmup,
+                model = clone(cfg.estimators[method]).fit(data.u_train, data.y_train)
+            ev = evaluate(model, data.u_test, data.y_test, warmup=cfg.warmup,
                           output_names=data.y_names)
-            rows.append(ev.table.assign(dataset=name, method=method))
-            fits.append({"dataset": name, "method": method, "fit_seconds": t.seconds,
+            rows.append(ev.table.assign(dataset=name, hparams=hparams, method=method))
+            fits.append({"dataset": name, "hparams": hparams, "method": method,
+                         "fit_seconds": t.seconds,
                          "n_submodels": getattr(model, "n_submodels_", None),
                          "free_run_diverged": ev.diverged()})
-            print(f"{name:11s} {method:12s} fit {t.seconds:7.2f} s  one-step NRMSE "
+            print(f"{name:11s} {method:10s} ({hparams:7s}) fit {t.seconds:7.2f} s  one-step NRMSE "
                   f"{ev.mean('one_step'):.4g}  free-run NRMSE {ev.mean('free_run'):.4g}"
                   f"{'  (diverged)' if ev.diverged() else ''}", flush=True)
     table = pd.concat(rows, ignore_index=True)
-    write_table(table[["dataset", "method", "mode", "output", "nrmse", "r2", "rmse"]], "comparison")
+    write_table(table[["dataset", "hparams", "method", "mode", "output", "nrmse", "r2", "rmse"]],
+                "comparison")
     write_table(pd.DataFrame(fits), "comparison_fit")
     md = [f"## {ds} — {mode}\n\n" + table1(table, ds, mode).to_markdown(floatfmt=".4g") + "\n"
           for ds in table["dataset"].unique() for mode in ("one_step", "free_run")]

@@ -8,29 +8,23 @@
    ``--repeats`` runs, with the time of each step; the subspace baseline's fit time and peak
    memory (tracemalloc, numpy allocations included), as configured in data/hparams.toml.
 
+The paper's values come from data/hparams.toml (sets ``paper``).
 Writes results/identify.json and results/identify.md.
-Usage: python benchmarks/identify.py [--repeats 3]
+Usage: python -m benchmarks.identify [--repeats 3]
 """
 
 import argparse
 import statistics
-import sys
 import tracemalloc
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from sklearn.base import clone
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks._common import RESULTS, Timer, write_json  # noqa: E402
-from pwa_pipeline.config import get_hparams  # noqa: E402
-from pwa_pipeline.datasets import load_kuka, make_hure_vasak  # noqa: E402
-from pwa_pipeline.identification import PWARX  # noqa: E402
-from pwa_pipeline.metrics import match_submodels  # noqa: E402
-
-PAPER_SIM = dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")
-PAPER_KUKA = dict(n_rho=61, eps=8.0, min_pts=22, settings="paper")
+from benchmarks._common import RESULTS, Timer, write_json
+from pwa_pipeline import load_kuka, make_hure_vasak
+from pwa_pipeline.config import HParamsFile
+from pwa_pipeline.scoring.metrics import match_submodels
 
 
 def mode_errors(thetas: np.ndarray, true: np.ndarray) -> list[float | None]:
@@ -45,15 +39,17 @@ def mode_errors(thetas: np.ndarray, true: np.ndarray) -> list[float | None]:
 
 def simulation_report() -> list[dict]:
     data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=0)
+    hp = HParamsFile()
     rows = []
-    for name, kwargs in (("paper", PAPER_SIM), ("default", {})):
-        model = PWARX(na=1, nb=1, **kwargs).fit(data.u, data.y)
+    for name in ("paper", "default"):
+        model = clone(hp.configuration(name, "hure_vasak").pwa).fit(data.u, data.y)
         errs = mode_errors(model.thetas_, data.thetas)
+        noise, eps = model.clustering_.noise_share_, model.clustering_.eps_
         rows.append({"setting": name, "n_submodels": model.n_submodels_,
-                     "noise_share": model.noise_share_, "eps": model.eps_,
+                     "noise_share": noise, "eps": eps,
                      **{f"max_error_mode{i + 1}": e for i, e in enumerate(errs)}})
         print(f"simulation, {name:7s}: {model.n_submodels_} sub-models, noise share "
-              f"{model.noise_share_:.1%}, eps {model.eps_:.4g}, largest error per mode {errs}")
+              f"{noise:.1%}, eps {eps:.4g}, largest error per mode {errs}")
         print(np.round(model.thetas_.transpose(0, 2, 1), 4))
     return rows
 
@@ -64,24 +60,29 @@ def kuka_speed(repeats: int) -> list[dict]:
     except FileNotFoundError as exc:
         print(f"skipping the KUKA timing: {exc}")
         return []
+    hp = HParamsFile()
+    settings = {"paper": hp.configuration("paper", "kuka_robot").pwa,
+                "default, n_rho=61": clone(hp.configuration("default", "kuka_robot").pwa)
+                .set_params(local_models__n_rho=61)}
     rows = []
-    for name, kwargs in (("paper", PAPER_KUKA), ("default, n_rho=61", {"n_rho": 61})):
+    for name, estimator in settings.items():
         times, steps = [], []
         for _ in range(repeats):
             with Timer() as t:
-                model = PWARX(na=2, nb=2, **kwargs).fit(robot.u_train, robot.y_train)
+                model = clone(estimator).fit(robot.u_train, robot.y_train)
             times.append(t.seconds)
             steps.append(model.timings_)
         med = {k: statistics.median(s[k] for s in steps) for k in steps[0]}
         rows.append({"setting": name, "median_seconds": statistics.median(times),
                      "runs": times, "n_submodels": model.n_submodels_,
-                     "noise_share": model.noise_share_, **{f"step_{k}": v for k, v in med.items()}})
+                     "noise_share": model.clustering_.noise_share_,
+                     **{f"step_{k}": v for k, v in med.items()}})
         print(f"KUKA fit, {name}: median {statistics.median(times):.2f} s over {repeats} "
               f"({', '.join(f'{x:.2f}' for x in times)}); steps {med}")
     tracemalloc.start()
     with Timer() as t:
-        ss = get_hparams("default", "kuka_robot").subspace_model().fit(robot.u_train,
-                                                                       robot.y_train)
+        ss = clone(hp.configuration("default", "kuka_robot").estimators["subspace"]).fit(
+            robot.u_train, robot.y_train)
     peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
     rows.append({"setting": f"subspace, order {ss.order_}, horizon {ss.horizon}",

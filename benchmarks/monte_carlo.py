@@ -8,25 +8,22 @@ mode (samples of unmatched sub-models count as wrong), and the free-run NRMSE on
 validation record (seed + 1000, 10-sample warm-up).
 
 Writes results/monte_carlo.csv (one row per scenario, setting and seed) and
-results/monte_carlo.md (the summary). Usage: python benchmarks/monte_carlo.py [--seeds 20]
+results/monte_carlo.md (the summary). Both settings are the sets ``default`` and ``paper`` of
+data/hparams.toml for hure_vasak. Usage: python -m benchmarks.monte_carlo [--seeds 20]
 """
 
 import argparse
-import sys
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from sklearn.base import clone
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks._common import RESULTS, Timer, write_table
+from pwa_pipeline import evaluate, make_hure_vasak
+from pwa_pipeline.config import HParamsFile
+from pwa_pipeline.scoring.metrics import match_submodels
 
-from benchmarks._common import RESULTS, Timer, write_table  # noqa: E402
-from pwa_pipeline.datasets import make_hure_vasak  # noqa: E402
-from pwa_pipeline.evaluation import evaluate  # noqa: E402
-from pwa_pipeline.identification import PWARX  # noqa: E402
-from pwa_pipeline.metrics import match_submodels  # noqa: E402
-
-SETTINGS = {"default": {}, "paper": dict(n_rho=18, eps=0.1, min_pts=20, settings="paper")}
+SETTINGS = ("default", "paper")
 SCENARIOS = {"N=4000, 30 dB": (4000, 30.0), "N=4000, 20 dB": (4000, 20.0),
              "N=1000, 30 dB": (1000, 30.0)}
 
@@ -37,7 +34,8 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
     row = {"setting": setting, "seed": seed}
     try:
         with Timer() as t:
-            model = PWARX(na=1, nb=1, **SETTINGS[setting]).fit(data.u, data.y)
+            model = clone(HParamsFile().configuration(setting, "hure_vasak").pwa).fit(
+                data.u, data.y)
     except ValueError as exc:  # e.g. no cluster found
         return {**row, "n_submodels": 0, "error": str(exc)}
     mode_of, error = match_submodels(model.thetas_, data.thetas)
@@ -47,8 +45,8 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
     return {**row, "n_submodels": model.n_submodels_,
             "max_param_error": float(np.nanmax(error)) if model.n_submodels_ == 4 else np.nan,
             "region_accuracy": accuracy, "free_run_nrmse": ev.mean("free_run"),
-            "one_step_nrmse": ev.mean("one_step"), "noise_share": model.noise_share_,
-            "eps": model.eps_, "fit_seconds": t.seconds}
+            "one_step_nrmse": ev.mean("one_step"), "noise_share": model.clustering_.noise_share_,
+            "eps": model.clustering_.eps_, "fit_seconds": t.seconds}
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
