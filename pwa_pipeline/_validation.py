@@ -6,12 +6,56 @@ import numpy as np
 
 from ._typing import Float2D, Signals
 
+# Magnitude limits. Fitting forms squares, products and sums of squares of signal values. With
+# every |x| <= 1e150 these stay <= 1e300, a factor ~1e8 below the float64 maximum (1.8e308), so
+# sums of up to ~1e8 such terms cannot overflow. With a channel's largest |x| >= 1e-150 its
+# squares reach >= 1e-300, a factor ~1e8 above the smallest normal float64 (2.2e-308), so they
+# neither underflow to zero nor lose precision as subnormals.
+MAX_MAGNITUDE = 1e150
+MIN_MAGNITUDE = 1e-150
+
+
+def _not_numeric(x: object, name: str, exc: Exception) -> ValueError:
+    return ValueError(f"{name} must be numeric, got {type(x).__name__}: {exc}")
+
 
 def as_signal(x: object, name: str) -> Float2D:
+    """Check one signal and return it as a float array of shape (n_samples, n_channels).
+
+    Parameters
+    ----------
+    x : array-like of shape (N,) or (N, channels)
+        A 1-D array is read as a single channel. A ``numpy.ma.MaskedArray`` is accepted
+        only when no entry is masked.
+    name : str
+        The signal's name in error messages.
+
+    Returns
+    -------
+    ndarray of shape (N, channels)
+
+    Raises
+    ------
+    ValueError
+        If ``x`` is not numeric, is complex (even with every imaginary part zero: a real
+        signal is needed), is not 1-D or 2-D, has no channels, has masked entries, holds NaN
+        or inf, or has a channel whose largest magnitude exceeds 1e150 or whose nonzero
+        values are all below 1e-150 (float64 squares would overflow or underflow; an
+        all-zero channel is accepted).
+    """
     try:
-        arr = np.asarray(x, dtype=float)
+        raw = np.asarray(x)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be numeric, got {type(x).__name__}: {exc}") from None
+        raise _not_numeric(x, name, exc) from None
+    if np.iscomplexobj(raw):
+        raise ValueError(
+            f"{name} is complex (dtype {raw.dtype}); a real signal is needed: pass its real "
+            f"part, magnitude or phase explicitly"
+        )
+    try:
+        arr = raw.astype(float, copy=False)
+    except (TypeError, ValueError) as exc:
+        raise _not_numeric(x, name, exc) from None
     if arr.ndim == 1:
         arr = arr[:, None]
     if arr.ndim != 2:
@@ -20,6 +64,15 @@ def as_signal(x: object, name: str) -> Float2D:
         )
     if arr.shape[1] == 0:
         raise ValueError(f"{name} has no channels (shape {arr.shape})")
+    if np.ma.isMaskedArray(x):
+        masked = np.ma.getmaskarray(x).reshape(arr.shape)
+        if masked.any():
+            rows, cols = np.nonzero(masked)
+            raise ValueError(
+                f"{name} has {masked.sum()} masked value(s) (first at sample {rows[0]}, "
+                f"channel {cols[0]}); a masked sample cannot be fitted: remove or interpolate "
+                f"them and pass an unmasked array"
+            )
     bad = ~np.isfinite(arr)
     if bad.any():
         rows, cols = np.nonzero(bad)
@@ -28,6 +81,19 @@ def as_signal(x: object, name: str) -> Float2D:
             f"{name} contains {bad.sum()} non-finite value(s) (first: {kind} at sample "
             f"{rows[0]}, channel {cols[0]}); remove or interpolate them before fitting"
         )
+    peak = np.abs(arr).max(axis=0, initial=0.0)
+    for j, top in enumerate(peak):
+        if top > MAX_MAGNITUDE:
+            raise ValueError(
+                f"{name} channel {j} reaches magnitude {top:.3g}, above {MAX_MAGNITUDE:.0e}: its "
+                f"float64 squares would overflow; rescale the data (e.g. to engineering units)"
+            )
+        if 0 < top < MIN_MAGNITUDE:
+            raise ValueError(
+                f"{name} channel {j} has no value above {MIN_MAGNITUDE:.0e} in magnitude "
+                f"(largest {top:.3g}): its float64 squares would underflow; rescale the data "
+                f"(e.g. to engineering units)"
+            )
     return arr
 
 

@@ -16,6 +16,8 @@ KUKA_DOWNLOAD = (
     "forward_identification_without_raw_data.mat"
 )
 KUKA_FILES = ("forward_identification_reconstructed.mat", "forward_identification_without_raw_data.mat")
+KUKA_VARIABLES = ("u_train", "y_train", "u_test", "y_test")
+KUKA_CHANNELS = 6
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,19 @@ def default_kuka_path() -> Path:
     return Path(__file__).resolve().parents[3] / "shared" / "data" / "kuka-kr300"
 
 
+def _samples_by_channels(x: object, variable: str, found: Path) -> Float2D:
+    """``x`` as (samples, 6), whether stored channels × samples (as documented) or transposed."""
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim == 2 and arr.shape[0] == KUKA_CHANNELS:
+        return arr.T
+    if arr.ndim == 2 and arr.shape[1] == KUKA_CHANNELS:
+        return arr
+    raise ValueError(
+        f"{found}: variable {variable!r} has shape {arr.shape}; expected {KUKA_CHANNELS} "
+        f"channels × samples ({KUKA_CHANNELS}, N) or samples × channels (N, {KUKA_CHANNELS})"
+    )
+
+
 def _split(x: Float2D, length: int) -> list[Float2D]:
     return [x[i : i + length] for i in range(0, x.shape[0], length)]
 
@@ -67,7 +82,12 @@ def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT
     FileNotFoundError
         Naming the path searched and where the official file can be downloaded.
     ValueError
-        If the file lacks the benchmark's variables.
+        If the file lacks the benchmark's variables, or one of them does not have 6 channels.
+
+    Notes
+    -----
+    The variables are documented as channels × samples, (6, N); a file storing them as
+    samples × channels, (N, 6), is read the same way. A (6, 6) variable is read as documented.
     """
     from scipy.io import loadmat
 
@@ -81,10 +101,10 @@ def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT
             f"pass its path or set PWA_KUKA_DATA to it"
         )
     mat = loadmat(found)
-    missing = [k for k in ("u_train", "y_train", "u_test", "y_test") if k not in mat]
+    missing = [k for k in KUKA_VARIABLES if k not in mat]
     if missing:
         raise ValueError(f"{found} lacks the benchmark variable(s) {', '.join(missing)}")
-    arrays = {k: np.asarray(mat[k], dtype=float).T for k in ("u_train", "y_train", "u_test", "y_test")}
+    arrays = {k: _samples_by_channels(mat[k], k, found) for k in KUKA_VARIABLES}
     return RobotData(
         u_train=_split(arrays["u_train"], segment),
         y_train=_split(arrays["y_train"], segment),

@@ -3,7 +3,18 @@
 import os
 from pathlib import Path
 
+import numpy as np
+
 from .._typing import Float2D
+
+
+def _shown(cell: object) -> str:
+    """A table cell as error messages show it: quoted if text, 'NaN or empty' if missing."""
+    import pandas as pd
+
+    if pd.api.types.is_scalar(cell) and pd.isna(cell):
+        return "NaN or empty"
+    return repr(cell) if isinstance(cell, str) else str(cell)
 
 
 def load_table(
@@ -30,7 +41,9 @@ def load_table(
     Raises
     ------
     FileNotFoundError, ValueError
-        Missing file, unknown format, missing columns, or non-numeric values.
+        Missing file, unknown format, missing columns, an empty experiment id, or a
+        non-numeric, missing or infinite value in the u/y columns. Rows are numbered from 0
+        in file order, not counting the header.
     """
     import pandas as pd
 
@@ -45,10 +58,25 @@ def load_table(
     missing = [c for c in wanted if c not in df.columns]
     if missing:
         raise ValueError(f"{p.name} has no column(s) {missing}; it has {list(df.columns)}")
-    groups = [df] if experiment_column is None else [g for _, g in df.groupby(experiment_column, sort=False)]
-    try:
-        u = [g[list(u_columns)].to_numpy(dtype=float) for g in groups]
-        y = [g[list(y_columns)].to_numpy(dtype=float) for g in groups]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{p.name}: non-numeric value in the u/y columns ({exc})") from None
+    for c in list(u_columns) + list(y_columns):
+        values = pd.to_numeric(df[c], errors="coerce").astype(float)
+        bad = np.flatnonzero(~np.isfinite(values.to_numpy()))
+        if bad.size:
+            raise ValueError(
+                f"{p.name}: column {c!r} has {bad.size} non-numeric, missing or infinite value(s) "
+                f"(first: {_shown(df[c].iloc[bad[0]])} at row {bad[0]})"
+            )
+        df[c] = values
+    if experiment_column is None:
+        groups = [df]
+    else:
+        no_id = np.flatnonzero(df[experiment_column].isna().to_numpy())
+        if no_id.size:
+            raise ValueError(
+                f"{p.name}: column {experiment_column!r} is empty in {no_id.size} row(s) "
+                f"(first: row {no_id[0]}); every row needs an experiment id"
+            )
+        groups = [g for _, g in df.groupby(experiment_column, sort=False)]
+    u = [g[list(u_columns)].to_numpy(dtype=float) for g in groups]
+    y = [g[list(y_columns)].to_numpy(dtype=float) for g in groups]
     return u, y

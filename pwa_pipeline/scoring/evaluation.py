@@ -12,6 +12,7 @@ number is reported all the same.
 """
 
 from dataclasses import dataclass
+from numbers import Integral
 from typing import Protocol
 
 import numpy as np
@@ -75,18 +76,32 @@ def evaluate(
     u, y : arrays or lists of arrays
         Held-out experiments.
     warmup : int, default 10
-        Initialising samples per experiment, excluded from the score.
+        Initialising samples per experiment (at least 1), excluded from the score.
     output_names : list of str, optional
+        One name per output; default ``y1, y2, ...``.
     divergence : float, default 10
         Free-run NRMSE above which a run is flagged diverged.
 
     Raises
     ------
     ValueError
-        NaN or inf in the data, mismatched shapes, a warm-up shorter than the model needs or
-        an experiment not longer than the warm-up.
+        NaN or inf in the data, mismatched shapes, a ``warmup`` that is not an integer ≥ 1,
+        a warm-up shorter than the model needs, an experiment not longer than the warm-up,
+        or ``output_names`` whose length differs from the number of outputs, that repeat a
+        name or that use ``"mean"``.
     """
+    if not isinstance(warmup, Integral) or isinstance(warmup, bool) or warmup < 1:
+        raise ValueError(f"warmup must be an integer >= 1, got {warmup!r}")
     pairs = as_experiments(u, y)
+    m = pairs[0][1].shape[1]
+    if output_names is not None and len(output_names) != m:
+        raise ValueError(
+            f"output_names has {len(output_names)} name(s) but y has {m} output(s)"
+        )
+    if output_names is not None and ("mean" in output_names
+                                     or len(set(output_names)) != len(output_names)):
+        raise ValueError(f"output_names must be distinct and not 'mean' (the average's row), "
+                         f"got {list(output_names)}")
     short = [i for i, (ue, _) in enumerate(pairs) if ue.shape[0] <= warmup + 1]
     if short:
         raise ValueError(
@@ -97,8 +112,7 @@ def evaluate(
         "one_step": [np.asarray(p) for p in model.predict(us, ys, n_init=warmup)],
         "free_run": [np.asarray(p) for p in model.simulate(us, [yy[:warmup] for yy in ys])],
     }
-    m = ys[0].shape[1]
-    names = output_names or [f"y{i + 1}" for i in range(m)]
+    names = [f"y{i + 1}" for i in range(m)] if output_names is None else list(output_names)
     truth = np.vstack([yy[warmup:] for yy in ys])
     rows = []
     for mode in MODES:

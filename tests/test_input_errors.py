@@ -1,0 +1,158 @@
+"""Bad input that used to give a silently wrong result is refused with a message naming it."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.io import savemat
+
+from pwa_pipeline import LinearARX, evaluate, load_kuka, load_table
+from pwa_pipeline._validation import as_experiments, as_signal
+
+
+def _arx_data(n=200, seed=0):
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for k in range(1, n):
+        y[k] = 0.5 * y[k - 1] + u[k - 1]
+    return u, y
+
+
+# 1. load_table: NaN experiment ids, non-numeric and missing u/y cells
+
+
+def test_table_rows_without_experiment_id_are_refused(tmp_path):
+    run = np.where(np.arange(20) % 2 == 0, 1.0, np.nan)  # 10 of 20 rows have no id
+    df = pd.DataFrame({"run": run, "force": np.arange(20.0), "pos": np.arange(20.0)})
+    df.to_csv(tmp_path / "d.csv", index=False)
+    with pytest.raises(ValueError, match=r"d\.csv: column 'run' is empty in 10 row\(s\) \(first: row 1\)"):
+        load_table(tmp_path / "d.csv", ["force"], ["pos"], experiment_column="run")
+
+
+def test_table_non_numeric_cell_is_named_by_row_and_column(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("run,force,pos\n1,0.1,1\n1,0.2,2\n1,0.3,3\n2,abc,4\n2,0.5,5\n")
+    with pytest.raises(ValueError, match=r"d\.csv: column 'force' has 1 non-numeric, missing or infinite "
+                                         r"value\(s\) \(first: 'abc' at row 3\)"):
+        load_table(path, ["force"], ["pos"], experiment_column="run")
+
+
+def test_table_missing_cell_is_named_by_row_and_column(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("force,pos\n0.1,1\n0.2,2\n0.3,\n0.4,\n")
+    with pytest.raises(ValueError, match=r"d\.csv: column 'pos' has 2 non-numeric, missing or infinite "
+                                         r"value\(s\) \(first: NaN or empty at row 2\)"):
+        load_table(path, ["force"], ["pos"])
+
+
+# 2. masked arrays
+
+
+def test_masked_entries_are_refused_and_an_unmasked_masked_array_is_accepted():
+    u, y = _arx_data()
+    mask = np.zeros(y.shape, bool)
+    mask[[17, 40, 41]] = True
+    y_masked = np.ma.masked_array(y, mask=mask)
+    with pytest.raises(ValueError, match=r"y has 3 masked value\(s\) \(first at sample 17, "
+                                         r"channel 0\); a masked sample cannot be fitted"):
+        LinearARX(1, 1).fit(u, y_masked)
+    u_1d = np.ma.masked_invalid(np.r_[np.zeros(5), np.nan, np.zeros(4)])
+    with pytest.raises(ValueError, match=r"u has 1 masked value\(s\) \(first at sample 5, channel 0\)"):
+        as_experiments(u_1d, np.zeros(10))
+    fitted = LinearARX(1, 1).fit(np.ma.masked_array(u), np.ma.masked_array(y, mask=False))
+    np.testing.assert_allclose(fitted.theta_, LinearARX(1, 1).fit(u, y).theta_)
+
+
+# 3. complex input
+
+
+@pytest.mark.parametrize("imag", [0.5, 0.0])
+def test_complex_signals_are_refused(imag):
+    u, y = _arx_data()
+    with pytest.raises(ValueError, match=r"u is complex \(dtype complex128\); a real signal is needed"):
+        LinearARX(1, 1).fit(u + 1j * imag, y)
+    with pytest.raises(ValueError, match=r"y is complex"):
+        as_signal([1.0, 2.0 + 1j * imag], "y")
+
+
+# 4. evaluate: warmup and output_names
+
+
+@pytest.mark.parametrize(("warmup", "shown"), [(-3, "-3"), (0, "0"), (2.5, "2.5"), (True, "True")])
+def test_evaluate_refuses_a_warmup_below_one_or_not_an_integer(warmup, shown):
+    u, y = _arx_data()
+    model = LinearARX(1, 1).fit(u, y)
+    with pytest.raises(ValueError, match=rf"warmup must be an integer >= 1, got {shown}$"):
+        evaluate(model, u, y, warmup=warmup)
+    assert evaluate(model, u, y, warmup=np.int64(1)).mean("one_step") < 1e-9
+
+
+@pytest.mark.parametrize("names", [[], ["a"], ["a", "b", "c"]])
+def test_evaluate_refuses_output_names_of_the_wrong_count(names):
+    rng = np.random.default_rng(1)
+    u, y = rng.normal(size=(100, 1)), rng.normal(size=(100, 2))
+    model = LinearARX(1, 1).fit(u, y)
+    with pytest.raises(ValueError, match=rf"output_names has {len(names)} name\(s\) but y has 2 output\(s\)"):
+        evaluate(model, u, y, output_names=names)
+
+
+@pytest.mark.parametrize("names", [["mean", "q2"], ["q1", "q1"]])
+def test_evaluate_refuses_output_names_that_clash(names):
+    rng = np.random.default_rng(1)
+    u, y = rng.normal(size=(100, 1)), rng.normal(size=(100, 2))
+    model = LinearARX(1, 1).fit(u, y)
+    with pytest.raises(ValueError, match=r"output_names must be distinct and not 'mean'"):
+        evaluate(model, u, y, output_names=names)
+
+
+# 5. KUKA .mat orientation
+
+
+def _write_kuka(path, transpose=(), shapes=None):
+    rng = np.random.default_rng(0)
+    data = {"u_train": rng.normal(size=(6, 1212)), "y_train": rng.normal(size=(6, 1212)),
+            "u_test": rng.normal(size=(6, 606)), "y_test": rng.normal(size=(6, 606))}
+    data.update({k: rng.normal(size=s) for k, s in (shapes or {}).items()})
+    savemat(path, {k: (v.T if k in transpose else v) for k, v in data.items()})
+    return data
+
+
+def test_kuka_variables_are_read_in_either_orientation(tmp_path):
+    data = _write_kuka(tmp_path / "as_documented.mat")
+    _write_kuka(tmp_path / "transposed.mat", transpose=("u_train", "y_train", "u_test", "y_test"))
+    _write_kuka(tmp_path / "mixed.mat", transpose=("u_train", "y_test"))
+    for name in ("as_documented.mat", "transposed.mat", "mixed.mat"):
+        r = load_kuka(tmp_path / name)
+        assert [a.shape for a in r.u_train] == [(606, 6), (606, 6)], name
+        assert [a.shape for a in r.y_test] == [(606, 6)], name
+        np.testing.assert_array_equal(np.vstack(r.u_train), data["u_train"].T)
+        np.testing.assert_array_equal(np.vstack(r.y_test), data["y_test"].T)
+
+
+@pytest.mark.parametrize("shape", [(5, 606), (606, 7)])
+def test_kuka_variable_without_six_channels_is_refused(tmp_path, shape):
+    _write_kuka(tmp_path / "bad.mat", shapes={"y_test": shape})
+    with pytest.raises(ValueError, match=rf"bad\.mat: variable 'y_test' has shape \({shape[0]}, "
+                                         rf"{shape[1]}\); expected 6 channels"):
+        load_kuka(tmp_path / "bad.mat")
+
+
+# 6. magnitudes that break float64 numerics
+
+
+@pytest.mark.parametrize(("scale", "message"), [
+    (1e-160, r"y channel 1 has no value above 1e-150 in magnitude \(largest 4e-159\)"),
+    (1e300, r"y channel 1 reaches magnitude 4e\+301, above 1e\+150"),
+])
+def test_signals_too_small_or_too_large_for_float64_are_refused(scale, message):
+    u, y = _arx_data()
+    y2 = np.column_stack([y, y * scale])
+    y2[5, 1] = 40 * scale
+    with pytest.raises(ValueError, match=message + r".*rescale the data \(e\.g\. to engineering units\)"):
+        LinearARX(1, 1).fit(u, y2)
+
+
+def test_all_zero_channel_and_moderate_scales_are_accepted():
+    u, y = _arx_data()
+    for scale in (1e-140, 1e140):
+        as_experiments(u * scale, np.column_stack([y * scale, np.zeros(len(y))]))
