@@ -38,3 +38,13 @@ def robot():
 def max_param_error(estimated: np.ndarray, true: np.ndarray) -> float:
     """Largest absolute entry error after matching estimated to true sub-models."""
     return float(np.nanmax(match_submodels(estimated, true)[1]))
+
+
+@pytest.fixture(scope="session")
+def mlflow_template(tmp_path_factory):
+    """An MLflow sqlite store migrated once (it takes seconds), copied by each test."""
+    from mlflow.tracking import MlflowClient
+
+    path = tmp_path_factory.mktemp("mlflow") / "template.db"
+    MlflowClient(tracking_uri=f"sqlite:///{path}").search_experiments()
+    return path

@@ -19,16 +19,6 @@ from pwa_pipeline.orchestration.storage import PartitionedFileIOManager, atomic_
 ASSETS = list(defs.assets)
 
 
-@pytest.fixture(scope="session")
-def mlflow_template(tmp_path_factory):
-    """An MLflow sqlite store migrated once (it takes seconds), copied by each test."""
-    from mlflow.tracking import MlflowClient
-
-    path = tmp_path_factory.mktemp("mlflow") / "template.db"
-    MlflowClient(tracking_uri=f"sqlite:///{path}").search_experiments()
-    return path
-
-
 @pytest.fixture()
 def resources(tmp_path, mlflow_template):
     db = tmp_path / "mlflow.db"

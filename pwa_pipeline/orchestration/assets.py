@@ -8,6 +8,7 @@ partition's configuration is resolved once, by the ``configuration`` asset. Meth
 :data:`pwa_pipeline.methods.METHODS`.
 """
 
+import pickle
 import time
 
 import dagster as dg
@@ -41,7 +42,7 @@ from .reporting import (
     theta_table,
 )
 from .resources import MLflowTracker, PipelineSettings
-from .storage import cache_key, load_object, save_object
+from .storage import UnsignedFileError, cache_key, inside, load_object, save_object, signing_key
 
 GROUP = "identification"
 
@@ -107,14 +108,20 @@ def _identification_assets(partitions_def) -> list:
         t0 = time.perf_counter()
         key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
                         **step.get_params())
-        path = settings.cache_root() / "local_models" / f"{key}.pkl"
-        cached = settings.cache_local_models and path.is_file()
-        if cached:
-            local = load_object(path)
-        else:
+        root = settings.cache_root()
+        path = inside(root, "local_models", f"{key}.pkl")
+        local = None
+        if settings.cache_local_models and path.is_file():
+            try:
+                local = load_object(path, signing_key(root))
+            except (UnsignedFileError, pickle.UnpicklingError, EOFError, AttributeError) as exc:
+                context.log.warning(f"local-model cache entry {path} unusable ({exc}); "
+                                    f"recomputing it")
+        cached = local is not None
+        if not cached:
             local = configuration.pwa.fit_step("local_models", regressors)
             if settings.cache_local_models:
-                save_object(path, local)
+                save_object(path, local, signing_key(root))
         context.add_output_metadata({"n_rho": local.n_rho_, "from_cache": cached,
                                      "seconds": time.perf_counter() - t0, "cache_key": key})
         return local

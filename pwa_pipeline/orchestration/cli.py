@@ -10,6 +10,7 @@ import os
 import sys
 
 from .paths import dagster_home, default_storage_dir, default_tracking_uri
+from .resources import mask_credentials
 
 DAGSTER_YAML = """telemetry:
   enabled: false
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     resources = dict(defs.resources)
     if args.tracking_uri:
         resources["mlflow"] = MLflowTracker(tracking_uri=args.tracking_uri)
-    uri = resources["mlflow"].uri()
+    uri = mask_credentials(resources["mlflow"].uri())
     instance = dg.DagsterInstance.get()
     quiet = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
     failed = []
@@ -84,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
                             "with the 'paper' and 'default' sets")
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
     p_run.add_argument("--tracking-uri", default="",
-                       help=f"MLflow tracking URI (default: {default_tracking_uri()})")
+                       help=f"MLflow tracking URI (default: "
+                            f"{mask_credentials(default_tracking_uri())})")
     sub.add_parser("partitions", help="list the partition keys")
     args = parser.parse_args(argv)
     if args.command == "partitions":

@@ -1,8 +1,10 @@
 """Resources: data and hyper-parameter locations, and MLflow tracking."""
 
+import base64
 import json
 import os
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -13,6 +15,29 @@ import pandas as pd
 from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from .paths import default_storage_dir, default_tracking_uri
+
+#: sqlite tracking stores whose schema this process has created or checked.
+_READY_STORES: set[str] = set()
+
+
+def split_credentials(uri: str) -> tuple[str, str]:
+    """``(uri without user:password@, base64 'user:password' or '')``."""
+    parts = urllib.parse.urlsplit(uri)
+    if parts.username is None:
+        return uri, ""
+    host = parts.hostname + (f":{parts.port}" if parts.port else "")
+    token = base64.b64encode(f"{urllib.parse.unquote(parts.username)}:"
+                             f"{urllib.parse.unquote(parts.password or '')}".encode()).decode()
+    return urllib.parse.urlunsplit(parts._replace(netloc=host)), token
+
+
+def mask_credentials(uri: str) -> str:
+    """``uri`` with a password replaced by ``***``, for messages and logs."""
+    parts = urllib.parse.urlsplit(uri)
+    if parts.password is None:
+        return uri
+    return urllib.parse.urlunsplit(parts._replace(
+        netloc=parts.netloc.replace(f":{parts.password}@", ":***@", 1)))
 
 
 class PipelineSettings(dg.ConfigurableResource):
@@ -67,38 +92,55 @@ class MLflowTracker(dg.ConfigurableResource):
     hyper-parameters as params, the scores as metrics, the Dagster run id and partition as
     tags, and the parameter matrices and score table as artifacts.
 
+    Failures are bounded: a tracking server is probed first (``timeout_seconds``), and every
+    MLflow request then gets ``request_timeout`` seconds and ``request_retries`` retries
+    (MLflow's own defaults, 120 s and 7 retries, stall an asset for minutes on a broken
+    server). Credentials in the URI (``http://user:password@host``) are used for the probe and
+    never printed. A new sqlite store is created under a file lock, so runs that start at once
+    do not race in MLflow's schema migration.
+
     Attributes
     ----------
     tracking_uri : str
         Empty: ``$MLFLOW_TRACKING_URI`` or the embedded ``sqlite:///<project>/mlflow.db``.
     experiment_prefix : str
     timeout_seconds : float
-        How long to wait for a tracking server before failing.
+        How long to wait for a tracking server's health probe before failing.
+    request_timeout : float
+        Seconds per MLflow HTTP request.
+    request_retries : int
+        Retries per MLflow HTTP request.
     """
 
     tracking_uri: str = ""
     experiment_prefix: str = "pwa-pipeline"
     timeout_seconds: float = 5.0
+    request_timeout: float = 10.0
+    request_retries: int = 2
 
     def uri(self) -> str:
         """The tracking URI in use."""
         return self.tracking_uri or default_tracking_uri()
 
     def check_reachable(self) -> None:
-        """Fail fast, with the URI in the message, if the tracking store cannot be used."""
+        """Fail fast, with the URI (credentials masked) in the message, if the tracking store
+        cannot be used."""
         uri = self.uri()
         if uri.startswith(("http://", "https://")):
+            url, auth = split_credentials(uri)
+            request = urllib.request.Request(url.rstrip("/") + "/health")
+            if auth:
+                request.add_header("Authorization", "Basic " + auth)
             try:
-                with urllib.request.urlopen(uri.rstrip("/") + "/health",
-                                            timeout=self.timeout_seconds) as resp:
+                with urllib.request.urlopen(request, timeout=self.timeout_seconds) as resp:
                     if resp.status != 200:
                         raise OSError(f"HTTP {resp.status}")
             except (OSError, urllib.error.URLError) as exc:
                 raise dg.Failure(
                     description=(
-                        f"MLflow tracking server {uri} cannot be reached ({exc}). Start it, "
-                        f"or unset MLFLOW_TRACKING_URI to use the embedded store; assets "
-                        f"already materialised are kept."
+                        f"MLflow tracking server {mask_credentials(uri)} cannot be reached "
+                        f"({exc}). Start it, or unset MLFLOW_TRACKING_URI to use the embedded "
+                        f"store; assets already materialised are kept."
                     )
                 ) from None
         elif uri.startswith("sqlite:///"):
@@ -110,11 +152,30 @@ class MLflowTracker(dg.ConfigurableResource):
         import mlflow
         from mlflow.tracking import MlflowClient
 
+        uri = self.uri()
+        if uri.startswith(("http://", "https://")):
+            # read by MLflow at each request; process-wide, as MLflow offers no other way
+            os.environ["MLFLOW_HTTP_REQUEST_TIMEOUT"] = str(self.request_timeout)
+            os.environ["MLFLOW_HTTP_REQUEST_MAX_RETRIES"] = str(self.request_retries)
+            os.environ["MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR"] = "1"
         # Artifact repositories of a tracking server resolve through the global URI.
-        mlflow.set_tracking_uri(self.uri())
-        return MlflowClient(tracking_uri=self.uri())
+        mlflow.set_tracking_uri(uri)
+        if uri.startswith("sqlite:///") and uri not in _READY_STORES:
+            from filelock import FileLock
+
+            # the client's first use of a store creates and migrates its schema
+            with FileLock(uri[len("sqlite:///"):] + ".lock"):
+                client = MlflowClient(tracking_uri=uri)
+                client.search_experiments(max_results=1)
+            _READY_STORES.add(uri)
+            return client
+        return MlflowClient(tracking_uri=uri)
 
     def _experiment(self, client, dataset: str) -> str:
+        """Get or create the data set's experiment; another process creating it at the same
+        moment is fine."""
+        from mlflow.exceptions import MlflowException
+
         name = f"{self.experiment_prefix}/{dataset}"
         exp = client.get_experiment_by_name(name)
         if exp is not None:
@@ -124,7 +185,13 @@ class MLflowTracker(dg.ConfigurableResource):
             # beside the database, never relative to whichever process's working directory
             db = Path(self.uri()[len("sqlite:///"):])
             location = (db.parent / "mlartifacts" / dataset).as_uri()
-        return client.create_experiment(name, artifact_location=location)
+        try:
+            return client.create_experiment(name, artifact_location=location)
+        except MlflowException:
+            exp = client.get_experiment_by_name(name)
+            if exp is None:
+                raise
+            return exp.experiment_id
 
     def log_run(
         self,
@@ -170,7 +237,9 @@ class MLflowTracker(dg.ConfigurableResource):
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             client.set_terminated(run_id, "FINISHED")
-        except Exception:
-            client.set_terminated(run_id, "FAILED")
+        except BaseException as exc:
+            # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
+            # as KILLED rather than leave it RUNNING forever
+            client.set_terminated(run_id, "FAILED" if isinstance(exc, Exception) else "KILLED")
             raise
         return run_id

@@ -1,25 +1,46 @@
-"""Files: atomic writes, the partitioned IO manager, and the local-model cache.
+"""Files: atomic writes, signed pickles, the partitioned IO manager, and the local-model cache.
 
-Format. A pandas DataFrame is written as Parquet (pyarrow); any other value (the core's
-frozen dataclasses of numpy arrays, fitted estimators) as a Python pickle (protocol 5).
-Files live at ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}``. Every write goes to
-a temporary file in the same folder and is moved into place with ``os.replace``, so a
-failed run never leaves a half-written file and a re-materialisation replaces the old one
-at once. Pickles are for this trusted local store only: load none from elsewhere.
+Format. A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step
+objects and estimators, the core's frozen dataclasses) as a signed pickle: a header, an
+HMAC-SHA256 of the payload under the store's key, then the pickle (protocol 5). Files live at
+``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}``; the names are checked against
+:data:`pwa_pipeline.config.NAME_PATTERN` and every path is resolved and checked to stay inside
+the store. Every write goes to a temporary file in the same folder and is moved into place
+with ``os.replace``, so a failed or killed run never leaves a half-written file; temporary
+files a killed run left behind are removed once they are an hour old.
+
+Trust boundary. A pickle can run code when loaded, so only files carrying a valid signature
+are unpickled: ones this store wrote. The key is ``<store>/.signing-key``, created on first
+use, readable by its owner only; whoever can write that key can make the store load code, so
+keep the store private. A file without a valid signature (planted, copied from another store,
+truncated) is refused with its path; a cache entry is then recomputed.
 """
 
 import hashlib
+import hmac
 import os
 import pickle
+import secrets
 import tempfile
+import time
 from pathlib import Path
 
 import dagster as dg
 import numpy as np
 import pandas as pd
 
+from ..config import check_name
 from .partitions import split_key
 from .paths import default_storage_dir
+
+MAGIC = b"pwa-pipeline signed pickle 1\n"
+KEY_FILE = ".signing-key"
+#: Age after which a temporary file is taken for one a killed run left behind.
+STALE_SECONDS = 3600.0
+
+
+class UnsignedFileError(ValueError):
+    """A pickle whose signature is missing or wrong: not written by this store, or damaged."""
 
 
 def atomic_write(path: Path, write) -> None:
@@ -35,20 +56,80 @@ def atomic_write(path: Path, write) -> None:
             os.unlink(tmp)
 
 
-def save_object(path: Path, obj) -> None:
-    """Pickle ``obj`` to ``path`` atomically."""
-    atomic_write(path, lambda p: p.write_bytes(pickle.dumps(obj, protocol=5)))
+def sweep_stale_tmp(folder: Path, older_than: float = STALE_SECONDS) -> list[Path]:
+    """Delete the temporary files of :func:`atomic_write` in ``folder`` older than
+    ``older_than`` seconds (a running write is seconds old); returns what was deleted."""
+    if not folder.is_dir():
+        return []
+    cutoff = time.time() - older_than
+    stale = [p for p in folder.iterdir() if p.name.startswith(".") and p.name.endswith(".tmp")
+             and p.is_file() and p.stat().st_mtime < cutoff]
+    for p in stale:
+        p.unlink(missing_ok=True)
+    return stale
 
 
-def load_object(path: Path):
-    """Read a pickle written by :func:`save_object`."""
-    return pickle.loads(path.read_bytes())
+def signing_key(root: Path) -> bytes:
+    """The store's HMAC key (``<root>/.signing-key``), created on first use (mode 0600)."""
+    path = root / KEY_FILE
+    if not path.is_file():
+        root.mkdir(parents=True, exist_ok=True)
+        key = secrets.token_bytes(32)
+        fd, tmp = tempfile.mkstemp(dir=root, prefix=".key.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(key)
+        os.chmod(tmp, 0o600)
+        try:
+            os.link(tmp, path)  # atomic, and never replaces a key another process created
+        except FileExistsError:
+            pass
+        finally:
+            os.unlink(tmp)
+    return path.read_bytes()
+
+
+def save_object(path: Path, obj, key: bytes) -> None:
+    """Pickle ``obj`` to ``path`` atomically, signed with ``key``."""
+    payload = pickle.dumps(obj, protocol=5)
+    digest = hmac.new(key, payload, hashlib.sha256).digest()
+    atomic_write(path, lambda p: p.write_bytes(MAGIC + digest + payload))
+
+
+def load_object(path: Path, key: bytes):
+    """Unpickle a file written by :func:`save_object` with the same key.
+
+    Raises
+    ------
+    UnsignedFileError
+        If the header or signature is missing or wrong (the file is then never unpickled).
+    """
+    data = path.read_bytes()
+    head = len(MAGIC)
+    digest, payload = data[head:head + 32], data[head + 32:]
+    expected = hmac.new(key, payload, hashlib.sha256).digest()
+    if not data.startswith(MAGIC) or not hmac.compare_digest(digest, expected):
+        raise UnsignedFileError(
+            f"{path} is not a file this store wrote (missing or wrong signature: planted, "
+            f"copied from another store, or damaged); it was not loaded. Delete it and "
+            f"materialise again"
+        )
+    return pickle.loads(payload)
+
+
+def inside(root: Path, *parts: str) -> Path:
+    """``root / parts``, resolved, refused unless it stays inside ``root``."""
+    base = root.resolve()
+    path = base.joinpath(*parts).resolve()
+    if not path.is_relative_to(base):
+        raise ValueError(f"storage path {path} would leave the store {base}")
+    return path
 
 
 class PartitionedFileIOManager(dg.ConfigurableIOManager):
-    """Stores each asset partition as Parquet (tables) or pickle (everything else).
+    """Stores each asset partition as Parquet (tables) or a signed pickle (everything else).
 
-    ``base_dir`` empty means ``<project>/storage``.
+    ``base_dir`` empty means ``<project>/storage``. See the module doc for the layout and the
+    trust boundary.
     """
 
     base_dir: str = ""
@@ -56,34 +137,39 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
     def _root(self) -> Path:
         return Path(self.base_dir).resolve() if self.base_dir else default_storage_dir()
 
-    def _stem(self, context) -> Path:
+    def _paths(self, context) -> dict[str, Path]:
+        """The two files one asset partition may be stored as, by format."""
         dataset, hparams = split_key(context.asset_partition_key)
-        return self._root() / "/".join(context.asset_key.path) / dataset / hparams
+        check_name(dataset, "data set")
+        check_name(hparams, "hyper-parameter set")
+        asset = [check_name(part, "asset") for part in context.asset_key.path]
+        return {fmt: inside(self._root(), *asset, dataset, f"{hparams}.{fmt}")
+                for fmt in ("parquet", "pkl")}
 
     def handle_output(self, context: dg.OutputContext, obj) -> None:
-        stem = self._stem(context)
+        paths = self._paths(context)
+        sweep_stale_tmp(paths["pkl"].parent)
         if isinstance(obj, pd.DataFrame):
-            path = stem.with_suffix(".parquet")
+            path = paths["parquet"]
             atomic_write(path, lambda p: obj.to_parquet(p, index=False))
         else:
-            path = stem.with_suffix(".pkl")
-            save_object(path, obj)
-        for stale in stem.parent.glob(stem.name + ".*"):
-            if stale != path and not stale.name.endswith(".tmp"):
-                stale.unlink()
+            path = paths["pkl"]
+            save_object(path, obj, signing_key(self._root()))
+        for other in paths.values():
+            if other != path:
+                other.unlink(missing_ok=True)
         context.add_output_metadata({"path": dg.MetadataValue.path(str(path))})
 
     def load_input(self, context: dg.InputContext):
-        stem = self._stem(context)
-        if stem.with_suffix(".parquet").is_file():
-            return pd.read_parquet(stem.with_suffix(".parquet"))
-        path = stem.with_suffix(".pkl")
-        if not path.is_file():
+        paths = self._paths(context)
+        if paths["parquet"].is_file():
+            return pd.read_parquet(paths["parquet"])
+        if not paths["pkl"].is_file():
             raise FileNotFoundError(
                 f"{'/'.join(context.asset_key.path)} for partition "
-                f"{context.asset_partition_key} has not been materialised (no {path})"
+                f"{context.asset_partition_key} has not been materialised (no {paths['pkl']})"
             )
-        return load_object(path)
+        return load_object(paths["pkl"], signing_key(self._root()))
 
 
 def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:

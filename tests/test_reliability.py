@@ -1,0 +1,245 @@
+"""Faults a hostile user or a busy team meets: names that try to leave the store, planted
+or damaged pickles, runs started at once, interrupts, broken or password-protected servers."""
+
+import base64
+import multiprocessing
+import os
+import pickle
+import shutil
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+
+import dagster as dg
+import pandas as pd
+import pytest
+
+from pwa_pipeline.definitions import defs
+from pwa_pipeline.orchestration.resources import (
+    MLflowTracker,
+    PipelineSettings,
+    mask_credentials,
+    split_credentials,
+)
+from pwa_pipeline.orchestration.storage import (
+    PartitionedFileIOManager,
+    UnsignedFileError,
+    inside,
+    load_object,
+    save_object,
+    signing_key,
+    sweep_stale_tmp,
+)
+
+IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
+
+
+class _Planted:
+    """Unpickling this runs code: it writes ``marker``."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.write_text, (self.marker, "code ran"))
+
+
+def _assets(names):
+    return [a for a in defs.assets if a.key.to_user_string() in names]
+
+
+def test_paths_cannot_leave_the_store(tmp_path):
+    assert inside(tmp_path, "a", "b.pkl") == (tmp_path / "a" / "b.pkl").resolve()
+    for bad in (("..", "x.pkl"), ("/etc", "passwd"), ("a", "../../x")):
+        with pytest.raises(ValueError, match="would leave the store"):
+            inside(tmp_path, *bad)
+    io = PartitionedFileIOManager(base_dir=str(tmp_path))
+    for key in ("hure_vasak|../../out", "hure_vasak|set?", "../x|paper", "hure_vasak|eps0.1"):
+        ctx = dg.build_output_context(asset_key=dg.AssetKey("comparison"), partition_key=key)
+        with pytest.raises(ValueError, match="invalid (hyper-parameter set|data set) name"):
+            io.handle_output(ctx, pd.DataFrame({"a": [1]}))
+    assert [p.name for p in tmp_path.iterdir()] == []
+
+
+def test_similar_names_never_share_a_file(tmp_path):
+    io = PartitionedFileIOManager(base_dir=str(tmp_path))
+    for name, value in (("eps0_1", 1), ("eps0_3", 3), ("eps0", 0)):
+        ctx = dg.build_output_context(asset_key=dg.AssetKey("x"), partition_key=f"d|{name}")
+        io.handle_output(ctx, {"value": value})
+    for name, value in (("eps0_1", 1), ("eps0_3", 3), ("eps0", 0)):
+        ctx = dg.build_input_context(asset_key=dg.AssetKey("x"), partition_key=f"d|{name}")
+        assert io.load_input(ctx) == {"value": value}
+    # a table replaces the pickle of the same partition, and only that one
+    ctx = dg.build_output_context(asset_key=dg.AssetKey("x"), partition_key="d|eps0")
+    io.handle_output(ctx, pd.DataFrame({"a": [1]}))
+    assert sorted(p.name for p in (tmp_path / "x" / "d").iterdir()) == [
+        "eps0.parquet", "eps0_1.pkl", "eps0_3.pkl"]
+
+
+def test_a_planted_pickle_is_never_loaded(tmp_path):
+    marker = tmp_path / "marker"
+    planted = tmp_path / "store" / "x" / "d" / "s.pkl"
+    planted.parent.mkdir(parents=True)
+    planted.write_bytes(pickle.dumps(_Planted(marker)))
+    io = PartitionedFileIOManager(base_dir=str(tmp_path / "store"))
+    ctx = dg.build_input_context(asset_key=dg.AssetKey("x"), partition_key="d|s")
+    with pytest.raises(UnsignedFileError, match=f"{planted} is not a file this store wrote"):
+        io.load_input(ctx)
+    assert not marker.exists()
+    # signed with another store's key: refused too
+    save_object(planted, {"a": 1}, signing_key(tmp_path / "other"))
+    with pytest.raises(UnsignedFileError):
+        io.load_input(ctx)
+
+
+def test_signed_files_round_trip_and_damage_is_detected(tmp_path):
+    key = signing_key(tmp_path)
+    assert signing_key(tmp_path) == key and len(key) == 32
+    assert (tmp_path / ".signing-key").stat().st_mode & 0o777 == 0o600
+    save_object(tmp_path / "a.pkl", {"theta": [1.0, 2.0]}, key)
+    assert load_object(tmp_path / "a.pkl", key) == {"theta": [1.0, 2.0]}
+    data = (tmp_path / "a.pkl").read_bytes()
+    (tmp_path / "a.pkl").write_bytes(data[:-5])  # truncated
+    with pytest.raises(UnsignedFileError, match="a.pkl is not a file this store wrote"):
+        load_object(tmp_path / "a.pkl", key)
+
+
+@pytest.fixture()
+def settings(tmp_path):
+    return PipelineSettings(cache_dir=str(tmp_path / "cache"))
+
+
+def test_bad_cache_entries_are_recomputed_with_a_warning(tmp_path, settings):
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "store")),
+                 "settings": settings}
+    instance = dg.DagsterInstance.ephemeral()
+    first = dg.materialize(_assets(IDENTIFICATION), partition_key="hure_vasak|paper",
+                           resources=resources, instance=instance)
+    key = first.asset_materializations_for_node("local_models")[0].metadata["cache_key"].value
+    entry = tmp_path / "cache" / "local_models" / f"{key}.pkl"
+    marker = tmp_path / "marker"
+    for damage in (lambda: entry.write_bytes(pickle.dumps(_Planted(marker))),
+                   lambda: entry.write_bytes(entry.read_bytes()[:100])):
+        damage()
+        result = dg.materialize(_assets(IDENTIFICATION), partition_key="hure_vasak|paper",
+                                resources=resources, instance=instance)
+        meta = result.asset_materializations_for_node("local_models")[0].metadata
+        assert result.success and not meta["from_cache"].value
+        logged = [e.user_message for e in instance.all_logs(result.run_id)]
+        assert any(f"local-model cache entry {entry} unusable" in m for m in logged)
+        assert not marker.exists()
+    again = dg.materialize(_assets(IDENTIFICATION), partition_key="hure_vasak|paper",
+                           resources=resources)
+    assert again.asset_materializations_for_node("local_models")[0].metadata["from_cache"].value
+
+
+def test_stale_temporary_files_are_swept_fresh_ones_kept(tmp_path):
+    old, new = tmp_path / ".a.pkl.x1.tmp", tmp_path / ".a.pkl.x2.tmp"
+    for p in (old, new):
+        p.write_text("half")
+    os.utime(old, (time.time() - 7200, time.time() - 7200))
+    (tmp_path / "b.pkl").write_text("kept")
+    assert sweep_stale_tmp(tmp_path) == [old]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".a.pkl.x2.tmp", "b.pkl"]
+
+
+def _log_one(args):
+    uri, i = args
+    tracker = MLflowTracker(tracking_uri=uri)
+    return tracker.log_run(dataset="d", hparams=f"s{i}", method="pwa", params={}, metrics={"m": i},
+                           tags={}, artifacts={})
+
+
+@pytest.mark.parametrize("fresh", [True, False])
+def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    if not fresh:
+        shutil.copy(mlflow_template, db)
+    uri = f"sqlite:///{db}"
+    with multiprocessing.get_context("fork").Pool(3) as pool:  # separate processes, no re-import
+        ids = pool.map(_log_one, [(uri, i) for i in range(3)])
+    client = MlflowClient(tracking_uri=uri)
+    exps = [e for e in client.search_experiments() if e.name == "pwa-pipeline/d"]
+    assert len(exps) == 1
+    runs = client.search_runs([exps[0].experiment_id])
+    assert sorted(r.info.run_id for r in runs) == sorted(ids)
+    assert {r.info.status for r in runs} == {"FINISHED"}
+
+
+class _Exploding:
+    """A value whose JSON serialisation (``float(self)``) raises ``error``."""
+
+    def __init__(self, error):
+        self.error = error
+
+    def __float__(self):
+        raise self.error
+
+
+@pytest.mark.parametrize(("error", "status"), [(KeyboardInterrupt(), "KILLED"),
+                                               (RuntimeError("disk full"), "FAILED")])
+def test_interrupted_logging_ends_the_run(tmp_path, mlflow_template, error, status):
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+    with pytest.raises(type(error)):
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={}, metrics={},
+                        tags={}, artifacts={"f.json": {"x": _Exploding(error)}})
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    exp = client.get_experiment_by_name("pwa-pipeline/d")
+    assert [r.info.status for r in client.search_runs([exp.experiment_id])] == [status]
+
+
+class _Server(BaseHTTPRequestHandler):
+    """/health answers 200 (with the right credentials); the API answers 503."""
+
+    def do_GET(self):  # noqa: N802
+        expected = "Basic " + base64.b64encode(b"ana:s3cret").decode()
+        ok = self.path == "/health" and self.headers.get("Authorization") == expected
+        self.send_response(200 if ok else (401 if self.path == "/health" else 503))
+        self.end_headers()
+        self.wfile.write(b"OK")
+
+    do_POST = do_GET  # noqa: N815
+
+    def log_message(self, *args):
+        pass
+
+
+@pytest.fixture()
+def broken_server():
+    server = ThreadingHTTPServer(("127.0.0.1", 0), _Server)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield server.server_address[1]
+    server.shutdown()
+
+
+def test_credentials_are_used_for_the_probe_and_never_shown(broken_server):
+    uri = f"http://ana:s3cret@127.0.0.1:{broken_server}"
+    assert mask_credentials(uri) == f"http://ana:***@127.0.0.1:{broken_server}"
+    url, token = split_credentials(uri)
+    assert url == f"http://127.0.0.1:{broken_server}"
+    assert base64.b64decode(token) == b"ana:s3cret"
+    MLflowTracker(tracking_uri=uri).check_reachable()  # live: the probe sends the password
+    wrong = uri.replace("s3cret", "guess")
+    with pytest.raises(dg.Failure) as info:
+        MLflowTracker(tracking_uri=wrong).check_reachable()
+    assert "cannot be reached" in info.value.description
+    assert "guess" not in info.value.description and "ana:***@" in info.value.description
+
+
+def test_a_server_whose_api_fails_fails_the_run_within_30_seconds(broken_server):
+    tracker = MLflowTracker(tracking_uri=f"http://ana:s3cret@127.0.0.1:{broken_server}",
+                            request_timeout=3, request_retries=1)
+    t0 = time.perf_counter()
+    with pytest.raises(Exception) as info:
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={}, metrics={},
+                        tags={}, artifacts={})
+    assert time.perf_counter() - t0 < 30
+    assert "s3cret" not in str(info.value)
