@@ -169,6 +169,11 @@ class HParamsFile:
                     hparams=name, dataset=dataset, estimators=estimators,
                     warmup=int(base["warmup"]), source=self.path)
 
+    @property
+    def datasets(self) -> set[str]:
+        """The data sets the file has tables for (in any set)."""
+        return {dataset for _, dataset in self._configs}
+
     def configuration(self, hparams: str, dataset: str) -> Configuration:
         """The configuration of set ``hparams`` for ``dataset``.
 

@@ -243,3 +243,66 @@ def test_a_server_whose_api_fails_fails_the_run_within_30_seconds(broken_server)
                         tags={}, artifacts={})
     assert time.perf_counter() - t0 < 30
     assert "s3cret" not in str(info.value)
+
+
+def _prepare(home):
+    os.environ["DAGSTER_HOME"] = home
+    from pwa_pipeline.orchestration.instance import prepare_instance
+
+    prepare_instance().get_runs(limit=1)
+    return "ok"
+
+
+def test_instances_created_at_once_share_one_schema(tmp_path):
+    import sqlite3
+
+    for trial in range(2):  # without the lock 2 of 3 such trials broke the home
+        home = tmp_path / f"home{trial}"
+        with multiprocessing.get_context("fork").Pool(4) as pool:
+            assert pool.map(_prepare, [str(home)] * 4) == ["ok"] * 4
+        db = sqlite3.connect(home / "history" / "runs.db")
+        assert db.execute("select count(*) from alembic_version").fetchone() == (1,)
+        assert "nux:\n  enabled: false" in (home / "dagster.yaml").read_text()
+
+
+def test_doctor_finds_and_repairs_what_a_killed_run_left(tmp_path, mlflow_template, monkeypatch,
+                                                         capsys):
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    uri = f"sqlite:///{db}"
+    # what SIGKILL leaves: a STARTED Dagster run, a RUNNING MLflow run, a temporary file
+    from pwa_pipeline.orchestration.instance import prepare_instance
+
+    instance = prepare_instance()
+    run = instance.add_run(dg.DagsterRun(job_name="sweep", status=dg.DagsterRunStatus.STARTED))
+    client = MlflowClient(tracking_uri=uri)
+    mlflow_run = client.create_run(client.create_experiment("pwa-pipeline/d"))
+    tmp = tmp_path / "storage" / "pwa_model" / "d" / ".s.pkl.abc.tmp"
+    tmp.parent.mkdir(parents=True)
+    tmp.write_text("half")
+    os.utime(tmp, (time.time() - 600, time.time() - 600))
+    time.sleep(1.1)  # MLflow and Dagster keep second-resolution start times
+    args = ["doctor", "--older-than", "0.01", "--tracking-uri", uri]
+    assert main(args) == 1
+    report = capsys.readouterr().out
+    assert run.run_id in report and mlflow_run.info.run_id in report and str(tmp) in report
+    assert main(args + ["--repair"]) == 0
+    assert instance.get_run_by_id(run.run_id).status == dg.DagsterRunStatus.FAILURE
+    assert client.get_run(mlflow_run.info.run_id).info.status == "KILLED"
+    assert not tmp.exists()
+    assert main(args) == 0  # nothing left
+
+
+def test_tables_for_unknown_data_sets_are_refused(tmp_path):
+    from pwa_pipeline.orchestration.definitions import build_definitions
+
+    path = tmp_path / "hp.toml"
+    path.write_text("[a.hure_vasak]\n[a.kuka_robto]\n")
+    with pytest.raises(ValueError, match=r"unknown data set\(s\) \['kuka_robto'\]"):
+        build_definitions(path)

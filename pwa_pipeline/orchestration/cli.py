@@ -6,26 +6,11 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 """
 
 import argparse
-import os
 import sys
 
-from .paths import dagster_home, default_storage_dir, default_tracking_uri
+from .instance import prepare_instance
+from .paths import default_storage_dir, default_tracking_uri
 from .resources import mask_credentials
-
-DAGSTER_YAML = """telemetry:
-  enabled: false
-nux:
-  enabled: false
-"""
-
-
-def _prepare_dagster_home() -> str:
-    home = dagster_home()
-    home.mkdir(parents=True, exist_ok=True)
-    if not (home / "dagster.yaml").exists():
-        (home / "dagster.yaml").write_text(DAGSTER_YAML)
-    os.environ["DAGSTER_HOME"] = str(home)
-    return str(home)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,16 +22,16 @@ def run(args: argparse.Namespace) -> int:
     from .partitions import all_keys, check_keys, default_keys
     from .resources import MLflowTracker
 
-    home = _prepare_dagster_home()
     partitions_def = partitions_of(defs)
     keys = all_keys(partitions_def) if args.all else (args.partition
                                                      or default_keys(partitions_def))
     check_keys(partitions_def, keys)  # a clear error for a mistyped key before anything runs
+    instance = prepare_instance()
+    home = instance.root_directory
     resources = dict(defs.resources)
     if args.tracking_uri:
         resources["mlflow"] = MLflowTracker(tracking_uri=args.tracking_uri)
     uri = mask_credentials(resources["mlflow"].uri())
-    instance = dg.DagsterInstance.get()
     quiet = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
     failed = []
     for key in keys:
@@ -70,6 +55,29 @@ Open the UIs on the same stores:
     return 1 if failed else 0
 
 
+def doctor(args: argparse.Namespace) -> int:
+    """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
+    something is found and not repaired."""
+    from .doctor import find_orphans, repair
+    from .resources import MLflowTracker
+
+    instance = prepare_instance()
+    client = MLflowTracker(tracking_uri=args.tracking_uri).client()
+    older = args.older_than * 60
+    orphans = find_orphans(instance, client, [default_storage_dir()], older)
+    print(f"Runs and files older than {args.older_than:g} minutes that interrupted runs left:")
+    print(f"  Dagster runs still STARTED : {orphans.dagster_runs or 'none'}")
+    print(f"  MLflow runs still RUNNING  : {orphans.mlflow_runs or 'none'}")
+    print(f"  temporary files            : {[str(p) for p in orphans.temporary_files] or 'none'}")
+    if orphans and args.repair:
+        repair(orphans, instance, client, older)
+        print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files deleted.")
+        return 0
+    if orphans:
+        print("Run again with --repair to fix them.")
+    return 1 if orphans else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
     parser = argparse.ArgumentParser(
@@ -88,6 +96,16 @@ def main(argv: list[str] | None = None) -> int:
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")
     sub.add_parser("partitions", help="list the partition keys")
+    p_doc = sub.add_parser(
+        "doctor", help="list Dagster runs left STARTED, MLflow runs left RUNNING and temporary "
+                       "files left by interrupted runs; --repair marks the runs failed/killed "
+                       "and deletes the files")
+    p_doc.add_argument("--repair", action="store_true", help="fix what is found")
+    p_doc.add_argument("--older-than", type=float, default=60.0, metavar="MINUTES",
+                       help="only what is older than this (a younger run may be live; "
+                            "default 60)")
+    p_doc.add_argument("--tracking-uri", default="", help="MLflow tracking URI (default as "
+                                                          "for run)")
     args = parser.parse_args(argv)
     if args.command == "partitions":
         from .definitions import defs, partitions_of
@@ -95,6 +113,8 @@ def main(argv: list[str] | None = None) -> int:
 
         print("\n".join(all_keys(partitions_of(defs))))
         return 0
+    if args.command == "doctor":
+        return doctor(args)
     return run(args)
 
 

@@ -5,6 +5,7 @@ import os
 import dagster as dg
 
 from ..config import HParamsFile
+from ..datasets import DATASETS
 from .assets import build_assets
 from .partitions import build_partitions
 from .resources import MLflowTracker, PipelineSettings
@@ -18,11 +19,16 @@ def build_definitions(hparams_path: str | os.PathLike | None = None, **resources
 
     The partitions' set names and the ``settings`` resource read the same file
     (``hparams_path``; default ``$PWA_HPARAMS`` or ``data/hparams.toml``), which is read and
-    validated here, so a bad set fails when the definitions load. ``resources`` replace the
+    validated here, so a bad set (or a table for an unknown data set) fails when the
+    definitions load. ``resources`` replace the
     defaults (``io_manager``, ``settings``, ``mlflow``); a replacement ``settings`` gets
     ``hparams_path`` set to that file.
     """
     hparams = HParamsFile(hparams_path)
+    unknown = sorted(hparams.datasets - set(DATASETS))
+    if unknown:
+        raise ValueError(f"{hparams.path} has tables for unknown data set(s) {unknown}; the "
+                         f"data sets are {list(DATASETS)}")
     partitions_def = build_partitions(hparams)
     job, schedule = build_sweep(partitions_def)
     settings = resources.pop("settings", PipelineSettings())

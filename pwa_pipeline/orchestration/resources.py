@@ -148,7 +148,8 @@ class MLflowTracker(dg.ConfigurableResource):
             if not os.access(folder, os.W_OK):
                 raise dg.Failure(description=f"MLflow store folder {folder} is not writable")
 
-    def _client(self):
+    def client(self):
+        """An MLflow client on the tracking URI, the store created if new (see the class doc)."""
         import mlflow
         from mlflow.tracking import MlflowClient
 
@@ -212,7 +213,7 @@ class MLflowTracker(dg.ConfigurableResource):
         from mlflow.entities import Metric, Param, RunTag
 
         self.check_reachable()
-        client = self._client()
+        client = self.client()
         exp_id = self._experiment(client, dataset)
         run = client.create_run(exp_id, run_name=f"{method}|{hparams}",
                                 tags={"dataset": dataset, "hparams": hparams,

@@ -1,0 +1,33 @@
+"""The Dagster instance of the command line: created once, under a file lock.
+
+Dagster creates the sqlite schema of ``$DAGSTER_HOME`` on first use; two processes doing that
+at once leave two ``alembic_version`` rows, after which every run on that home fails at start.
+:func:`prepare_instance` serialises the first use.
+"""
+
+import os
+
+import dagster as dg
+from filelock import FileLock
+
+from .paths import dagster_home
+
+DAGSTER_YAML = """telemetry:
+  enabled: false
+nux:
+  enabled: false
+"""
+
+
+def prepare_instance() -> dg.DagsterInstance:
+    """``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) with its ``dagster.yaml`` and
+    schema created, under ``.init.lock``; sets ``DAGSTER_HOME`` and returns the instance."""
+    home = dagster_home()
+    home.mkdir(parents=True, exist_ok=True)
+    os.environ["DAGSTER_HOME"] = str(home)
+    with FileLock(home / ".init.lock"):
+        if not (home / "dagster.yaml").exists():
+            (home / "dagster.yaml").write_text(DAGSTER_YAML)
+        instance = dg.DagsterInstance.get()
+        instance.get_runs(limit=1)  # the first query creates and migrates the schema
+    return instance
