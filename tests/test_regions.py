@@ -69,3 +69,30 @@ def test_one_class_is_one_region_and_predict_needs_fit():
     assert reg.n_regions_ == 1 and set(reg.predict(np.zeros((4, 2)))) == {0}
     with pytest.raises(NotFittedError):
         SVMRegions().predict(np.ones((2, 2)))
+
+
+def test_capped_rows_stand_for_their_class():
+    from pwa_pipeline.pwa.regions import _capped_per_class
+
+    rows = np.arange(1000)
+    labels = np.r_[np.zeros(900, int), np.ones(80, int), np.full(20, 2)]
+    kept, represents = _capped_per_class(rows, labels, 100, np.random.default_rng(0))
+    assert np.all(np.diff(kept) > 0)
+    counts = np.bincount(labels[kept])
+    assert list(counts) == [100, 80, 20]  # the rare classes keep every row
+    # each class's weights add up to its size: the loss is that of every row in expectation
+    np.testing.assert_allclose(np.bincount(labels[kept], weights=represents), [900, 80, 20])
+
+
+def test_a_row_cap_keeps_the_boundary_of_the_full_fit():
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-1, 1, (20000, 2))
+    labels = (x[:, 0] + 0.3 * rng.normal(size=20000) > 0.6).astype(int)  # overlapping, 80/20
+    full = SVMRegions(max_rows=None).fit(x, labels)
+    capped = SVMRegions(max_rows=2000).fit(x, labels)
+    fresh = rng.uniform(-1, 1, (20000, 2))
+    assert np.mean(full.predict(fresh) == capped.predict(fresh)) > 0.98
+    # below the cap every row is used: the same fit
+    small = SVMRegions(max_rows=None).fit(x[:1500], labels[:1500])
+    same = SVMRegions(max_rows=2000).fit(x[:1500], labels[:1500])
+    np.testing.assert_array_equal(small.coef_, same.coef_)

@@ -89,3 +89,21 @@ def test_default_sub_models_are_refitted_on_their_rows(sim_30db, default_30db):
         rows = model.labels_ == i
         ls = np.linalg.lstsq(phi[rows], sim_30db.y[1:][rows], rcond=None)[0]
         np.testing.assert_allclose(model.thetas_[i], ls, atol=1e-10)
+
+
+def test_merging_many_clusters_tests_few_pairs(monkeypatch):
+    """Separability is asked for pairs closer than the first mergeable one, once per pair of
+    row sets: linear in the clusters (testing every pair at every merge was cubic)."""
+    import pwa_pipeline.pwa.submodels as submodels
+
+    phi, y, mode, _ = _two_modes(gap=3.0, n=3000)
+    rng = np.random.default_rng(5)
+    labels = mode * 15 + rng.integers(0, 15, len(y))  # each mode split into 15 copies
+    calls = []
+    real = submodels.separable
+    monkeypatch.setattr(submodels, "separable", lambda *a: calls.append(1) or real(*a))
+    merged, n = merge_indistinguishable(phi, y, labels, tol=1.0, copy_tol=25.0,
+                                        regions=SVMRegions())
+    assert len(set(merged)) == 2 and n == 28
+    assert len({(a, b) for a, b in zip(merged, mode, strict=True)}) == 2  # the true modes
+    assert len(calls) <= 60  # the previous scan made one per pair per merge: ~4,000

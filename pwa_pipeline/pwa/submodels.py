@@ -5,6 +5,7 @@ the library default. The region estimator (step 6) is passed in by the caller, s
 imports no other step.
 """
 
+import hashlib
 from numbers import Integral, Real
 
 import numpy as np
@@ -88,6 +89,7 @@ def merge_indistinguishable(
         raise ValueError("merging copies (copy_tol) needs a region estimator (regions)")
     labels = relabel_by_size(labels)
     n_merged = 0
+    verdicts: dict[tuple[bytes, bytes], bool] = {}  # separable(), by the rows of each pair
     while (s := int(labels.max()) + 1) > 1:
         thetas = refit(phi, target, labels, s)
         if np.isnan(thetas).any():
@@ -95,16 +97,30 @@ def merge_indistinguishable(
         rows = labels >= 0
         sq = _sq_residuals(phi[rows], target[rows], thetas)
         sigma2 = robust_noise_var(sq[labels[rows], np.arange(rows.sum())])
-        best, pair = np.inf, None
+        stats = []
         for i in range(s):
             for j in range(i + 1, s):
                 both = (labels == i) | (labels == j)
                 diff = phi[both] @ (thetas[i] - thetas[j])
-                stat = float(np.mean((diff**2 / sigma2).sum(axis=1)))
-                copies = (copy_tol is not None and tol <= stat < copy_tol
-                          and not separable(phi[both], labels[both] == i, regions))
-                if (stat < tol or copies) and (pair is None or stat < best):
-                    best, pair = stat, (i, j)
+                stats.append((float(np.mean((diff**2 / sigma2).sum(axis=1))), i, j))
+        # The mergeable pair with the smallest statistic is the first mergeable one in this
+        # order, so the SVM runs only on pairs closer than that one, and once per pair of
+        # row sets: linear in the merges, where testing every pair at every merge was cubic.
+        pair = None
+        for stat, i, j in sorted(stats):
+            if stat < tol:
+                pair = (i, j)
+                break
+            if copy_tol is None or stat >= copy_tol:
+                break
+            key = tuple(hashlib.blake2b(np.flatnonzero(labels == g).tobytes()).digest()
+                        for g in (i, j))
+            if key not in verdicts:
+                both = (labels == i) | (labels == j)
+                verdicts[key] = separable(phi[both], labels[both] == i, regions)
+            if not verdicts[key]:
+                pair = (i, j)
+                break
         if pair is None:
             break
         labels[labels == pair[1]] = pair[0]
