@@ -180,3 +180,18 @@ def test_single_output_affine_switching_on_the_output():
     region = m.regions_.predict(phi)
     positive = y[:-1, 0] > 0.05
     assert len(set(region[positive])) == 1 and len(set(region[y[:-1, 0] < -0.05])) == 1
+
+
+@pytest.mark.slow
+def test_single_output_fit_time_is_bounded():
+    """Issue 13: a 2-mode SISO record of 50k samples in under 10 s on 2 cores (~4 s measured
+    by benchmarks/siso.py), with both modes; slow, run with -m slow."""
+    import time
+
+    from benchmarks.siso import TRUTH, two_mode_siso
+
+    u, y = two_mode_siso(50000)
+    t0 = time.perf_counter()
+    m = PWARX(na=1, nb=1, affine=True).fit(u, y)
+    assert time.perf_counter() - t0 < 10
+    assert m.n_submodels_ == 2 and max_param_error(m.thetas_, TRUTH) < 0.01

@@ -80,8 +80,10 @@ def test_capped_rows_stand_for_their_class():
     assert np.all(np.diff(kept) > 0)
     counts = np.bincount(labels[kept])
     assert list(counts) == [100, 80, 20]  # the rare classes keep every row
-    # each class's weights add up to its size: the loss is that of every row in expectation
-    np.testing.assert_allclose(np.bincount(labels[kept], weights=represents), [900, 80, 20])
+    # the classes keep the proportions they have among all rows, at mean weight 1
+    np.testing.assert_allclose(np.bincount(labels[kept], weights=represents),
+                               np.array([900, 80, 20]) * kept.size / 1000)
+    assert represents.mean() == pytest.approx(1.0)
 
 
 def test_a_row_cap_keeps_the_boundary_of_the_full_fit():
