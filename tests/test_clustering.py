@@ -21,6 +21,8 @@ class _Local:
         self.theta_ = theta
         self.residual_var_ = np.ones((len(theta), theta.shape[2]))
         self.phi_scale_ = np.ones(theta.shape[1])
+        self.degenerate_ = np.zeros(len(theta), bool)
+        self.n_degenerate_ = 0
 
 
 def test_automatic_eps_is_in_a_sane_range_and_never_mixes_clusters():

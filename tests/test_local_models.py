@@ -45,12 +45,28 @@ def test_n_rho_too_small_or_too_large():
         LocalLeastSquares(n_rho=40).fit(phi, phi[:, :1])
 
 
-def test_singular_local_problem_is_reported_and_ridge_fixes_it():
+def test_degenerate_local_sets_are_marked_and_get_the_minimum_norm_solution():
     rng = np.random.default_rng(0)
     x = rng.normal(size=(50, 1))
-    phi = np.hstack([x, 2 * x])  # collinear columns: every local problem is singular
-    nbrs = local_sets(phi, 6, standardize=False)
-    with pytest.raises(ValueError, match="singular for 50 local set.*first: regressor row 0"):
-        local_least_squares(phi, x, nbrs)
-    theta, _, _ = local_least_squares(phi, x, nbrs, ridge=1e-8)
-    assert np.all(np.isfinite(theta))
+    phi = np.hstack([x, 2 * x])  # collinear columns: every local problem is rank-deficient
+    local = LocalLeastSquares(n_rho=6, standardize=False).fit(phi, 3 * x)
+    assert local.n_degenerate_ == 50 and local.degenerate_.all()
+    # y = 3x = a·x + b·2x, minimum-norm in unit-RMS columns (x and 2x scale alike): a = 2b
+    a, b = local.theta_[:, 0, 0], local.theta_[:, 1, 0]
+    np.testing.assert_allclose(a + 2 * b, 3.0)
+    np.testing.assert_allclose(a, 2 * b)
+    ridged = local_least_squares(phi, 3 * x, local.neighbours_, ridge=1e-8)
+    assert np.all(np.isfinite(ridged[0])) and not ridged[3].any()
+
+
+def test_only_the_rank_deficient_sets_are_marked():
+    rng = np.random.default_rng(1)
+    phi = rng.normal(size=(200, 3))
+    phi[:20, 1:] = [5.0, 7.0]  # a hold of two inputs: constant, hence collinear, columns
+    phi[:20, 0] = np.linspace(100, 101, 20)  # far from the rest, so their sets stay inside
+    local = LocalLeastSquares(n_rho=8, standardize=False).fit(phi, phi @ [[1.0], [2.0], [3.0]])
+    assert set(np.flatnonzero(local.degenerate_)) <= set(range(20))
+    assert local.degenerate_[:20].sum() >= 10
+    good = ~local.degenerate_
+    np.testing.assert_allclose(local.theta_[good, :, 0],
+                               np.broadcast_to([1.0, 2.0, 3.0], (good.sum(), 3)))

@@ -123,6 +123,7 @@ def _identification_assets(partitions_def) -> list:
             if settings.cache_local_models:
                 save_object(path, local, signing_key(root))
         context.add_output_metadata({"n_rho": local.n_rho_, "from_cache": cached,
+                                     "degenerate_local_sets": local.n_degenerate_,
                                      "seconds": time.perf_counter() - t0, "cache_key": key})
         return local
 

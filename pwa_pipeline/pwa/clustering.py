@@ -198,15 +198,24 @@ class DBSCANClustering(BaseEstimator):
         Parameters
         ----------
         local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
-            Its ``theta_``, ``residual_var_`` and ``phi_scale_`` are used.
+            Its ``theta_``, ``residual_var_``, ``phi_scale_`` and ``degenerate_`` are used;
+            degenerate local models are never clustered.
         target : ndarray of shape (n, m)
             The outputs y(k) (their RMS makes θ unit-free).
         """
         theta = local.theta_
         n = theta.shape[0]
         self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * theta.shape[1]
-        keep = np.ones(n, bool) if self.confidence is None else confident_models(
-            local.residual_var_, self.confidence)
+        keep = ~local.degenerate_
+        if keep.sum() < self.min_pts_:
+            raise ValueError(
+                f"{local.n_degenerate_} of {n} local sets are degenerate (their regressors "
+                f"are linearly dependent, e.g. inputs held constant for longer than a local "
+                f"set): too few left to cluster. Raise local_models__n_rho, lower na/nb, or "
+                f"excite the system with an input that changes more often"
+            )
+        if self.confidence is not None:
+            keep[keep] = confident_models(local.residual_var_[keep], self.confidence)
         if self.max_clustered is not None and keep.sum() > self.max_clustered:
             rows = np.random.default_rng(self.random_state).choice(
                 np.nonzero(keep)[0], self.max_clustered, replace=False)

@@ -65,12 +65,14 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
 
 def local_least_squares(
     phi: Float2D, target: Float2D, neighbours: np.ndarray, ridge: float = 0.0
-) -> tuple[np.ndarray, Float2D, np.ndarray]:
+) -> tuple[np.ndarray, Float2D, np.ndarray, np.ndarray]:
     """Least-squares θ_k on every local set, batched over k (eq. 6–7).
 
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
     matrix Φ_k; with ``ridge > 0`` the rows √ridge·I are appended (Tikhonov regularisation in
-    scaled units), which keeps the problem solvable where a local set is degenerate.
+    scaled units). A local set whose Φ_k is rank-deficient (e.g. every row inside one hold of
+    a piecewise-constant input) has no unique θ_k: it gets the minimum-norm solution (in the unit-RMS columns, so
+    independent of the channels' units) and is marked degenerate, never an error.
 
     Returns
     -------
@@ -80,12 +82,14 @@ def local_least_squares(
         SSR / (n_ρ − d) of each local fit, per output.
     phi_scale : ndarray of shape (d,)
         Root mean square of each regressor column (the column scaling of the solve).
+    degenerate : ndarray of shape (n,), bool
+        Local sets whose (scaled, ridge-extended) Φ_k has a diagonal entry of R at most 1e-10
+        of its largest: rank-deficient.
 
     Raises
     ------
     ValueError
-        If n_ρ ≤ d (an exact fit, no least squares), or a local problem is rank-deficient
-        and ``ridge`` is 0; the message counts the singular local sets and names the first.
+        If n_ρ ≤ d (an exact fit, no least squares).
     """
     n, d = phi.shape
     n_rho = neighbours.shape[1]
@@ -95,6 +99,7 @@ def local_least_squares(
     m = target.shape[1]
     theta = np.empty((n, d, m))
     resvar = np.empty((n, m))
+    degenerate = np.zeros(n, bool)
     damp = np.sqrt(ridge) * np.eye(d) if ridge > 0 else None
     for start in range(0, n, _CHUNK):
         idx = neighbours[start : start + _CHUNK]
@@ -105,20 +110,16 @@ def local_least_squares(
         q, r = np.linalg.qr(p)
         diag = np.abs(np.diagonal(r, axis1=1, axis2=2))
         singular = diag.min(axis=1) <= _RANK_TOL * diag.max(axis=1)
+        th = np.empty((len(idx), d, m))
+        th[~singular] = np.linalg.solve(r[~singular],
+                                        q[~singular].transpose(0, 2, 1) @ t[~singular])
         if singular.any():
-            first = start + int(np.argmax(singular))
-            total = int(singular.sum())
-            raise ValueError(
-                f"local least-squares problem is singular for {total} local set(s) in rows "
-                f"{start}..{start + len(idx) - 1} (first: regressor row {first}); the "
-                f"regressors of those local sets are linearly dependent. Increase n_rho, "
-                f"lower na/nb, or set ridge > 0"
-            )
-        th = np.linalg.solve(r, q.transpose(0, 2, 1) @ t)
+            th[singular] = np.linalg.pinv(p[singular], rtol=_RANK_TOL) @ t[singular]
+        degenerate[start : start + len(idx)] = singular
         res = target[idx] - xs[idx] @ th
         theta[start : start + len(idx)] = th / scale[:, None]
         resvar[start : start + len(idx)] = (res**2).sum(axis=1) / (n_rho - d)
-    return theta, resvar, scale
+    return theta, resvar, scale, degenerate
 
 
 class LocalLeastSquares(BaseEstimator):
@@ -134,8 +135,8 @@ class LocalLeastSquares(BaseEstimator):
         (False), where large-valued channels (the inputs of its section 5 system) dominate the
         distance and few local sets are pure (``shared/paper/NOTES.md``).
     ridge : float, default 0
-        Tikhonov term for degenerate local sets, in column-scaled units (0: a singular local
-        set raises).
+        Tikhonov term in column-scaled units (0: none; a rank-deficient local set then gets
+        the minimum-norm solution and is marked in ``degenerate_``).
 
     Attributes
     ----------
@@ -149,6 +150,11 @@ class LocalLeastSquares(BaseEstimator):
         Root mean square of each regressor column, used to make θ unit-free.
     n_rho_ : int
         The n_ρ used.
+    degenerate_ : ndarray of shape (n,), bool
+        Local sets whose regressors are linearly dependent (rank-deficient Φ_k, e.g. inside
+        one hold of a piecewise-constant input): θ_k is not identified there, and the
+        clustering step leaves them out.
+    n_degenerate_ : int
 
     Examples
     --------
@@ -183,8 +189,9 @@ class LocalLeastSquares(BaseEstimator):
         self.n_rho_ = self.n_rho if self.n_rho is not None else 3 * d
         check_n_rho(self.n_rho_, d)
         self.neighbours_ = local_sets(phi, self.n_rho_, self.standardize)
-        self.theta_, self.residual_var_, self.phi_scale_ = local_least_squares(
-            phi, target, self.neighbours_, self.ridge)
+        self.theta_, self.residual_var_, self.phi_scale_, self.degenerate_ = \
+            local_least_squares(phi, target, self.neighbours_, self.ridge)
+        self.n_degenerate_ = int(self.degenerate_.sum())
         return self
 
     def resolved_params(self) -> dict:

@@ -1,0 +1,44 @@
+"""Issue 10: piecewise-constant (held) inputs, as from a PLC, a PRBS or a step test."""
+
+import numpy as np
+import pytest
+
+from pwa_pipeline import PWARX
+from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, add_output_noise, hure_vasak_mode
+from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
+
+from .conftest import max_param_error
+
+
+def held_hure_vasak(n: int, seed: int, hold=(5, 40), snr_db: float = 30.0, burn_in: int = 100):
+    """The section 5 system with each input value held for 5–40 samples."""
+    rng = np.random.default_rng(seed)
+    total = n + burn_in
+    u = np.empty((total, 2))
+    k = 0
+    while k < total:
+        h = int(rng.integers(hold[0], hold[1] + 1))
+        u[k:k + h] = [rng.uniform(-4, 6), rng.uniform(-2, 4)]
+        k += h
+    y = np.zeros((total, 2))
+    for k in range(1, total):
+        y[k] = np.r_[y[k - 1], u[k - 1]] @ HURE_VASAK_THETAS[hure_vasak_mode(y[k - 1])]
+    u, y = u[burn_in:], y[burn_in:]
+    return u, y + add_output_noise(y, snr_db, rng)
+
+
+@pytest.mark.parametrize("seed", [101, 102])  # not among the seeds the default was tuned on
+def test_held_inputs_give_every_mode_without_an_error(seed):
+    u, y = held_hure_vasak(4000, seed)
+    m = PWARX(na=1, nb=1).fit(u, y)
+    assert m.local_models_.n_degenerate_ > 500  # many local sets lie inside one hold
+    assert not (m.clustering_.labels_[m.local_models_.degenerate_] >= 0).any()
+    assert m.n_submodels_ == 4 and max_param_error(m.thetas_, HURE_VASAK_THETAS) < 0.2
+
+
+def test_too_few_usable_local_sets_say_why():
+    u, y = held_hure_vasak(400, 3, hold=(60, 80))
+    phi = np.column_stack([y[:-1], u[:-1]])
+    local = LocalLeastSquares(n_rho=12).fit(phi, y[1:])
+    with pytest.raises(ValueError, match=r"\d+ of 399 local sets are degenerate .*held constant"):
+        DBSCANClustering(min_pts=local.n_degenerate_ + 1000).fit(local, y[1:])
