@@ -115,6 +115,16 @@ def test_materialise_hure_vasak_paper(resources, tmp_path):
         "parameter_matrices.json", "scores.csv", "prediction.png"}
     meta = result.asset_materializations_for_node("pwa_scores")[0].metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
+    assert meta["mlflow_run"].value == (f"http://127.0.0.1:5000/#/experiments/"
+                                        f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}")
+    # MLflow 3's UI opens the experiment in its model-training view, not the GenAI one
+    experiment = client.get_experiment(pwa.info.experiment_id)
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
+    # numbers on the asset pages carry 4 significant digits; checks name their partition
+    eps = result.asset_materializations_for_node("clusters")[0].metadata["eps"].value
+    assert eps == float(f"{eps:.4g}")
+    evaluations = result.get_asset_check_evaluations()
+    assert {e.metadata["partition"].value for e in evaluations} == {"hure_vasak|paper"}
     sub = next(r for r in runs if r.data.tags["method"] == "subspace")
     assert sub.data.params["order"] == "2" and sub.data.params["warmup"] == "10"
 
@@ -207,3 +217,30 @@ def test_cli_lists_partitions_and_refuses_a_mistyped_key(capsys, tmp_path, monke
     with pytest.raises(ValueError, match="unknown partition 'hure_vasak|papr'"):
         main(["run", "--partition", "hure_vasak|papr"])
     assert not (tmp_path / "storage").exists()
+
+
+def test_a_failing_noise_check_stops_the_steps_after_clustering(resources, tmp_path):
+    path = tmp_path / "noisy.toml"
+    path.write_text("[noisy.hure_vasak]\npreset = \"paper\"\nna = 1\nnb = 1\n"
+                    "local_models.n_rho = 18\nclustering.eps = 0.07\n"
+                    "clustering.min_pts = 20\n")  # one cluster, 96 % noise
+    noisy = build_definitions(path)
+    resources["settings"] = resources["settings"].with_hparams(path)
+    result = dg.materialize(list(noisy.assets), partition_key="hure_vasak|noisy",
+                            resources=resources, raise_on_error=False)
+    check = next(e for e in result.get_asset_check_evaluations()
+                 if e.check_name == "noise_share_below_limit")
+    assert not check.passed and check.metadata["noise_share"].value > 0.9
+    done = {e.asset_key.to_user_string() for e in result.get_asset_materialization_events()}
+    assert "clusters" in done and not {"sub_models", "svm_regions", "pwa_model"} & done
+    assert "linear_arx_model" in done  # what does not depend on the clusters still runs
+
+
+def test_the_schedule_skips_data_sets_that_are_missing(monkeypatch, tmp_path):
+    monkeypatch.setenv("PWA_KUKA_DATA", str(tmp_path / "nowhere"))
+    schedule = defs.get_repository_def().get_schedule_def("sweep_schedule")
+    ctx = dg.build_schedule_context(scheduled_execution_time=pd.Timestamp("2026-11-21T02:00"))
+    requests = schedule(ctx)
+    keys = [r.partition_key for r in requests]
+    assert keys and all(k.startswith("hure_vasak|") for k in keys)
+    assert len(keys) == len(all_keys(partitions_of(defs))) // 2

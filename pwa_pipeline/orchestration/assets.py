@@ -38,6 +38,7 @@ from .reporting import (
     params_table,
     prediction_figure,
     regions_table,
+    rounded,
     score_metrics,
     theta_table,
 )
@@ -122,26 +123,28 @@ def _identification_assets(partitions_def) -> list:
             local = configuration.pwa.fit_step("local_models", regressors)
             if settings.cache_local_models:
                 save_object(path, local, signing_key(root))
-        context.add_output_metadata({"n_rho": local.n_rho_, "from_cache": cached,
-                                     "degenerate_local_sets": local.n_degenerate_,
-                                     "seconds": time.perf_counter() - t0, "cache_key": key})
+        context.add_output_metadata(rounded({
+            "n_rho": local.n_rho_, "from_cache": cached,
+            "degenerate_local_sets": local.n_degenerate_, "seconds": time.perf_counter() - t0,
+            "cache_key": key}))
         return local
 
     @dg.asset(**part, kinds={"scikit-learn"}, check_specs=CLUSTER_CHECKS)
-    def clusters(configuration: Configuration, regressors: Regressors,
-                 local_models: BaseEstimator):
+    def clusters(context: dg.AssetExecutionContext, configuration: Configuration,
+                 regressors: Regressors, local_models: BaseEstimator):
         """Extended DBSCAN on the Vθ distance of the local models (eq. 8–10), the fitted
         ``clustering`` step."""
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("clustering", regressors, local_models=local_models)
-        yield dg.Output(step, metadata={
+        yield dg.Output(step, metadata=rounded({
             "n_clusters": step.n_clusters_, "eps": step.eps_, "eps_from_data": step.eps_auto_,
             "min_pts": step.min_pts_, "noise_share": step.noise_share_,
-            "seconds": time.perf_counter() - t0})
-        yield from cluster_results(step)
+            "seconds": time.perf_counter() - t0}))
+        yield from cluster_results(step, str(context.partition_key))
 
     @dg.asset(**part, kinds={"numpy"}, check_specs=SUB_MODEL_CHECKS)
-    def sub_models(configuration: Configuration, raw_benchmark: Dataset,
+    def sub_models(context: dg.AssetExecutionContext, configuration: Configuration,
+                   raw_benchmark: Dataset,
                    regressors: Regressors, local_models: BaseEstimator,
                    clusters: BaseEstimator):
         """One parameter matrix θ_i per cluster (step 5), the fitted ``submodels`` step."""
@@ -150,11 +153,11 @@ def _identification_assets(partitions_def) -> list:
                                           clustering=clusters)
         table = theta_table(step.thetas_, _phi_names(configuration.pwa, raw_benchmark),
                             raw_benchmark.y_names)
-        yield dg.Output(step, metadata={
+        yield dg.Output(step, metadata=rounded({
             "n_submodels": step.n_submodels_, "merged": step.n_merged_,
             "refinement_sweeps": step.n_iter_, "seconds": time.perf_counter() - t0,
-            "parameters": markdown(table)})
-        yield from sub_model_results(step)
+            "parameters": markdown(table)}))
+        yield from sub_model_results(step, str(context.partition_key))
 
     @dg.asset(**part, kinds={"scikit-learn"})
     def svm_regions(context: dg.AssetExecutionContext, configuration: Configuration,
@@ -165,9 +168,9 @@ def _identification_assets(partitions_def) -> list:
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("regions", regressors, submodels=sub_models)
         table = regions_table(step, _phi_names(configuration.pwa, raw_benchmark))
-        context.add_output_metadata({"n_regions": step.n_regions_,
-                                     "seconds": time.perf_counter() - t0,
-                                     "hyperplanes": markdown(table)})
+        context.add_output_metadata(rounded({"n_regions": step.n_regions_,
+                                             "seconds": time.perf_counter() - t0,
+                                             "hyperplanes": markdown(table)}))
         return step
 
     @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
@@ -182,9 +185,9 @@ def _identification_assets(partitions_def) -> list:
                           zip(("local_models", "clustering", "submodels", "regions"),
                               ("local_models", "clusters", "sub_models", "svm_regions"),
                               strict=True)}
-        context.add_output_metadata({
+        context.add_output_metadata(rounded({
             "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
-            "resolved parameters": markdown(params_table(model.resolved_params()))})
+            "resolved parameters": markdown(params_table(model.resolved_params()))}))
         return model
 
     return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
@@ -200,9 +203,9 @@ def _baseline_model_asset(method: Method, partitions_def):
         t0 = time.perf_counter()
         fitted = clone(configuration.estimators[method.name]).fit(raw_benchmark.u_train,
                                                                   raw_benchmark.y_train)
-        context.add_output_metadata({
+        context.add_output_metadata(rounded({
             "fit_seconds": time.perf_counter() - t0,
-            "resolved parameters": markdown(params_table(fitted.resolved_params()))})
+            "resolved parameters": markdown(params_table(fitted.resolved_params()))}))
         return fitted
 
     return model
@@ -239,9 +242,9 @@ def _scores_asset(method: Method, partitions_def):
             metrics={**score_metrics(ev.table), **extra_metrics},
             tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
             artifacts={"scores.csv": ev.table, "prediction.png": figure, **artifacts})
-        context.add_output_metadata({"mlflow_run_id": run_id,
-                                     "free_run_diverged": ev.diverged(),
-                                     **nrmse_summary(ev.table)})
+        context.add_output_metadata(rounded({
+            "mlflow_run_id": run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run_id)),
+            "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))
         return ev.table
 
     return scores
@@ -251,12 +254,12 @@ def _comparison_asset(partitions_def):
     @dg.asset(partitions_def=partitions_def, group_name="comparison", kinds={"pandas"},
               check_specs=COMPARISON_CHECKS,
               ins={name: dg.AssetIn(f"{name}_scores") for name in METHODS})
-    def comparison(**scores: pd.DataFrame):
+    def comparison(context: dg.AssetExecutionContext, **scores: pd.DataFrame):
         """Every method's scores side by side (one-step and free run)."""
         table = pd.concat([scores[name].assign(method=name) for name in METHODS],
                           ignore_index=True)
         yield dg.Output(table, metadata={"mean_scores": markdown(mean_scores(table))})
-        yield from comparison_results(table)
+        yield from comparison_results(table, str(context.partition_key))
 
     return comparison
 

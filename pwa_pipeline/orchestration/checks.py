@@ -18,8 +18,10 @@ SUB_MODEL_CHECKS = [
                       description="Identification produced at least one sub-model."),
 ]
 CLUSTER_CHECKS = [
-    dg.AssetCheckSpec("noise_share_below_limit", asset="clusters",
-                      description=f"DBSCAN labels at most {NOISE_LIMIT:.0%} of local models noise."),
+    dg.AssetCheckSpec("noise_share_below_limit", asset="clusters", blocking=True,
+                      description=f"DBSCAN labels at most {NOISE_LIMIT:.0%} of local models "
+                                  f"noise; when it fails, the steps after clustering do not "
+                                  f"run (their sub-models would rest on too few points)."),
 ]
 COMPARISON_CHECKS = [
     dg.AssetCheckSpec("pwa_free_run_not_worse_than_linear", asset="comparison",
@@ -28,26 +30,28 @@ COMPARISON_CHECKS = [
 ]
 
 
-def sub_model_results(subs) -> list[dg.AssetCheckResult]:
+def sub_model_results(subs, partition: str) -> list[dg.AssetCheckResult]:
     """Finite parameters and at least one sub-model, for a fitted sub-model step."""
     n_bad = int((~np.isfinite(subs.thetas_)).sum())
     return [
         dg.AssetCheckResult(check_name="finite_parameters", passed=n_bad == 0,
-                            metadata={"non_finite_entries": n_bad}),
+                            metadata={"partition": partition, "non_finite_entries": n_bad}),
         dg.AssetCheckResult(check_name="at_least_one_sub_model",
                             passed=subs.n_submodels_ >= 1,
-                            metadata={"n_submodels": int(subs.n_submodels_)}),
+                            metadata={"partition": partition,
+                                      "n_submodels": int(subs.n_submodels_)}),
     ]
 
 
-def cluster_results(clustering) -> list[dg.AssetCheckResult]:
+def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
     """Noise share below :data:`NOISE_LIMIT`, for a fitted clustering step."""
     return [dg.AssetCheckResult(
         check_name="noise_share_below_limit", passed=clustering.noise_share_ <= NOISE_LIMIT,
-        metadata={"noise_share": clustering.noise_share_, "limit": NOISE_LIMIT})]
+        metadata={"partition": partition, "noise_share": round(clustering.noise_share_, 4),
+                  "limit": NOISE_LIMIT})]
 
 
-def comparison_results(table: pd.DataFrame) -> list[dg.AssetCheckResult]:
+def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetCheckResult]:
     """PWA free-run mean NRMSE no worse than the linear ARX's (within
     :data:`FREE_RUN_RTOL`); a warning, not an error."""
     sel = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
@@ -57,4 +61,5 @@ def comparison_results(table: pd.DataFrame) -> list[dg.AssetCheckResult]:
         check_name="pwa_free_run_not_worse_than_linear",
         passed=bool(pwa <= lin * (1 + FREE_RUN_RTOL)),
         severity=dg.AssetCheckSeverity.WARN,
-        metadata={"pwa_free_run_nrmse": float(pwa), "linear_free_run_nrmse": float(lin)})]
+        metadata={"partition": partition, "pwa_free_run_nrmse": float(f"{pwa:.4g}"),
+                  "linear_free_run_nrmse": float(f"{lin:.4g}")})]

@@ -7,6 +7,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 
 import argparse
 import sys
+import time
 
 from .instance import prepare_instance
 from .paths import default_storage_dir, default_tracking_uri
@@ -34,16 +35,24 @@ def run(args: argparse.Namespace) -> int:
     uri = mask_credentials(resources["mlflow"].uri())
     quiet = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
     failed = []
+    summaries = []
     for key in keys:
         print(f"\n=== materialising {key} ===", flush=True)
+        t0 = time.perf_counter()
         result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
                                 instance=instance, run_config=quiet, raise_on_error=False)
         if not result.success:
             failed.append(key)
-            print(f"FAILED: {key} (see the run {result.run_id} in the Dagster UI)")
+            summaries.append(f"{key}: FAILED after {time.perf_counter() - t0:.1f} s (run "
+                             f"{result.run_id} in the Dagster UI)")
+            print(summaries[-1])
             continue
         table = result.output_for_node("comparison")
         print(mean_scores(table).to_markdown(floatfmt=".4g"))
+        summaries.append(_summary(key, result, table, time.perf_counter() - t0))
+    print("\nSummary\n  " + "\n  ".join(summaries))
+    experiments = "" if uri.startswith(("http://", "https://")) else \
+        "      then open http://127.0.0.1:5000/#/experiments (the runs of each data set)\n"
     print(f"""
 Stores
   Dagster instance : {home}
@@ -51,8 +60,19 @@ Stores
   MLflow tracking  : {uri}
 Open the UIs on the same stores:
   DAGSTER_HOME={home} dagster dev -w workspace.yaml        # http://127.0.0.1:3000
-  mlflow ui --backend-store-uri {uri} --workers 1          # http://127.0.0.1:5000""")
+  mlflow ui --backend-store-uri {uri} --workers 1          # http://127.0.0.1:5000
+{experiments}""", end="")
     return 1 if failed else 0
+
+
+def _summary(key: str, result, table, seconds: float) -> str:
+    """One line per partition: sub-models found and free-run NRMSE of every method."""
+    free = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
+    scores = ", ".join(f"{m} {v:.4g}" for m, v in zip(free["method"], free["nrmse"],
+                                                      strict=True))
+    model = result.output_for_node("pwa_model")
+    return (f"{key}: {model.n_submodels_} PWA sub-model(s); free-run NRMSE {scores} "
+            f"({seconds:.1f} s)")
 
 
 def doctor(args: argparse.Namespace) -> int:

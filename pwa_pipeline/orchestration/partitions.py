@@ -51,14 +51,20 @@ def all_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
     return [str(k) for k in partitions_def.get_partition_keys()]
 
 
-def default_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
-    """``<dataset>|<set>`` for :data:`DEFAULT_SETS`, with ``kuka_robot`` only if its data are
-    present (a note on stderr says why it is left out otherwise)."""
-    datasets = ["hure_vasak"]
+def unavailable_datasets() -> dict[str, str]:
+    """The data sets whose files are missing, with the reason (the simulated one never is)."""
     kuka = default_kuka_path()
     if any((kuka / f).is_file() for f in KUKA_FILES) or (kuka.suffix == ".mat" and kuka.is_file()):
-        datasets.append("kuka_robot")
-    else:
-        print(f"note: kuka_robot partitions left out: no KUKA data at {kuka}", file=sys.stderr)
+        return {}
+    return {"kuka_robot": f"no KUKA data at {kuka} (set PWA_KUKA_DATA)"}
+
+
+def default_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
+    """``<dataset>|<set>`` for :data:`DEFAULT_SETS` and the available data sets (a note on
+    stderr says why any is left out)."""
+    missing = unavailable_datasets()
+    for dataset, reason in missing.items():
+        print(f"note: {dataset} partitions left out: {reason}", file=sys.stderr)
+    datasets = [d for d in DATASETS if d not in missing]
     known = set(all_keys(partitions_def))
     return [k for k in (f"{ds}|{hp}" for ds in datasets for hp in DEFAULT_SETS) if k in known]

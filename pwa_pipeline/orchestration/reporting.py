@@ -7,6 +7,12 @@ import pandas as pd
 from ..datasets import Dataset
 
 
+def rounded(metadata: dict) -> dict:
+    """``metadata`` with every float rounded to 4 significant digits (what the UI shows)."""
+    return {k: float(f"{v:.4g}") if isinstance(v, float | np.floating) else v
+            for k, v in metadata.items()}
+
+
 def markdown(table: pd.DataFrame) -> dg.MetadataValue:
     """A table as Markdown metadata, numbers to 4 significant digits."""
     return dg.MetadataValue.md(table.to_markdown(floatfmt=".4g"))

@@ -16,6 +16,9 @@ from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from .paths import default_storage_dir, default_tracking_uri
 
+#: The experiment tag MLflow 3's UI reads to open an experiment in its classic model-training
+#: view rather than the GenAI one.
+EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 #: sqlite tracking stores whose schema this process has created or checked.
 _READY_STORES: set[str] = set()
 
@@ -104,6 +107,9 @@ class MLflowTracker(dg.ConfigurableResource):
     tracking_uri : str
         Empty: ``$MLFLOW_TRACKING_URI`` or the embedded ``sqlite:///<project>/mlflow.db``.
     experiment_prefix : str
+    ui_url : str
+        Where the MLflow UI of a local (sqlite) store is served (``mlflow ui``'s default);
+        run links point there, or at the tracking server itself.
     timeout_seconds : float
         How long to wait for a tracking server's health probe before failing.
     request_timeout : float
@@ -114,6 +120,7 @@ class MLflowTracker(dg.ConfigurableResource):
 
     tracking_uri: str = ""
     experiment_prefix: str = "pwa-pipeline"
+    ui_url: str = "http://127.0.0.1:5000"
     timeout_seconds: float = 5.0
     request_timeout: float = 10.0
     request_retries: int = 2
@@ -180,6 +187,8 @@ class MLflowTracker(dg.ConfigurableResource):
         name = f"{self.experiment_prefix}/{dataset}"
         exp = client.get_experiment_by_name(name)
         if exp is not None:
+            if exp.tags.get(EXPERIMENT_KIND[0]) is None:
+                client.set_experiment_tag(exp.experiment_id, *EXPERIMENT_KIND)
             return exp.experiment_id
         location = None
         if self.uri().startswith("sqlite:///"):
@@ -187,12 +196,21 @@ class MLflowTracker(dg.ConfigurableResource):
             db = Path(self.uri()[len("sqlite:///"):])
             location = (db.parent / "mlartifacts" / dataset).as_uri()
         try:
-            return client.create_experiment(name, artifact_location=location)
+            return client.create_experiment(name, artifact_location=location,
+                                            tags=dict([EXPERIMENT_KIND]))
         except MlflowException:
             exp = client.get_experiment_by_name(name)
             if exp is None:
                 raise
             return exp.experiment_id
+
+    def run_url(self, run_id: str) -> str:
+        """The link to a run in the MLflow UI (credentials never included)."""
+        uri = self.uri()
+        base = split_credentials(uri)[0] if uri.startswith(("http://", "https://")) \
+            else self.ui_url
+        experiment = self.client().get_run(run_id).info.experiment_id
+        return f"{base.rstrip('/')}/#/experiments/{experiment}/runs/{run_id}"
 
     def log_run(
         self,

@@ -2,7 +2,7 @@
 
 import dagster as dg
 
-from .partitions import all_keys
+from .partitions import all_keys, split_key, unavailable_datasets
 
 
 def build_sweep(partitions_def: dg.MultiPartitionsDefinition
@@ -14,10 +14,16 @@ def build_sweep(partitions_def: dg.MultiPartitionsDefinition
     @dg.schedule(job=job, cron_schedule="0 2 * * 6",
                  default_status=dg.DefaultScheduleStatus.STOPPED)
     def sweep_schedule(context: dg.ScheduleEvaluationContext):
-        """Weekly (Saturday 02:00), one run per partition; off until turned on in the UI."""
+        """Weekly (Saturday 02:00), one run per partition whose data are available (the
+        others are skipped, with the reason in the tick's log); off until turned on."""
         stamp = context.scheduled_execution_time.strftime("%Y%m%dT%H%M") \
             if context.scheduled_execution_time else "manual"
-        for key in all_keys(partitions_def):
-            yield dg.RunRequest(partition_key=key, run_key=f"{key}@{stamp}")
+        missing = unavailable_datasets()
+        for dataset, reason in missing.items():
+            context.log.info(f"skipping the partitions of {dataset}: {reason}")
+        keys = [k for k in all_keys(partitions_def) if split_key(k)[0] not in missing]
+        if not keys:
+            return dg.SkipReason(f"no data set is available: {missing}")
+        return [dg.RunRequest(partition_key=k, run_key=f"{k}@{stamp}") for k in keys]
 
     return job, sweep_schedule

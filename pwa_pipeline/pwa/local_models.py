@@ -71,8 +71,9 @@ def local_least_squares(
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
     matrix Φ_k; with ``ridge > 0`` the rows √ridge·I are appended (Tikhonov regularisation in
     scaled units). A local set whose Φ_k is rank-deficient (e.g. every row inside one hold of
-    a piecewise-constant input) has no unique θ_k: it gets the minimum-norm solution (in the unit-RMS columns, so
-    independent of the channels' units) and is marked degenerate, never an error.
+    a piecewise-constant input) has no unique θ_k: it gets the minimum-norm solution (in the
+    unit-RMS columns, so independent of the channels' units) and is marked degenerate, never
+    an error.
 
     Returns
     -------
