@@ -19,16 +19,29 @@ from pwa_pipeline.orchestration.storage import PartitionedFileIOManager, atomic_
 ASSETS = list(defs.assets)
 
 
-@pytest.fixture()
-def resources(tmp_path, mlflow_template):
-    db = tmp_path / "mlflow.db"
+def _resources(folder, mlflow_template):
+    db = folder / "mlflow.db"
     shutil.copy(mlflow_template, db)
     return {
-        "io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
-        "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
+        "io_manager": PartitionedFileIOManager(base_dir=str(folder / "storage")),
+        "settings": PipelineSettings(cache_dir=str(folder / "cache"),
                                      hparams_path=str(BUNDLED_HPARAMS)),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}"),
     }
+
+
+@pytest.fixture()
+def resources(tmp_path, mlflow_template):
+    return _resources(tmp_path, mlflow_template)
+
+
+@pytest.fixture(scope="module")
+def paper_run(tmp_path_factory, mlflow_template):
+    """hure_vasak|paper materialised once for the tests that only read its results."""
+    folder = tmp_path_factory.mktemp("paper_run")
+    resources = _resources(folder, mlflow_template)
+    result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources)
+    return result, resources, folder
 
 
 def _runs(resources, dataset):
@@ -76,8 +89,8 @@ def test_set_names_and_the_resource_read_the_same_file(tmp_path):
     assert again.resources["settings"].hparams_path == str(path)
 
 
-def test_materialise_hure_vasak_paper(resources, tmp_path):
-    result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources)
+def test_materialise_hure_vasak_paper(paper_run):
+    result, resources, tmp_path = paper_run
     assert result.success
     model = result.output_for_node("pwa_model")
     assert isinstance(model, PWARX) and model.thetas_.shape == (2, 4, 2)  # 2 of the 4 modes
@@ -244,3 +257,65 @@ def test_the_schedule_skips_data_sets_that_are_missing(monkeypatch, tmp_path):
     keys = [r.partition_key for r in requests]
     assert keys and all(k.startswith("hure_vasak|") for k in keys)
     assert len(keys) == len(all_keys(partitions_of(defs))) // 2
+
+
+def test_registered_models_load_in_another_process_and_simulate_the_same(paper_run, tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.mlflow_models import example_table
+
+    result, resources, _ = paper_run
+    uri = resources["mlflow"].tracking_uri
+    client = MlflowClient(tracking_uri=uri)
+    names = sorted(m.name for m in client.search_registered_models())
+    assert names == [f"pwa-pipeline.hure_vasak.{m}" for m in sorted(METHODS)]
+    data = result.output_for_node("raw_benchmark")
+    u, y = data.u_test[0][500:700], data.y_test[0][500:700]  # not the logged example
+    table = example_table(u, y, data.u_names, data.y_names, 10, rows=200)
+    table.to_parquet(tmp_path / "input.parquet")
+    script = (
+        "import sys, json, mlflow, pandas as pd\n"
+        f"mlflow.set_tracking_uri({uri!r})\n"
+        "m = mlflow.pyfunc.load_model('models:/pwa-pipeline.hure_vasak.pwa/latest')\n"
+        f"out = m.predict(pd.read_parquet({str(tmp_path / 'input.parquet')!r}))\n"
+        "print(json.dumps(out.to_numpy().tolist()))\n")
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    loaded = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
+    direct = result.output_for_node("pwa_model").simulate(u, y[:10])
+    np.testing.assert_allclose(loaded, direct, rtol=1e-12)
+    # the run has a signature, an input example, and its training data as a dataset
+    run_id = result.asset_materializations_for_node("pwa_scores")[0].metadata[
+        "mlflow_run_id"].value
+    run = client.get_run(run_id)
+    assert [d.dataset.name for d in run.inputs.dataset_inputs] == ["training"]
+    model_info = mlflow_model_info(uri, run_id)
+    assert model_info.signature.inputs.input_names() == data.u_names + data.y_names
+
+
+def mlflow_model_info(uri, run_id):
+    import mlflow
+
+    mlflow.set_tracking_uri(uri)
+    return mlflow.models.get_model_info(f"runs:/{run_id}/model")
+
+
+def test_diverged_scores_are_capped_and_flagged_for_mlflow():
+    from pwa_pipeline.orchestration.reporting import score_metrics
+
+    table = pd.DataFrame([
+        {"mode": "one_step", "output": "mean", "nrmse": 0.2, "r2": 0.96, "rmse": 0.1,
+         "diverged": False},
+        {"mode": "free_run", "output": "mean", "nrmse": 1.2e30, "r2": -1.4e60, "rmse": 3e29,
+         "diverged": True},
+        {"mode": "free_run", "output": "q1", "nrmse": np.nan, "r2": np.nan, "rmse": np.nan,
+         "diverged": True}])
+    m = score_metrics(table)
+    assert m["free_run_nrmse_mean"] == 10 and m["free_run_r2_mean"] == -99
+    assert m["free_run_nrmse_q1"] == 10 and "free_run_rmse_mean" not in m
+    assert m["one_step_rmse_mean"] == 0.1 and m["free_run_diverged"] == 1.0

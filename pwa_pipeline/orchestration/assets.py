@@ -31,6 +31,7 @@ from .checks import (
     comparison_results,
     sub_model_results,
 )
+from .mlflow_models import ModelToLog, Simulator, example_table
 from .partitions import split_key
 from .reporting import (
     markdown,
@@ -41,6 +42,7 @@ from .reporting import (
     rounded,
     score_metrics,
     theta_table,
+    training_table,
 )
 from .resources import MLflowTracker, PipelineSettings
 from .storage import UnsignedFileError, cache_key, inside, load_object, save_object, signing_key
@@ -241,7 +243,12 @@ def _scores_asset(method: Method, partitions_def):
             params={**configuration.params(method.name), **model.resolved_params()},
             metrics={**score_metrics(ev.table), **extra_metrics},
             tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
-            artifacts={"scores.csv": ev.table, "prediction.png": figure, **artifacts})
+            artifacts={"scores.csv": ev.table, "prediction.png": figure, **artifacts},
+            model=ModelToLog(
+                simulator=Simulator(model, data.u_names, data.y_names),
+                input_example=example_table(data.u_test[0], data.y_test[0], data.u_names,
+                                            data.y_names, configuration.warmup),
+                training=training_table(data)))
         context.add_output_metadata(rounded({
             "mlflow_run_id": run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run_id)),
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))

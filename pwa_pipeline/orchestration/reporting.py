@@ -5,6 +5,7 @@ import numpy as np
 import pandas as pd
 
 from ..datasets import Dataset
+from ..scoring.evaluation import DIVERGENCE
 
 
 def rounded(metadata: dict) -> dict:
@@ -40,11 +41,21 @@ def regions_table(regions, phi_names: list[str]) -> pd.DataFrame:
 
 
 def score_metrics(table: pd.DataFrame) -> dict[str, float]:
-    """``{<mode>_<metric>_<output>: value}`` from an evaluation table."""
+    """``{<mode>_<metric>_<output>: value}`` from an evaluation table, for MLflow.
+
+    A diverged run's NRMSE is capped at the divergence limit and its R² at 1 − limit² (a
+    1e30 free run would flatten every chart of the experiment), its RMSE is left out, and
+    ``free_run_diverged`` is 1; the ``scores.csv`` artifact keeps the exact values.
+    """
     out = {}
     for row in table.itertuples(index=False):
-        for metric in ("nrmse", "r2", "rmse"):
-            out[f"{row.mode}_{metric}_{row.output}"] = float(getattr(row, metric))
+        stem = f"{row.mode}_{{}}_{row.output}"
+        if row.diverged:
+            out[stem.format("nrmse")] = float(np.fmin(row.nrmse, DIVERGENCE))
+            out[stem.format("r2")] = float(np.fmax(row.r2, 1 - DIVERGENCE**2))
+        else:
+            out.update({stem.format(k): float(getattr(row, k)) for k in ("nrmse", "r2", "rmse")})
+    out["free_run_diverged"] = float(table.loc[table["mode"] == "free_run", "diverged"].any())
     return out
 
 
@@ -81,3 +92,11 @@ def prediction_figure(data: Dataset, predictions: dict[str, list[np.ndarray]], t
     axes[-1].set_xlabel("sample k of the first held-out experiment")
     fig.suptitle(title)
     return fig
+
+
+def training_table(data: Dataset) -> pd.DataFrame:
+    """The training experiments as one table (experiment, inputs, outputs)."""
+    return pd.concat([pd.DataFrame(np.column_stack([u, y]), columns=data.u_names + data.y_names)
+                      .assign(experiment=str(i)) for i, (u, y) in
+                      enumerate(zip(data.u_train, data.y_train, strict=True))],
+                     ignore_index=True)

@@ -6,7 +6,9 @@ import os
 import urllib.error
 import urllib.parse
 import urllib.request
+from importlib.metadata import version
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import dagster as dg
 import numpy as np
@@ -16,6 +18,11 @@ from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from .paths import default_storage_dir, default_tracking_uri
 
+if TYPE_CHECKING:
+    from .mlflow_models import ModelToLog
+
+#: What a logged model needs to load elsewhere (pinned to the versions that logged it).
+REQUIREMENTS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn", "pandas")
 #: The experiment tag MLflow 3's UI reads to open an experiment in its classic model-training
 #: view rather than the GenAI one.
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
@@ -204,6 +211,21 @@ class MLflowTracker(dg.ConfigurableResource):
                 raise
             return exp.experiment_id
 
+    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog") -> None:
+        import mlflow
+        from mlflow.models import infer_signature
+
+        output = model.simulator.predict(None, model.input_example)
+        with mlflow.start_run(run_id=run_id):
+            mlflow.log_input(mlflow.data.from_pandas(model.training, name="training"),
+                             context="training")
+            mlflow.pyfunc.log_model(
+                name="model", python_model=model.simulator,
+                signature=infer_signature(model.input_example, output),
+                input_example=model.input_example, registered_model_name=registered_name,
+                # given, not inferred: inference imports and inspects the environment (slow)
+                pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+
     def run_url(self, run_id: str) -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
         uri = self.uri()
@@ -222,11 +244,14 @@ class MLflowTracker(dg.ConfigurableResource):
         metrics: dict[str, float],
         tags: dict[str, str],
         artifacts: dict[str, object],
+        model: "ModelToLog | None" = None,
     ) -> str:
         """Create, fill and close one run; returns its id.
 
         ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV) or
-        matplotlib figures (as PNG).
+        matplotlib figures (as PNG). ``model`` is logged as the run's MLflow model (a pyfunc
+        with signature and input example, registered as ``<prefix>.<dataset>.<method>``)
+        and its training table as the run's dataset.
         """
         from mlflow.entities import Metric, Param, RunTag
 
@@ -255,6 +280,8 @@ class MLflowTracker(dg.ConfigurableResource):
                     client.log_text(run_id, obj.to_csv(index=False), name)
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
+            if model is not None:
+                self._log_model(run_id, f"{self.experiment_prefix}.{dataset}.{method}", model)
             client.set_terminated(run_id, "FINISHED")
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run

@@ -23,6 +23,8 @@ from .._validation import as_experiments
 from .metrics import nrmse, r2_score, rmse
 
 MODES = ("one_step", "free_run")
+#: Free-run NRMSE above which a run is flagged diverged.
+DIVERGENCE = 10.0
 
 
 class Model(Protocol):
@@ -65,7 +67,7 @@ def evaluate(
     y,
     warmup: int = 10,
     output_names: list[str] | None = None,
-    divergence: float = 10.0,
+    divergence: float = DIVERGENCE,
 ) -> Evaluation:
     """Score a fitted model by one-step prediction and free-run simulation (see module doc).
 

@@ -1,0 +1,72 @@
+"""Fitted models as MLflow models: a pyfunc that simulates the model's outputs.
+
+``mlflow.pyfunc.load_model("models:/<prefix>.<dataset>.<method>/latest")`` in any process
+with pwa-pipeline installed gives back the simulator of a logged run. Its input is a table
+with the model's input columns and output columns; the outputs are given on the leading
+warm-up rows (at least what the model needs, e.g. max(na, nb)) and empty (NaN) after. Its
+output is the table of output columns: the warm-up rows as given, then the free-run
+simulation (the same numbers as the model's ``simulate``).
+"""
+
+from dataclasses import dataclass
+
+import mlflow.pyfunc
+import numpy as np
+import pandas as pd
+
+
+class Simulator(mlflow.pyfunc.PythonModel):
+    """A fitted PWARX, LinearARX or SubspaceSS as an MLflow pyfunc (see the module doc).
+
+    Parameters
+    ----------
+    model : fitted estimator with ``simulate(u, y_init)``
+    u_names, y_names : list of str
+        The input and output column names.
+    """
+
+    def __init__(self, model, u_names: list[str], y_names: list[str]):
+        self.model = model
+        self.u_names = list(u_names)
+        self.y_names = list(y_names)
+
+    def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
+        """Simulate from the warm-up rows of ``model_input``.
+
+        Raises
+        ------
+        ValueError
+            If a column is missing or no leading row gives every output.
+        """
+        missing = [c for c in self.u_names + self.y_names if c not in model_input.columns]
+        if missing:
+            raise ValueError(f"input table lacks column(s) {missing}; it needs "
+                             f"{self.u_names + self.y_names}")
+        y = model_input[self.y_names].to_numpy(float)
+        given = ~np.isnan(y).any(axis=1)
+        warmup = int(np.argmin(given)) if not given.all() else len(given)
+        if warmup == 0:
+            raise ValueError("no warm-up: give every output on the first rows of the table")
+        u = model_input[self.u_names].to_numpy(float)
+        simulated = self.model.simulate(u, y[:warmup])
+        return pd.DataFrame(simulated, columns=self.y_names, index=model_input.index)
+
+
+def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: list[str],
+                  warmup: int, rows: int = 40) -> pd.DataFrame:
+    """An input table for :class:`Simulator`: ``rows`` samples, outputs given on ``warmup``."""
+    y = y[:rows].copy()
+    y[warmup:] = np.nan
+    return pd.concat([pd.DataFrame(u[:rows], columns=u_names),
+                      pd.DataFrame(y, columns=y_names)], axis=1)
+
+
+@dataclass(frozen=True)
+class ModelToLog:
+    """What :meth:`~pwa_pipeline.orchestration.resources.MLflowTracker.log_run` logs as the
+    run's model: the simulator, an input example (for the signature), and the training
+    table (logged as the run's dataset)."""
+
+    simulator: Simulator
+    input_example: pd.DataFrame
+    training: pd.DataFrame
