@@ -61,6 +61,9 @@ def test_definitions_load():
     assert repo.get_job("sweep") is not None
     assert repo.get_schedule_def("sweep_schedule").default_status == dg.DefaultScheduleStatus.STOPPED
     assert "config" not in defs.resources  # a name Dagster reserves for run config
+    # one process per run: a process per step cost a UI-launched partition 88 s for 3 s
+    assert repo.get_job("sweep").executor_def.name == "in_process"
+    assert defs.executor.name == "in_process"
 
 
 def test_schedule_requests_every_partition_once():

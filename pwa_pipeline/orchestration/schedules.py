@@ -9,7 +9,8 @@ def build_sweep(partitions_def: dg.MultiPartitionsDefinition
                 ) -> tuple:
     """The ``sweep`` job (every asset of one partition) and ``sweep_schedule``."""
     job = dg.define_asset_job("sweep", selection=dg.AssetSelection.all(),
-                              description="Every asset of one partition.")
+                              executor_def=dg.in_process_executor,
+                              description="Every asset of one partition, in one process.")
 
     @dg.schedule(job=job, cron_schedule="0 2 * * 6",
                  default_status=dg.DefaultScheduleStatus.STOPPED)
