@@ -306,3 +306,15 @@ def test_tables_for_unknown_data_sets_are_refused(tmp_path):
     path.write_text("[a.hure_vasak]\n[a.kuka_robto]\n")
     with pytest.raises(ValueError, match=r"unknown data set\(s\) \['kuka_robto'\]"):
         build_definitions(path)
+
+
+def test_re_runs_mark_the_latest_run(tmp_path, mlflow_template):
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    uri = f"sqlite:///{db}"
+    ids = [_log_one((uri, 0)) for _ in range(3)] + [_log_one((uri, 1))]
+    client = MlflowClient(tracking_uri=uri)
+    tags = {i: client.get_run(i).data.tags["latest"] for i in ids}
+    assert [tags[i] for i in ids] == ["false", "false", "true", "true"]  # s0 thrice, s1 once

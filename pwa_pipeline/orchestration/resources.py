@@ -211,6 +211,19 @@ class MLflowTracker(dg.ConfigurableResource):
                 raise
             return exp.experiment_id
 
+    @staticmethod
+    def _mark_latest(client, exp_id: str, run_id: str, hparams: str, method: str) -> None:
+        """Tag ``run_id`` ``latest=true`` and the earlier runs of the same set and method
+        ``latest=false``, so that re-runs are told apart in the UI (filter
+        ``tags.latest = 'true'``)."""
+        earlier = client.search_runs(
+            [exp_id], filter_string=f"tags.hparams = '{hparams}' and tags.method = '{method}' "
+                                    f"and tags.latest = 'true'")
+        for run in earlier:
+            if run.info.run_id != run_id:
+                client.set_tag(run.info.run_id, "latest", "false")
+        client.set_tag(run_id, "latest", "true")
+
     def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog") -> None:
         import mlflow
         from mlflow.models import infer_signature
@@ -283,6 +296,7 @@ class MLflowTracker(dg.ConfigurableResource):
             if model is not None:
                 self._log_model(run_id, f"{self.experiment_prefix}.{dataset}.{method}", model)
             client.set_terminated(run_id, "FINISHED")
+            self._mark_latest(client, exp_id, run_id, hparams, method)
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
             # as KILLED rather than leave it RUNNING forever
