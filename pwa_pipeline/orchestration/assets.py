@@ -125,6 +125,10 @@ def _identification_assets(partitions_def) -> list:
             local = configuration.pwa.fit_step("local_models", regressors)
             if settings.cache_local_models:
                 save_object(path, local, signing_key(root))
+        context.log.info(
+            f"local models: {len(local.theta_):,} local sets of n_rho = {local.n_rho_}"
+            f"{' from the cache' if cached else ''} ({local.n_degenerate_:,} degenerate) in "
+            f"{time.perf_counter() - t0:.1f} s")
         context.add_output_metadata(rounded({
             "n_rho": local.n_rho_, "from_cache": cached,
             "degenerate_local_sets": local.n_degenerate_, "seconds": time.perf_counter() - t0,
@@ -138,6 +142,9 @@ def _identification_assets(partitions_def) -> list:
         ``clustering`` step."""
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("clustering", regressors, local_models=local_models)
+        context.log.info(f"clusters: {step.n_clusters_} with eps = {step.eps_:.4g}, MinPts = "
+                         f"{step.min_pts_}, noise {step.noise_share_:.1%}, in "
+                         f"{time.perf_counter() - t0:.1f} s")
         yield dg.Output(step, metadata=rounded({
             "n_clusters": step.n_clusters_, "eps": step.eps_, "eps_from_data": step.eps_auto_,
             "min_pts": step.min_pts_, "noise_share": step.noise_share_,
@@ -153,6 +160,8 @@ def _identification_assets(partitions_def) -> list:
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("submodels", regressors, local_models=local_models,
                                           clustering=clusters)
+        context.log.info(f"sub-models: {step.n_submodels_} ({step.n_merged_} merges, "
+                         f"{step.n_iter_} sweeps) in {time.perf_counter() - t0:.1f} s")
         table = theta_table(step.thetas_, _phi_names(configuration.pwa, raw_benchmark),
                             raw_benchmark.y_names)
         yield dg.Output(step, metadata=rounded({
@@ -205,6 +214,7 @@ def _baseline_model_asset(method: Method, partitions_def):
         t0 = time.perf_counter()
         fitted = clone(configuration.estimators[method.name]).fit(raw_benchmark.u_train,
                                                                   raw_benchmark.y_train)
+        context.log.info(f"{method.label}: fitted in {time.perf_counter() - t0:.1f} s")
         context.add_output_metadata(rounded({
             "fit_seconds": time.perf_counter() - t0,
             "resolved parameters": markdown(params_table(fitted.resolved_params()))}))
@@ -224,6 +234,8 @@ def _scores_asset(method: Method, partitions_def):
         data = raw_benchmark
         ev = evaluate(model, data.u_test, data.y_test, warmup=configuration.warmup,
                       output_names=data.y_names)
+        context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
+                         f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
         fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")
         dataset, hparams = split_key(context.partition_key)
         extra_metrics, artifacts = {"fit_seconds": fit_seconds}, {}

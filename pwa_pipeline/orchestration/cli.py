@@ -33,7 +33,8 @@ def run(args: argparse.Namespace) -> int:
     if args.tracking_uri:
         resources["mlflow"] = MLflowTracker(tracking_uri=args.tracking_uri)
     uri = mask_credentials(resources["mlflow"].uri())
-    quiet = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
+    # INFO shows each step's one-line summary; Dagster's own events are DEBUG
+    quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
     failed = []
     summaries = []
     for key in keys:

@@ -2,6 +2,7 @@
 
 import base64
 import json
+import logging
 import os
 import urllib.error
 import urllib.parse
@@ -229,15 +230,23 @@ class MLflowTracker(dg.ConfigurableResource):
         from mlflow.models import infer_signature
 
         output = model.simulator.predict(None, model.input_example)
-        with mlflow.start_run(run_id=run_id):
-            mlflow.log_input(mlflow.data.from_pandas(model.training, name="training"),
-                             context="training")
-            mlflow.pyfunc.log_model(
-                name="model", python_model=model.simulator,
-                signature=infer_signature(model.input_example, output),
-                input_example=model.input_example, registered_model_name=registered_name,
-                # given, not inferred: inference imports and inspects the environment (slow)
-                pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+        # MLflow warns that a python_model object is stored with cloudpickle, at every log;
+        # the module doc of mlflow_models says what loading needs instead
+        pyfunc_log = logging.getLogger("mlflow.pyfunc")
+        level = pyfunc_log.level
+        pyfunc_log.setLevel(logging.ERROR)
+        try:
+            with mlflow.start_run(run_id=run_id):
+                mlflow.log_input(mlflow.data.from_pandas(model.training, name="training"),
+                                 context="training")
+                mlflow.pyfunc.log_model(
+                    name="model", python_model=model.simulator,
+                    signature=infer_signature(model.input_example, output),
+                    input_example=model.input_example, registered_model_name=registered_name,
+                    # given, not inferred: inference imports and inspects the environment
+                    pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+        finally:
+            pyfunc_log.setLevel(level)
 
     def run_url(self, run_id: str) -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
