@@ -141,6 +141,12 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert eps == float(f"{eps:.4g}")
     evaluations = result.get_asset_check_evaluations()
     assert {e.metadata["partition"].value for e in evaluations} == {"hure_vasak|paper"}
+    # figures on the asset pages, as Markdown with an inline PNG
+    for asset, key in (("pwa_scores", "prediction"), ("clusters", "local models by cluster"),
+                       ("pwa_model", "regions"),
+                       ("pwa_model", "switching (first held-out experiment)")):
+        text = result.asset_materializations_for_node(asset)[0].metadata[key].value
+        assert text.startswith("![") and "(data:image/png;base64," in text
     sub = next(r for r in runs if r.data.tags["method"] == "subspace")
     assert sub.data.params["order"] == "2" and sub.data.params["warmup"] == "10"
 

@@ -31,13 +31,19 @@ from .checks import (
     comparison_results,
     sub_model_results,
 )
+from .figures import (
+    parameter_clusters_figure,
+    prediction_figure,
+    regions_figure,
+    switching_figure,
+    to_markdown,
+)
 from .mlflow_models import ModelToLog, Simulator, example_table
 from .partitions import split_key
 from .reporting import (
     markdown,
     nrmse_summary,
     params_table,
-    prediction_figure,
     regions_table,
     rounded,
     score_metrics,
@@ -145,10 +151,12 @@ def _identification_assets(partitions_def) -> list:
         context.log.info(f"clusters: {step.n_clusters_} with eps = {step.eps_:.4g}, MinPts = "
                          f"{step.min_pts_}, noise {step.noise_share_:.1%}, in "
                          f"{time.perf_counter() - t0:.1f} s")
+        figure = parameter_clusters_figure(local_models, step, regressors.target)
         yield dg.Output(step, metadata=rounded({
             "n_clusters": step.n_clusters_, "eps": step.eps_, "eps_from_data": step.eps_auto_,
             "min_pts": step.min_pts_, "noise_share": step.noise_share_,
-            "seconds": time.perf_counter() - t0}))
+            "seconds": time.perf_counter() - t0,
+            "local models by cluster": dg.MetadataValue.md(to_markdown(figure))}))
         yield from cluster_results(step, str(context.partition_key))
 
     @dg.asset(**part, kinds={"numpy"}, check_specs=SUB_MODEL_CHECKS)
@@ -186,8 +194,9 @@ def _identification_assets(partitions_def) -> list:
 
     @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
     def pwa_model(context: dg.AssetExecutionContext, configuration: Configuration,
-                  regressors: Regressors, local_models: BaseEstimator, clusters: BaseEstimator,
-                  sub_models: BaseEstimator, svm_regions: BaseEstimator) -> PWARX:
+                  raw_benchmark: Dataset, regressors: Regressors, local_models: BaseEstimator,
+                  clusters: BaseEstimator, sub_models: BaseEstimator,
+                  svm_regions: BaseEstimator) -> PWARX:
         """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores."""
         model = clone(configuration.pwa).assemble(
             regressors, local_models=local_models, clustering=clusters, submodels=sub_models,
@@ -196,9 +205,14 @@ def _identification_assets(partitions_def) -> list:
                           zip(("local_models", "clustering", "submodels", "regions"),
                               ("local_models", "clusters", "sub_models", "svm_regions"),
                               strict=True)}
+        data = raw_benchmark
+        switching = switching_figure(model, data.u_test[0], data.y_test[0])
+        regions = regions_figure(model, regressors.phi, _phi_names(model, data))
         context.add_output_metadata(rounded({
             "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
-            "resolved parameters": markdown(params_table(model.resolved_params()))}))
+            "resolved parameters": markdown(params_table(model.resolved_params())),
+            "switching (first held-out experiment)": dg.MetadataValue.md(to_markdown(switching)),
+            "regions": dg.MetadataValue.md(to_markdown(regions))}))
         return model
 
     return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
@@ -247,8 +261,7 @@ def _scores_asset(method: Method, partitions_def):
             artifacts["parameter_matrices.json"] = {
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
                 "outputs": data.y_names}
-        figure = prediction_figure(data, ev.predictions,
-                                   f"{method.label} | {context.partition_key}",
+        figure = prediction_figure(data, ev, f"{method.label} | {context.partition_key}",
                                    configuration.warmup)
         run_id = mlflow.log_run(
             dataset=dataset, hparams=hparams, method=method.name,
@@ -262,6 +275,7 @@ def _scores_asset(method: Method, partitions_def):
                                             data.y_names, configuration.warmup),
                 training=training_table(data)))
         context.add_output_metadata(rounded({
+            "prediction": dg.MetadataValue.md(to_markdown(figure)),
             "mlflow_run_id": run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run_id)),
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))
         return ev.table

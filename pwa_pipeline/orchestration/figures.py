@@ -148,17 +148,16 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, title: str,
     return fig
 
 
-def _clustering_embedding(model: PWARX, target: np.ndarray) -> np.ndarray:
+def _clustering_embedding(local, step, target: np.ndarray) -> np.ndarray:
     """The clustered θ_k embedded as the clustering step embedded them (eq. 8–10), unit-free
     (θ_k·rms(φ)/rms(y)) when the step was."""
-    local, step = model.local_models_, model.clustering_
     theta = local.theta_
-    if getattr(step, "unit_free", False):
+    if step.unit_free:
         theta = theta * local.phi_scale_[None, :, None] / column_rms(np.asarray(target))
-    return EMBEDDINGS[getattr(step, "embedding", "exact")](theta[step.clustered_])
+    return EMBEDDINGS[step.embedding](theta[step.clustered_])
 
 
-def parameter_clusters_figure(model: PWARX, target: np.ndarray,
+def parameter_clusters_figure(local, clustering, target: np.ndarray,
                               title: str | None = None) -> Figure:
     """The local parameter matrices θ_k as DBSCAN clustered them (step 4), and its ε.
 
@@ -171,10 +170,9 @@ def parameter_clusters_figure(model: PWARX, target: np.ndarray,
 
     Parameters
     ----------
-    model : fitted PWARX
-        Only ``local_models_`` and ``clustering_`` are read, so any object with those two
-        fitted steps will do (e.g. ``SimpleNamespace(local_models_=..., clustering_=...)``
-        in the ``clusters`` asset).
+    local, clustering : the fitted local-model and clustering steps
+        (``PWARX.local_models_`` and ``clustering_``, or the ``local_models`` and
+        ``clusters`` assets).
     target : ndarray of shape (n, m)
         The training targets y(k) the clustering step was fitted with
         (``Regressors.target``); their RMS makes θ_k unit-free.
@@ -185,8 +183,8 @@ def parameter_clusters_figure(model: PWARX, target: np.ndarray,
     Figure
         Two axes: the projection and the k-distance curve.
     """
-    step = model.clustering_
-    emb = _clustering_embedding(model, target)
+    step = clustering
+    emb = _clustering_embedding(local, step, target)
     labels = step.labels_[step.clustered_]
     centred = emb - emb.mean(axis=0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
@@ -195,10 +193,10 @@ def parameter_clusters_figure(model: PWARX, target: np.ndarray,
     share = 100 * sv**2 / max(float(np.sum(sv**2)), np.finfo(float).tiny)
     fig = _figure(10, 4.0)
     ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
-    for c in np.unique(labels):
+    for c in np.unique(labels):  # (labels run by decreasing size: small clusters on top)
         rows = labels == c
         ax.scatter(pcs[rows, 0], pcs[rows, 1], s=5 if c < 0 else 7, color=_colour(c),
-                   alpha=0.5 if c < 0 else 0.8, lw=0, zorder=1 if c < 0 else 2,
+                   alpha=0.5 if c < 0 else 0.8, lw=0, zorder=1 if c < 0 else 2 + c / 100,
                    label=f"noise ({rows.sum()})" if c < 0 else f"cluster {c + 1} ({rows.sum()})")
     ax.set_xlabel(f"PC 1 ({share[0]:.0f} % of variance)")
     ax.set_ylabel(f"PC 2 ({share[1] if share.size > 1 else 0:.0f} % of variance)")
@@ -206,7 +204,7 @@ def parameter_clusters_figure(model: PWARX, target: np.ndarray,
     ax.set_title(f"{labels.size} of {step.labels_.size} local models clustered ({scale})",
                  fontsize=9, loc="left")
     ax.legend(fontsize=8, markerscale=2, loc="upper center", bbox_to_anchor=(0.5, -0.16),
-              ncols=min(5, np.unique(labels).size), frameon=False)
+              ncols=min(3, np.unique(labels).size), frameon=False)
     dist = k_distances(emb, step.min_pts_)
     ax_k.plot(np.arange(dist.size), dist, color="black", lw=1.0, label="k-distance")
     how = "chosen from the data" if step.eps_auto_ else "given"
@@ -214,9 +212,8 @@ def parameter_clusters_figure(model: PWARX, target: np.ndarray,
                  label=f"ε = {step.eps_:.4g} ({how})")
     ax_k.set_yscale("log")
     ax_k.set_xlabel("clustered local models, sorted")
-    ax_k.set_ylabel("k-distance")
-    ax_k.set_title(f"k-distance: distance to the MinPts-th neighbour (MinPts = {step.min_pts_})",
-                   fontsize=9, loc="left")
+    ax_k.set_ylabel("distance to the MinPts-th neighbour")
+    ax_k.set_title(f"k-distance curve (MinPts = {step.min_pts_})", fontsize=9, loc="left")
     ax_k.legend(fontsize=8, loc="upper left")
     fig.suptitle(title or "Step 4: local models θ_k in the DBSCAN embedding (PCA)")
     return fig
@@ -283,21 +280,26 @@ def switching_figure(model: PWARX, u: np.ndarray, y: np.ndarray,
     mapped = mode_of[region]
     agreement = 100.0 * float(np.mean(mapped == true))
     s_true = np.asarray(true_thetas).shape[0]
-    fig = _figure(10, 4.2)
-    ax_true, ax = fig.subplots(2, 1, sharex=True, height_ratios=(s_true, s))
+    # Paired regions sit at the level of their mode (as in the panel above), unpaired
+    # regions above them.
+    level = mode_of.copy()
+    level[mode_of < 0] = s_true + np.arange(np.sum(mode_of < 0))
+    n_levels = max(s_true, int(level.max()) + 1)
+    fig = _figure(10, 4.4)
+    ax_true, ax = fig.subplots(2, 1, sharex=True)
     ax_true.scatter(k[shown], true[shown], c=[_colour(t) for t in true[shown]], marker="|",
                     s=60, lw=1.2)
     ax_true.set_yticks(range(s_true), [f"mode {i + 1}" for i in range(s_true)])
-    ax_true.set_ylim(-0.6, s_true - 0.4)
     ax_true.set_ylabel("true")
-    ax.scatter(k[shown], region[shown], c=[_colour(t) for t in mapped[shown]], marker="|",
-               s=60, lw=1.2)
+    ax.scatter(k[shown], level[region[shown]], c=[_colour(t) for t in mapped[shown]],
+               marker="|", s=60, lw=1.2)
     wrong = shown & (mapped != true)
-    ax.plot(k[wrong], region[wrong], "x", color="black", ms=4, mew=0.8, ls="none",
+    ax.plot(k[wrong], level[region[wrong]], "x", color="black", ms=4, mew=0.8, ls="none",
             label=f"disagrees with the true mode ({wrong.sum()} of {shown.sum()} shown)")
-    ax.set_yticks(range(s), [f"H{i + 1} ≙ mode {mode_of[i] + 1}" if mode_of[i] >= 0
-                             else f"H{i + 1} (unpaired)" for i in range(s)])
-    ax.set_ylim(-0.6, s - 0.4)
+    ax.set_yticks(level, [f"H{i + 1} ≙ mode {mode_of[i] + 1}" if mode_of[i] >= 0
+                          else f"H{i + 1} (unpaired)" for i in range(s)])
+    for a in (ax_true, ax):
+        a.set_ylim(-0.6, n_levels - 0.4)
     ax.set_ylabel("estimated")
     ax.set_xlabel("sample k")
     ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.28), fontsize=8, frameon=False)
@@ -377,19 +379,20 @@ def regions_figure(model: PWARX, phi: np.ndarray, names: list[str],
     return fig
 
 
-def to_markdown(fig: Figure, width: int = 810, max_bytes: int = 300_000) -> str:
+def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> str:
     """The figure as a Markdown image with the PNG inlined (base64), for
     ``dagster.MetadataValue.md``.
 
-    Saved at ``width`` pixels (810 px ≈ 90 dpi for a 9-inch figure); the figures of this
-    module come out at roughly 40–160 kB. A PNG over ``max_bytes`` is saved again at a lower
-    resolution until it fits (down to about 30 dpi).
+    Saved at 90 dpi by default; the figures of this module then come out at about 15–250 kB
+    (prediction of two outputs ≈ 145 kB, of six noisy outputs ≈ 250 kB; parameter clusters
+    ≈ 65 kB; regions ≈ 65 kB; switching ≈ 15–35 kB). A PNG over ``max_bytes`` is saved again
+    at a lower resolution until it fits (down to about 30 dpi).
 
     Parameters
     ----------
     fig : Figure
-    width : int, default 810
-        Width of the PNG in pixels.
+    width : int, optional
+        Width of the PNG in pixels; None: 90 dpi (900 px for a 10-inch figure).
     max_bytes : int, default 300_000
         Size limit of the PNG (the base64 text is 4/3 of it).
 
@@ -398,7 +401,7 @@ def to_markdown(fig: Figure, width: int = 810, max_bytes: int = 300_000) -> str:
     str
         ``![<suptitle>](data:image/png;base64,...)``.
     """
-    dpi = width / fig.get_figwidth()
+    dpi = 90.0 if width is None else width / fig.get_figwidth()
     while True:
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=dpi)

@@ -65,35 +65,6 @@ def nrmse_summary(table: pd.DataFrame) -> dict[str, float]:
             for row in table.itertuples(index=False)}
 
 
-def prediction_figure(data: Dataset, predictions: dict[str, list[np.ndarray]], title: str,
-                      warmup: int):
-    """Measured output, one-step prediction and free run on the first held-out experiment
-    (its first 606 samples: one robot experiment).
-
-    Returns a matplotlib Figure, drawn without pyplot (no global state, no display).
-    """
-    from matplotlib.figure import Figure
-
-    n = min(data.y_test[0].shape[0], 606)
-    y = data.y_test[0][:n]
-    m = y.shape[1]
-    fig = Figure(figsize=(9, 1.8 * m + 0.6), layout="constrained")
-    axes = fig.subplots(m, 1, sharex=True, squeeze=False)[:, 0]
-    k = np.arange(y.shape[0])
-    for j, ax in enumerate(axes):
-        ax.plot(k, y[:, j], color="black", lw=1.2, label="measured")
-        ax.plot(k, predictions["one_step"][0][:n, j], lw=0.9, label="one-step")
-        free = predictions["free_run"][0][:n, j]
-        lim = np.abs(y[:, j]).max() * 3 + 1e-12
-        ax.plot(k, np.clip(free, -lim, lim), lw=0.9, label="free run (clipped)")
-        ax.axvline(warmup, color="grey", ls=":", lw=0.8)
-        ax.set_ylabel(data.y_names[j])
-    axes[0].legend(loc="upper right", fontsize=7, ncols=3)
-    axes[-1].set_xlabel("sample k of the first held-out experiment")
-    fig.suptitle(title)
-    return fig
-
-
 def training_table(data: Dataset) -> pd.DataFrame:
     """The training experiments as one table (experiment, inputs, outputs)."""
     return pd.concat([pd.DataFrame(np.column_stack([u, y]), columns=data.u_names + data.y_names)

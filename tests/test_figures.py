@@ -1,0 +1,220 @@
+"""The diagnostic figures of :mod:`pwa_pipeline.orchestration.figures` on a small fit."""
+
+import base64
+import copy
+import struct
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from matplotlib.contour import ContourSet
+
+from pwa_pipeline import PWARX
+from pwa_pipeline._arrays import column_rms
+from pwa_pipeline._validation import as_experiments
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.orchestration.figures import (
+    clip_range,
+    parameter_clusters_figure,
+    prediction_figure,
+    regions_figure,
+    switching_figure,
+    to_markdown,
+)
+from pwa_pipeline.pwa.clustering import k_distances
+from pwa_pipeline.pwa.embedding import exact_embedding
+from pwa_pipeline.pwa.regressors import build_regressors, lagged_matrix, regressor_names
+from pwa_pipeline.scoring.evaluation import Evaluation, evaluate
+from pwa_pipeline.scoring.metrics import match_submodels
+
+WARMUP = 10
+
+
+@pytest.fixture(scope="module")
+def fit():
+    """PWARX(na=1, nb=1) on 1,500 samples at 30 dB, scored on a fresh record."""
+    train = make_hure_vasak(n_samples=1500, snr_db=30, seed=0)
+    test = make_hure_vasak(n_samples=1500, snr_db=30, seed=1000)
+    model = PWARX(na=1, nb=1).fit(train.u, train.y)
+    data = Dataset("hure_vasak", [train.u], [train.y], [test.u], [test.y], train.u_names,
+                   train.y_names)
+    ev = evaluate(model, test.u, test.y, warmup=WARMUP, output_names=train.y_names)
+    reg = build_regressors(as_experiments(train.u, train.y), 1, 1, False)
+    names = regressor_names(train.y_names, train.u_names, 1, 1, False)
+    return SimpleNamespace(model=model, data=data, ev=ev, reg=reg, names=names, test=test)
+
+
+def _diverged(fit, flagged=True):
+    """The fit's evaluation with y1's free run at 1e30 from k = 200 and y2's NaN from 300."""
+    free = fit.ev.predictions["free_run"][0].copy()
+    free[200:, 0] = 1e30
+    free[300:, 1] = np.nan
+    table = fit.ev.table.copy()
+    rows = table["mode"] == "free_run"
+    table.loc[rows, "diverged"] = flagged
+    table.loc[rows, "nrmse"] = [1e30, np.inf, np.inf] if flagged else [0.5, 0.5, 0.5]
+    return Evaluation(table, {"one_step": fit.ev.predictions["one_step"], "free_run": [free]})
+
+
+def _line(ax, label):
+    lines = [ln for ln in ax.get_lines() if ln.get_label() == label]
+    assert len(lines) == 1, [ln.get_label() for ln in ax.get_lines()]
+    return lines[0]
+
+
+def test_prediction_titles_give_each_outputs_nrmse(fit):
+    fig = prediction_figure(fit.data, fit.ev, "pwa | test", WARMUP)
+    assert len(fig.axes) == 2
+    assert fig.get_suptitle() == "pwa | test"
+    table = fit.ev.table
+    for ax, name in zip(fig.axes, fit.data.y_names, strict=True):
+        one = table[(table["mode"] == "one_step") & (table["output"] == name)]["nrmse"].item()
+        free = table[(table["mode"] == "free_run") & (table["output"] == name)]["nrmse"].item()
+        assert one != free
+        assert ax.get_title(loc="left") == \
+            f"{name}: one-step NRMSE {one:.4g}, free run NRMSE {free:.4g}"
+        n = 606
+        assert np.allclose(_line(ax, "measured").get_ydata(),
+                           fit.data.y_test[0][:n, fit.data.y_names.index(name)])
+        assert len(_line(ax, "free run").get_ydata()) == n
+        assert not any("diverged" in ln.get_label() for ln in ax.get_lines())
+        (span,) = [p for p in ax.patches if p.get_label() == "warm-up"]
+        assert span.get_x() == 0 and span.get_width() == WARMUP
+
+
+def test_diverged_free_run_is_clipped_marked_and_labelled(fit):
+    fig = prediction_figure(fit.data, _diverged(fit), "diverged", WARMUP)
+    y = fit.data.y_test[0]
+    exits = {0: 200, 1: 300}
+    for j, ax in enumerate(fig.axes):
+        assert "(diverged)" in ax.get_title(loc="left")
+        line = _line(ax, "free run (diverged, clipped)")
+        assert line.get_color() == "#d62728"
+        lo, hi = clip_range(y[:606, j])
+        assert lo == pytest.approx(y[:606, j].min() - 0.5 * np.ptp(y[:606, j]))
+        data = np.asarray(line.get_ydata(), float)
+        drawn = data[np.isfinite(data)]
+        assert drawn.size > 150 and drawn.min() >= lo and drawn.max() <= hi
+        # The line reaches the edge once, at the exit, and does not run along it.
+        assert data[exits[j]] == hi and np.sum(data == hi) == 1
+        assert np.isnan(data[exits[j] + 1:]).all()
+        (marker,) = [ln for ln in ax.get_lines() if ln.get_marker() == "^"]
+        assert list(marker.get_xdata()) == [exits[j]]
+        assert ax.get_ylim()[1] < hi + 0.1 * (hi - lo)
+    assert "1e+30" in fig.axes[0].get_title(loc="left")
+    assert "inf" in fig.axes[1].get_title(loc="left")
+
+
+def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
+    fig = prediction_figure(fit.data, _diverged(fit, flagged=False), "t", WARMUP)
+    ax1, ax2 = fig.axes
+    assert _line(ax1, "free run (clipped)").get_color() == "C1"  # finite 1e30, not flagged
+    _line(ax2, "free run (diverged, clipped)")  # NaN
+    assert "(diverged)" not in ax1.get_title(loc="left")
+    assert "(diverged)" in ax2.get_title(loc="left")
+
+
+def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit):
+    model, step = fit.model, fit.model.clustering_
+    assert step.unit_free
+    fig = parameter_clusters_figure(model.local_models_, step, fit.reg.target)
+    assert len(fig.axes) == 2
+    ax, ax_k = fig.axes
+    assert sum(c.get_offsets().shape[0] for c in ax.collections) == step.clustered_.sum()
+    labels = [c.get_label() for c in ax.collections]
+    assert sum(lab.startswith("cluster") for lab in labels) == step.n_clusters_
+    (noise,) = [c for c in ax.collections if c.get_label().startswith("noise")]
+    assert noise.get_offsets().shape[0] == np.sum(step.labels_[step.clustered_] < 0)
+    assert np.allclose(noise.get_facecolor()[0][:3], 0x9A / 255)
+    theta = model.local_models_.theta_[step.clustered_]
+    scale = model.local_models_.phi_scale_[None, :, None] / column_rms(fit.reg.target)
+    expected = k_distances(exact_embedding(theta * scale), step.min_pts_)
+    assert not np.allclose(expected, k_distances(exact_embedding(theta), step.min_pts_))
+    assert np.allclose(_line(ax_k, "k-distance").get_ydata(), expected)
+    eps = _line(ax_k, f"ε = {step.eps_:.4g} (chosen from the data)")
+    assert np.allclose(eps.get_ydata(), step.eps_)
+    given = copy.copy(step)
+    given.eps_auto_ = False
+    fig = parameter_clusters_figure(model.local_models_, given, fit.reg.target)
+    _line(fig.axes[1], f"ε = {step.eps_:.4g} (given)")
+
+
+def test_switching_agreement_matches_a_direct_count(fit):
+    model, test = fit.model, fit.test
+    region = model.regions_.predict(lagged_matrix(test.u, test.y, 1, 1, False))
+    mode_of = match_submodels(model.thetas_, test.thetas)[0]
+    agreement = 100 * np.mean(mode_of[region] == test.modes[1:])
+    assert 80 < agreement < 100
+    assert abs(100 * np.mean(region == test.modes[1:]) - agreement) > 1  # pairing matters
+    for modes in (test.modes, test.modes[1:]):  # per sample or per regressor row
+        fig = switching_figure(model, test.u, test.y, modes, test.thetas)
+        assert len(fig.axes) == 2
+        assert f"agreement {agreement:.1f} % of {region.size} samples" in fig.get_suptitle()
+    shown = fig.axes[1].collections[0].get_offsets()
+    assert shown[:, 0].min() == 1 and shown[:, 0].max() == 605
+    # Each region sits at the level of the mode it is paired with.
+    assert np.array_equal(shown[:, 1], mode_of[region[:605]])
+    (wrong,) = [ln for ln in fig.axes[1].get_lines() if ln.get_label().startswith("disagrees")]
+    assert len(wrong.get_xdata()) == np.sum(mode_of[region[:605]] != test.modes[1:606])
+
+
+def test_switching_without_truth_and_bad_truth(fit):
+    model, test = fit.model, fit.test
+    fig = switching_figure(model, test.u, test.y)
+    assert len(fig.axes) == 1
+    region = model.regions_.predict(lagged_matrix(test.u, test.y, 1, 1, False))
+    assert np.array_equal(fig.axes[0].collections[0].get_offsets()[:, 1], region[:605])
+    with pytest.raises(ValueError, match="true_thetas"):
+        switching_figure(model, test.u, test.y, test.modes)
+    with pytest.raises(ValueError, match="true_modes has 10 entries"):
+        switching_figure(model, test.u, test.y, test.modes[:10], test.thetas)
+
+
+def test_regions_slice_covers_every_region(fit):
+    model = fit.model
+    fig = regions_figure(model, fit.reg.phi, fit.names)
+    assert len(fig.axes) == 1
+    ax = fig.axes[0]
+    # The modes of the system switch on y(k−1): those are the two regressors chosen.
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("y1(k-1)", "y2(k-1)")
+    (cs,) = [c for c in ax.collections if isinstance(c, ContourSet)]
+    levels = np.asarray(cs.levels)
+    s = model.regions_.n_regions_
+    assert s == model.n_submodels_ == 4
+    for r in range(s):
+        assert np.sum((levels[:-1] < r) & (r < levels[1:])) == 1
+    assert levels.size == s + 1
+    # Every region shows up in the slice (the 2-D cut through the quadrants meets all four).
+    assert all(len(p.vertices) > 0 for p in cs.get_paths())
+    points = [c for c in ax.collections if not isinstance(c, ContourSet)]
+    assert sum(c.get_offsets().shape[0] for c in points) == fit.reg.phi.shape[0]
+    with pytest.raises(ValueError, match="names"):
+        regions_figure(model, fit.reg.phi, fit.names[:3])
+
+
+def _png(markdown):
+    assert markdown.startswith("![") and "](data:image/png;base64," in markdown
+    assert markdown.endswith(")")
+    return base64.b64decode(markdown.split("base64,", 1)[1][:-1], validate=True)
+
+
+def test_to_markdown_inlines_a_small_png(fit):
+    figs = [prediction_figure(fit.data, fit.ev, "pred [pwa]", WARMUP),
+            prediction_figure(fit.data, _diverged(fit), "diverged", WARMUP),
+            parameter_clusters_figure(fit.model.local_models_, fit.model.clustering_,
+                                      fit.reg.target),
+            switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
+                             fit.test.thetas),
+            regions_figure(fit.model, fit.reg.phi, fit.names)]
+    for fig in figs:
+        png = _png(to_markdown(fig))
+        assert png.startswith(b"\x89PNG\r\n\x1a\n")
+        assert len(png) < 300_000
+        width = struct.unpack(">I", png[16:20])[0]  # IHDR: width in pixels
+        assert width == round(90 * fig.get_figwidth())
+    assert to_markdown(figs[0]).startswith("![pred (pwa)](data:image/png;base64,")
+    narrow = _png(to_markdown(figs[0], width=450))
+    assert struct.unpack(">I", narrow[16:20])[0] == 450
+    small = _png(to_markdown(figs[0], max_bytes=40_000))
+    assert len(small) <= 40_000
