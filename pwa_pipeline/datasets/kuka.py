@@ -67,6 +67,18 @@ def _split(x: Float2D, length: int) -> list[Float2D]:
     return [x[i : i + length] for i in range(0, x.shape[0], length)]
 
 
+def _candidates(base: Path) -> list[Path]:
+    """The files that may hold the benchmark: ``base`` itself if it is a ``.mat`` file, else
+    the :data:`KUKA_FILES` inside it."""
+    return [base] if base.suffix == ".mat" else [base / f for f in KUKA_FILES]
+
+
+def find_kuka(path: str | os.PathLike | None = None) -> Path | None:
+    """The benchmark's ``.mat`` file at ``path`` (default :func:`default_kuka_path`), or None."""
+    base = Path(path) if path is not None else default_kuka_path()
+    return next((c for c in _candidates(base) if c.is_file()), None)
+
+
 def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT) -> RobotData:
     """Load the KUKA KR300 forward identification benchmark, cut into experiments.
 
@@ -92,8 +104,8 @@ def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT
     from scipy.io import loadmat
 
     base = Path(path) if path is not None else default_kuka_path()
-    candidates = [base] if base.suffix == ".mat" else [base / f for f in KUKA_FILES]
-    found = next((c for c in candidates if c.is_file()), None)
+    candidates = _candidates(base)
+    found = find_kuka(base)
     if found is None:
         raise FileNotFoundError(
             f"KUKA robot data not found at {base.resolve()} (looked for "

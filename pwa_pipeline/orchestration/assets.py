@@ -19,7 +19,7 @@ from .._validation import as_experiments
 from ..config import Configuration
 from ..datasets import Dataset
 from ..methods import METHODS, Method
-from ..pwa import PWARX
+from ..pwa import PWARX, STEPS
 from ..pwa.regressors import Regressors, build_regressors, regressor_names
 from ..scoring.comparison import mean_scores
 from ..scoring.evaluation import evaluate
@@ -54,6 +54,9 @@ from .resources import MLflowTracker, PipelineSettings
 from .storage import UnsignedFileError, cache_key, inside, load_object, save_object, signing_key
 
 GROUP = "identification"
+#: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`.
+STEP_ASSETS = dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
+                       strict=True))
 
 
 def _phi_names(pwa: PWARX, data: Dataset) -> list[str]:
@@ -201,10 +204,8 @@ def _identification_assets(partitions_def) -> list:
         model = clone(configuration.pwa).assemble(
             regressors, local_models=local_models, clustering=clusters, submodels=sub_models,
             regions=svm_regions)
-        model.timings_ = {name: _latest_metadata(context, asset, "seconds") for name, asset in
-                          zip(("local_models", "clustering", "submodels", "regions"),
-                              ("local_models", "clusters", "sub_models", "svm_regions"),
-                              strict=True)}
+        model.timings_ = {name: _latest_metadata(context, asset, "seconds")
+                          for name, asset in STEP_ASSETS.items()}
         data = raw_benchmark
         switching = switching_figure(model, data.u_test[0], data.y_test[0])
         regions = regions_figure(model, regressors.phi, _phi_names(model, data))
@@ -244,7 +245,6 @@ def _scores_asset(method: Method, partitions_def):
                           f"evaluation protocol (one-step and free run), tracked in MLflow.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                configuration: Configuration, raw_benchmark: Dataset, model) -> pd.DataFrame:
-        mlflow.check_reachable()
         data = raw_benchmark
         ev = evaluate(model, data.u_test, data.y_test, warmup=configuration.warmup,
                       output_names=data.y_names)

@@ -4,6 +4,8 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
+from .reporting import rounded
+
 #: Largest share of DBSCAN noise accepted (the paper setting leaves ~81 % on its own
 #: simulation example, see NOTES.md; above 90 % the sub-models rest on too few points).
 NOISE_LIMIT = 0.9
@@ -47,8 +49,8 @@ def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
     """Noise share below :data:`NOISE_LIMIT`, for a fitted clustering step."""
     return [dg.AssetCheckResult(
         check_name="noise_share_below_limit", passed=clustering.noise_share_ <= NOISE_LIMIT,
-        metadata={"partition": partition, "noise_share": round(clustering.noise_share_, 4),
-                  "limit": NOISE_LIMIT})]
+        metadata=rounded({"partition": partition, "noise_share": clustering.noise_share_,
+                          "limit": NOISE_LIMIT}))]
 
 
 def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetCheckResult]:
@@ -61,5 +63,5 @@ def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetChec
         check_name="pwa_free_run_not_worse_than_linear",
         passed=bool(pwa <= lin * (1 + FREE_RUN_RTOL)),
         severity=dg.AssetCheckSeverity.WARN,
-        metadata={"partition": partition, "pwa_free_run_nrmse": float(f"{pwa:.4g}"),
-                  "linear_free_run_nrmse": float(f"{lin:.4g}")})]
+        metadata=rounded({"partition": partition, "pwa_free_run_nrmse": float(pwa),
+                          "linear_free_run_nrmse": float(lin)}))]

@@ -6,7 +6,7 @@ import dagster as dg
 
 from ..config import HParamsFile
 from ..datasets import DATASETS, default_kuka_path
-from ..datasets.kuka import KUKA_FILES
+from ..datasets.kuka import find_kuka
 
 #: What ``python -m pwa_pipeline run`` materialises unless told otherwise.
 DEFAULT_SETS = ("paper", "default")
@@ -53,10 +53,9 @@ def all_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
 
 def unavailable_datasets() -> dict[str, str]:
     """The data sets whose files are missing, with the reason (the simulated one never is)."""
-    kuka = default_kuka_path()
-    if any((kuka / f).is_file() for f in KUKA_FILES) or (kuka.suffix == ".mat" and kuka.is_file()):
+    if find_kuka() is not None:
         return {}
-    return {"kuka_robot": f"no KUKA data at {kuka} (set PWA_KUKA_DATA)"}
+    return {"kuka_robot": f"no KUKA data at {default_kuka_path()} (set PWA_KUKA_DATA)"}
 
 
 def default_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:

@@ -158,7 +158,8 @@ class PWARX(ARXModelBase):
         ------
         ValueError
             On NaN/inf, mismatched lengths or dimensions, too few samples for n_ρ, n_ρ ≤ d,
-            a singular local problem, or when DBSCAN finds no cluster.
+            too few usable (non-degenerate) local sets to cluster, or when DBSCAN finds no
+            cluster.
         """
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
