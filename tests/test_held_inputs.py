@@ -3,28 +3,12 @@
 import numpy as np
 import pytest
 
+from benchmarks.held_inputs import held_hure_vasak
 from pwa_pipeline import PWARX
-from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, add_output_noise, hure_vasak_mode
+from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
 
 from .conftest import max_param_error
-
-
-def held_hure_vasak(n: int, seed: int, hold=(5, 40), snr_db: float = 30.0, burn_in: int = 100):
-    """The section 5 system with each input value held for 5–40 samples."""
-    rng = np.random.default_rng(seed)
-    total = n + burn_in
-    u = np.empty((total, 2))
-    k = 0
-    while k < total:
-        h = int(rng.integers(hold[0], hold[1] + 1))
-        u[k:k + h] = [rng.uniform(-4, 6), rng.uniform(-2, 4)]
-        k += h
-    y = np.zeros((total, 2))
-    for k in range(1, total):
-        y[k] = np.r_[y[k - 1], u[k - 1]] @ HURE_VASAK_THETAS[hure_vasak_mode(y[k - 1])]
-    u, y = u[burn_in:], y[burn_in:]
-    return u, y + add_output_noise(y, snr_db, rng)
 
 
 @pytest.mark.parametrize("seed", [101, 102])  # not among the seeds the default was tuned on
