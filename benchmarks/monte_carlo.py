@@ -21,7 +21,7 @@ from sklearn.base import clone
 from benchmarks._common import RESULTS, Timer, write_table
 from pwa_pipeline import evaluate, make_hure_vasak
 from pwa_pipeline.config import HParamsFile
-from pwa_pipeline.scoring.metrics import match_submodels
+from pwa_pipeline.scoring.truth import ground_truth_scores
 
 SETTINGS = ("default", "paper")
 SCENARIOS = {"N=4000, 30 dB": (4000, 30.0), "N=4000, 20 dB": (4000, 20.0),
@@ -38,13 +38,11 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
                 data.u, data.y)
     except ValueError as exc:  # e.g. no cluster found
         return {**row, "n_submodels": 0, "error": str(exc)}
-    mode_of, error = match_submodels(model.thetas_, data.thetas)
-    phi = np.column_stack([data.y[:-1], data.u[:-1]])
-    accuracy = float(np.mean(mode_of[model.regions_.predict(phi)] == data.modes[1:]))
+    truth = ground_truth_scores(model, data.thetas, data.u, data.y, data.modes)
     ev = evaluate(model, fresh.u, fresh.y, warmup=10)
     return {**row, "n_submodels": model.n_submodels_,
-            "max_param_error": float(np.nanmax(error)) if model.n_submodels_ == 4 else np.nan,
-            "region_accuracy": accuracy, "free_run_nrmse": ev.mean("free_run"),
+            "max_param_error": truth["max_param_error"] if model.n_submodels_ == 4 else np.nan,
+            "region_accuracy": truth["region_accuracy"], "free_run_nrmse": ev.mean("free_run"),
             "one_step_nrmse": ev.mean("one_step"), "noise_share": model.clustering_.noise_share_,
             "eps": model.clustering_.eps_, "fit_seconds": t.seconds}
 

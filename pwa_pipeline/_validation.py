@@ -1,5 +1,6 @@
 """Input checks shared by every estimator: shapes, finiteness, experiment lists."""
 
+import re
 from collections.abc import Sequence
 
 import numpy as np
@@ -13,6 +14,17 @@ from ._typing import Float2D, Signals
 # neither underflow to zero nor lose precision as subnormals.
 MAX_MAGNITUDE = 1e150
 MIN_MAGNITUDE = 1e-150
+#: Names of data sets, hyper-parameter sets and assets: they become paths and partition keys.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def check_name(name: str, what: str) -> str:
+    """``name`` if it matches :data:`NAME_PATTERN`, else a ValueError naming ``what``."""
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        raise ValueError(
+            f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"
+        )
+    return name
 
 
 def _not_numeric(x: object, name: str, exc: Exception) -> ValueError:

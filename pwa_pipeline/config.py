@@ -5,27 +5,33 @@ The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys c
 classmethod that builds its step objects), ``na``, ``nb``, ``affine``, and each step's
 parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
-subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). Every estimator is
-built and its parameters checked when the file is read, so a bad value fails before any run,
-with the file, set and data set in the message.
+subspace baseline's parameters (``subspace.order``, ``subspace.horizon``).
+
+A table ``[<set>."*"]`` applies the set to every data set a user registers
+(:mod:`pwa_pipeline.datasets.user`); it gives no orders, which come from the registration
+(``na``, ``nb``, ``affine``). ``[baselines."*"]`` does the same for the baselines. A
+data set's own table, ``[<set>.<name>]``, takes precedence. Every estimator is built and its
+parameters checked when the file is read, so a bad value fails before any run, with the file,
+set and data set in the message.
 """
 
 import os
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from sklearn.base import BaseEstimator
 
+from ._validation import check_name
 from .methods import METHODS
 from .pwa.estimator import PWARX
+from .scoring.evaluation import WARMUP
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
 BASELINES = "baselines"
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
-#: Evaluation warm-up (samples) when ``[baselines.<dataset>]`` gives none.
-DEFAULT_WARMUP = 10
+#: The table key of a set's values for every user data set.
+ANY_DATASET = "*"
+ORDERS = ("na", "nb", "affine")
 _PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
                  ("clustering", "min_pts"): "min_pts"}
 
@@ -70,15 +76,6 @@ def default_hparams_path() -> Path:
     """``$PWA_HPARAMS`` if set, else the bundled ``data/hparams.toml``."""
     env = os.environ.get("PWA_HPARAMS")
     return Path(env).resolve() if env else BUNDLED_HPARAMS
-
-
-def check_name(name: str, what: str) -> str:
-    """``name`` if it matches :data:`NAME_PATTERN` (it becomes a path and a partition key)."""
-    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
-        raise ValueError(
-            f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"
-        )
-    return name
 
 
 def _flatten(table: dict, prefix: str = "") -> dict:
@@ -150,32 +147,58 @@ class HParamsFile:
                 tables = tomllib.load(fh)
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"{self.path} is not valid TOML: {exc}") from None
-        baselines = tables.pop(BASELINES, {})
+        self._baselines = tables.pop(BASELINES, {})
         self.sets = [check_name(name, "hyper-parameter set") for name in tables]
+        self._templates: dict[str, dict] = {}
         self._configs: dict[tuple[str, str], Configuration] = {}
         for name, per_dataset in tables.items():
             for dataset, table in per_dataset.items():
-                check_name(dataset, "data set")
-                where = f"{self.path}, [{name}.{dataset}]"
-                base = {"warmup": DEFAULT_WARMUP, **baselines.get(dataset, {})}
-                try:
-                    pwa = build_pwarx(table)
-                    estimators = {m.name: m.build(pwa, base) for m in METHODS.values()}
-                    for est in estimators.values():
-                        est._validate_params()
-                except (ValueError, TypeError) as exc:
-                    raise ValueError(f"{where}: {exc}") from None
-                self._configs[name, dataset] = Configuration(
-                    hparams=name, dataset=dataset, estimators=estimators,
-                    warmup=int(base["warmup"]), source=self.path)
+                if dataset == ANY_DATASET:
+                    given = [k for k in ORDERS if k in table]
+                    if given:
+                        raise ValueError(
+                            f'{self.path}, [{name}."*"]: {given} come from each data set\'s '
+                            f"registration, not from the set")
+                    self._templates[name] = table
+                    self._build(name, ANY_DATASET, {**table, "na": 1, "nb": 1})  # check it
+                    continue
+                self._configs[name, dataset] = self._build(name, check_name(dataset, "data set"),
+                                                           table)
+
+    def _build(self, name: str, dataset: str, table: dict) -> Configuration:
+        base = {"warmup": WARMUP, **self._baselines.get(
+            dataset, self._baselines.get(ANY_DATASET, {}))}
+        try:
+            pwa = build_pwarx(table)
+            estimators = {m.name: m.build(pwa, base) for m in METHODS.values()}
+            for est in estimators.values():
+                est._validate_params()
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{self.path}, [{name}.{dataset}]: {exc}") from None
+        return Configuration(hparams=name, dataset=dataset, estimators=estimators,
+                             warmup=int(base["warmup"]), source=self.path)
 
     @property
     def datasets(self) -> set[str]:
         """The data sets the file has tables for (in any set)."""
         return {dataset for _, dataset in self._configs}
 
-    def configuration(self, hparams: str, dataset: str) -> Configuration:
+    def covers(self, hparams: str, dataset: str, registered: bool = False) -> bool:
+        """Whether set ``hparams`` has values for ``dataset`` (a user's ``registered`` one
+        also through ``[<hparams>."*"]``)."""
+        return (hparams, dataset) in self._configs or (registered
+                                                       and hparams in self._templates)
+
+    def configuration(self, hparams: str, dataset: str,
+                      orders: dict | None = None) -> Configuration:
         """The configuration of set ``hparams`` for ``dataset``.
+
+        Parameters
+        ----------
+        hparams, dataset : str
+        orders : dict, optional
+            ``na``, ``nb``, ``affine`` of a user's registered data set: with them, a set
+            without a table for ``dataset`` falls back to its ``"*"`` table.
 
         Raises
         ------
@@ -186,7 +209,11 @@ class HParamsFile:
             raise KeyError(f"unknown hyper-parameter set {hparams!r} in {self.path}; "
                            f"known: {self.sets}")
         if (hparams, dataset) not in self._configs:
+            if orders is not None and hparams in self._templates:
+                return self._build(hparams, dataset, {**self._templates[hparams], **orders})
             known = sorted(d for s, d in self._configs if s == hparams)
             raise KeyError(f"hyper-parameter set {hparams!r} has no values for data set "
-                           f"{dataset!r} in {self.path}; it has {known}")
+                           f"{dataset!r} in {self.path}; it has {known}"
+                           + ("" if orders is None else
+                              f' and no [{hparams}."*"] table for registered data sets'))
         return self._configs[hparams, dataset]

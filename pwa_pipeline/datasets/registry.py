@@ -3,10 +3,38 @@ experiments."""
 
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from .._typing import Float2D
 from .kuka import load_kuka
-from .simulated import make_hure_vasak
+from .simulated import HURE_VASAK_THETAS, make_hure_vasak
+
+if TYPE_CHECKING:
+    from .user import DatasetRegistry
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """What a simulated data set knows about itself: the true PWARX structure and modes.
+
+    Attributes
+    ----------
+    thetas : ndarray of shape (s, d, m)
+        True parameter matrices, in the regressor order of eq. (3).
+    modes_test : list of ndarrays of shape (N_e,)
+        True mode (0-based) of every sample of each held-out experiment.
+    na, nb : int
+    affine : bool
+        The true orders and constant term: estimates are comparable only with these.
+    """
+
+    thetas: np.ndarray
+    modes_test: list[np.ndarray]
+    na: int
+    nb: int
+    affine: bool
 
 
 @dataclass(frozen=True)
@@ -20,6 +48,7 @@ class Dataset:
     y_test: list[Float2D]
     u_names: list[str]
     y_names: list[str]
+    truth: GroundTruth | None = None
 
     @property
     def n_train(self) -> int:
@@ -35,17 +64,25 @@ class Dataset:
 DATASETS = ("hure_vasak", "kuka_robot")
 
 
-def load_dataset(name: str, kuka_path: str | os.PathLike | None = None, seed: int = 0) -> Dataset:
+def load_dataset(name: str, kuka_path: str | os.PathLike | None = None, seed: int = 0,
+                 registry: "DatasetRegistry | None" = None) -> Dataset:
     """A named data set with its training and held-out parts.
 
     ``hure_vasak``: the section 5 system at 30 dB, N = 4000, ``seed`` for training and a fresh
-    record (seed + 1000) for validation. ``kuka_robot``: :func:`load_kuka` (train / test).
+    record (seed + 1000) for validation, with its :class:`GroundTruth`. ``kuka_robot``:
+    :func:`load_kuka` (train / test). Any other name: the user's data set of that name in
+    ``registry`` (:class:`~pwa_pipeline.datasets.user.DatasetRegistry`).
     """
     if name == "hure_vasak":
         train, test = make_hure_vasak(seed=seed), make_hure_vasak(seed=seed + 1000)
+        truth = GroundTruth(thetas=HURE_VASAK_THETAS.copy(), modes_test=[test.modes], na=1,
+                            nb=1, affine=False)
         return Dataset(name, [train.u], [train.y], [test.u], [test.y], train.u_names,
-                       train.y_names)
+                       train.y_names, truth)
     if name == "kuka_robot":
         r = load_kuka(kuka_path)
         return Dataset(name, r.u_train, r.y_train, r.u_test, r.y_test, r.u_names, r.y_names)
-    raise ValueError(f"unknown data set {name!r}; known: {list(DATASETS)}")
+    if registry is not None and name in registry.names():
+        return registry.get(name).load()
+    known = list(DATASETS) + (registry.names() if registry is not None else [])
+    raise ValueError(f"unknown data set {name!r}; known: {known}")

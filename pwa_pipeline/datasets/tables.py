@@ -1,6 +1,7 @@
 """Users' own data: CSV or Parquet tables with named input/output columns."""
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,13 +18,30 @@ def _shown(cell: object) -> str:
     return repr(cell) if isinstance(cell, str) else str(cell)
 
 
-def load_table(
+@dataclass(frozen=True)
+class Table:
+    """A user table split into experiments (in the order they first appear in the file).
+
+    Attributes
+    ----------
+    u, y : lists of ndarrays of shapes (N_e, r) and (N_e, m)
+    ids : list of str
+        Each experiment's id as text (``"0"`` without an experiment column).
+    """
+
+    u: list[Float2D]
+    y: list[Float2D]
+    ids: list[str]
+
+
+def read_table(
     path: str | os.PathLike,
     u_columns: list[str],
     y_columns: list[str],
     experiment_column: str | None = None,
-) -> tuple[list[Float2D], list[Float2D]]:
-    """Read user data from CSV or Parquet with named input and output columns.
+    time_column: str | None = None,
+) -> Table:
+    """Read and check a CSV or Parquet table with named input and output columns.
 
     Parameters
     ----------
@@ -33,17 +51,20 @@ def load_table(
         Column names of the inputs and outputs.
     experiment_column : str, optional
         Column identifying separate experiments (rows kept in file order within each).
+    time_column : str, optional
+        Numeric or date-time column that must increase strictly within each experiment; the
+        rows are not reordered, so an unsorted or repeated time is an error.
 
     Returns
     -------
-    u, y : lists of ndarrays, one per experiment
+    Table
 
     Raises
     ------
     FileNotFoundError, ValueError
-        Missing file, unknown format, missing columns, an empty experiment id, or a
-        non-numeric, missing or infinite value in the u/y columns. Rows are numbered from 0
-        in file order, not counting the header.
+        Missing file, unknown format, missing columns, an empty experiment id, a
+        non-numeric, missing or infinite value in the u/y columns, or a missing, repeated or
+        decreasing time. Rows are numbered from 0 in file order, not counting the header.
     """
     import pandas as pd
 
@@ -53,8 +74,9 @@ def load_table(
     readers = {".csv": pd.read_csv, ".parquet": pd.read_parquet}
     if p.suffix.lower() not in readers:
         raise ValueError(f"unsupported file type {p.suffix!r} for {p}: use .csv or .parquet")
-    df = readers[p.suffix.lower()](p)
-    wanted = list(u_columns) + list(y_columns) + ([experiment_column] if experiment_column else [])
+    df = readers[p.suffix.lower()](p).reset_index(drop=True)
+    extra = [c for c in (experiment_column, time_column) if c]
+    wanted = list(u_columns) + list(y_columns) + extra
     missing = [c for c in wanted if c not in df.columns]
     if missing:
         raise ValueError(f"{p.name} has no column(s) {missing}; it has {list(df.columns)}")
@@ -68,7 +90,7 @@ def load_table(
             )
         df[c] = values
     if experiment_column is None:
-        groups = [df]
+        groups = [("0", df)]
     else:
         no_id = np.flatnonzero(df[experiment_column].isna().to_numpy())
         if no_id.size:
@@ -76,7 +98,63 @@ def load_table(
                 f"{p.name}: column {experiment_column!r} is empty in {no_id.size} row(s) "
                 f"(first: row {no_id[0]}); every row needs an experiment id"
             )
-        groups = [g for _, g in df.groupby(experiment_column, sort=False)]
-    u = [g[list(u_columns)].to_numpy(dtype=float) for g in groups]
-    y = [g[list(y_columns)].to_numpy(dtype=float) for g in groups]
-    return u, y
+        groups = [(str(k), g) for k, g in df.groupby(experiment_column, sort=False)]
+    if time_column is not None:
+        times = _time_values(df[time_column], p.name, time_column)
+        for key, g in groups:
+            _check_increasing(times[g.index.to_numpy()], g.index.to_numpy(), p.name,
+                              time_column, key if experiment_column else None)
+    return Table(u=[g[list(u_columns)].to_numpy(dtype=float) for _, g in groups],
+                 y=[g[list(y_columns)].to_numpy(dtype=float) for _, g in groups],
+                 ids=[k for k, _ in groups])
+
+
+def _time_values(column, file: str, name: str) -> np.ndarray:
+    """A time column as float64 (numbers) or int64 nanoseconds (date-times)."""
+    import pandas as pd
+
+    numeric = pd.to_numeric(column, errors="coerce")
+    if numeric.notna().all():
+        return numeric.to_numpy(dtype=float)
+    if numeric.notna().any():
+        bad = int(np.flatnonzero(numeric.isna().to_numpy())[0])
+        raise ValueError(f"{file}: time column {name!r} has a non-numeric or missing value "
+                         f"({_shown(column.iloc[bad])} at row {bad})")
+    stamps = pd.to_datetime(column, errors="coerce", format="mixed")
+    if stamps.isna().any():
+        bad = int(np.flatnonzero(stamps.isna().to_numpy())[0])
+        raise ValueError(f"{file}: time column {name!r} is neither numeric nor a date-time "
+                         f"({_shown(column.iloc[bad])} at row {bad})")
+    return stamps.to_numpy().astype("datetime64[ns]").astype(np.int64)
+
+
+def _check_increasing(t: np.ndarray, rows: np.ndarray, file: str, name: str,
+                      experiment: str | None) -> None:
+    """Raise a ValueError at the first repeated or decreasing time of one experiment."""
+    step = np.diff(t)
+    bad = np.flatnonzero(step <= 0)
+    if not bad.size:
+        return
+    i = bad[0]
+    where = f" in experiment {experiment!r}" if experiment is not None else ""
+    what = "repeated" if step[i] == 0 else "decreasing (the rows are not sorted by time)"
+    raise ValueError(f"{file}: time column {name!r} is {what}{where}: row {rows[i + 1]} "
+                     f"follows row {rows[i]}; {bad.size} such row(s) in all")
+
+
+def load_table(
+    path: str | os.PathLike,
+    u_columns: list[str],
+    y_columns: list[str],
+    experiment_column: str | None = None,
+) -> tuple[list[Float2D], list[Float2D]]:
+    """Inputs and outputs of a CSV or Parquet table, one array per experiment.
+
+    See :func:`read_table` for the parameters and the errors.
+
+    Returns
+    -------
+    u, y : lists of ndarrays, one per experiment
+    """
+    table = read_table(path, u_columns, y_columns, experiment_column)
+    return table.u, table.y

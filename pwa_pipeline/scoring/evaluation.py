@@ -61,11 +61,15 @@ class Evaluation:
         return bool(self.table.loc[self.table["mode"] == mode, "diverged"].any())
 
 
+#: Warm-up samples of the evaluation protocol unless a data set sets its own.
+WARMUP = 10
+
+
 def evaluate(
     model: Model,
     u,
     y,
-    warmup: int = 10,
+    warmup: int = WARMUP,
     output_names: list[str] | None = None,
     divergence: float = DIVERGENCE,
 ) -> Evaluation:

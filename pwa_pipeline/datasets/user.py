@@ -1,0 +1,250 @@
+"""Users' own data sets: a CSV or Parquet file registered by name, with its columns, its
+split into training and held-out experiments, and its model orders.
+
+A :class:`DatasetRegistry` keeps them in one JSON file; the pipeline's ``dataset`` partitions
+are the built-in data sets and the names in that file. Registration reads and checks the
+whole file first and registers nothing when anything is wrong.
+"""
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from filelock import FileLock
+
+from .._validation import check_name
+from ..pwa.regressors import n_initial, regressor_dim
+from ..scoring.evaluation import WARMUP
+from .registry import DATASETS, Dataset
+from .tables import Table, read_table
+
+#: Share of the data held out for testing when no split is given.
+DEFAULT_TEST_FRACTION = 0.25
+#: Version of the registry file's layout.
+REGISTRY_VERSION = 1
+
+
+@dataclass(frozen=True)
+class UserDataset:
+    """One registered data set.
+
+    Parameters
+    ----------
+    name : str
+        Letters, digits, ``_`` and ``-``; the ``dataset`` partition key.
+    path : str
+        The ``.csv`` or ``.parquet`` file (stored absolute).
+    u, y : tuple of str
+        Input and output columns.
+    experiment : str, optional
+        Column of experiment ids; rows of one id form one experiment (lags never span two).
+    time : str, optional
+        Numeric or date-time column, strictly increasing within each experiment.
+    test_experiments : tuple of str
+        Experiment ids held out for testing (needs ``experiment``).
+    test_fraction : float, optional
+        Without ``test_experiments``: with two or more experiments, the last
+        ``round(f · n)`` of them (at least one, at most all but one) in file order; with one,
+        the last ``f`` of its samples. Default :data:`DEFAULT_TEST_FRACTION`.
+    na, nb : int
+        Output and input orders of eq. (3) for every hyper-parameter set that gives none.
+    affine : bool
+        Constant term of eq. (2).
+
+    Raises
+    ------
+    ValueError
+        A bad name, empty or repeated columns, orders below 1, a fraction outside (0, 1),
+        or both split rules at once.
+    """
+
+    name: str
+    path: str
+    u: tuple[str, ...]
+    y: tuple[str, ...]
+    experiment: str | None = None
+    time: str | None = None
+    test_experiments: tuple[str, ...] = field(default=())
+    test_fraction: float | None = None
+    na: int = 1
+    nb: int = 1
+    affine: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", str(Path(self.path).resolve()))
+        for key in ("u", "y", "test_experiments"):
+            object.__setattr__(self, key, tuple(str(v) for v in getattr(self, key)))
+        check_name(self.name, "data set")
+        if self.name in DATASETS:
+            raise ValueError(f"{self.name!r} is a built-in data set; choose another name")
+        if not self.u or not self.y:
+            raise ValueError(f"data set {self.name!r} needs at least one input (--u) and one "
+                             f"output (--y) column")
+        columns = [*self.u, *self.y, *(c for c in (self.experiment, self.time) if c)]
+        repeated = sorted({c for c in columns if columns.count(c) > 1})
+        if repeated:
+            raise ValueError(f"column(s) {repeated} are given more than once among the "
+                             f"inputs, outputs, experiment and time columns")
+        for key in ("na", "nb"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{key} must be an integer >= 1, got {value!r}")
+        if self.test_experiments and self.test_fraction is not None:
+            raise ValueError("give either test experiments or a test fraction, not both")
+        if self.test_experiments and self.experiment is None:
+            raise ValueError("test experiments need an experiment column (--experiment)")
+        fraction = self.test_fraction
+        if fraction is not None and not (isinstance(fraction, int | float)
+                                         and 0 < fraction < 1):
+            raise ValueError(f"the test fraction must lie strictly between 0 and 1, got "
+                             f"{fraction!r}")
+
+    def load(self) -> Dataset:
+        """Read the file, check it and split it (see the class doc).
+
+        Raises
+        ------
+        FileNotFoundError, ValueError
+            Everything :func:`~pwa_pipeline.datasets.tables.read_table` checks, unknown test
+            experiments, no experiment left for training, an experiment too short for the
+            orders or (held out) for the evaluation warm-up, or fewer regressor rows than
+            the default local-set size n_ρ = 3d.
+        """
+        table = read_table(self.path, list(self.u), list(self.y), self.experiment, self.time)
+        train, test = self._split(table)
+        lag = n_initial(self.na, self.nb)
+        for part, pieces, need in (("training", train, lag + 1),
+                                   ("held-out", test, max(lag, WARMUP) + 2)):
+            for label, u, _ in pieces:
+                if len(u) < need:
+                    raise ValueError(
+                        f"{Path(self.path).name}: {label} has {len(u)} sample(s); a {part} "
+                        f"experiment needs at least {need} with na = {self.na}, nb = {self.nb}"
+                        + (f" and the evaluation warm-up of {WARMUP}" if part == "held-out"
+                           else ""))
+        d = regressor_dim(len(self.y), len(self.u), self.na, self.nb, self.affine)
+        rows = sum(len(u) - lag for _, u, _ in train)
+        if rows < 3 * d:
+            raise ValueError(
+                f"data set {self.name!r}: the training data give {rows} regressor rows, fewer "
+                f"than the default local-set size n_rho = 3d = {3 * d} (d = {d}); use more "
+                f"data or lower orders")
+        return Dataset(name=self.name, u_train=[u for _, u, _ in train],
+                       y_train=[y for _, _, y in train], u_test=[u for _, u, _ in test],
+                       y_test=[y for _, _, y in test], u_names=list(self.u),
+                       y_names=list(self.y))
+
+    def _split(self, table: Table) -> tuple[list[tuple], list[tuple]]:
+        """The training and held-out pieces, each ``(label, u, y)`` (see the class doc)."""
+        pieces = [(f"experiment {e!r}", u, y)
+                  for e, u, y in zip(table.ids, table.u, table.y, strict=True)]
+        n = len(pieces)
+        if self.test_experiments:
+            unknown = [e for e in self.test_experiments if e not in table.ids]
+            if unknown:
+                raise ValueError(f"test experiment(s) {unknown} are not in column "
+                                 f"{self.experiment!r}; its ids are {table.ids}")
+            if len(set(self.test_experiments)) == n:
+                raise ValueError("every experiment is held out for testing; none is left "
+                                 "for training")
+            held = [e in self.test_experiments for e in table.ids]
+            return ([p for p, h in zip(pieces, held, strict=True) if not h],
+                    [p for p, h in zip(pieces, held, strict=True) if h])
+        fraction = DEFAULT_TEST_FRACTION if self.test_fraction is None else self.test_fraction
+        if n >= 2:
+            k = min(max(1, round(fraction * n)), n - 1)
+            return pieces[:n - k], pieces[n - k:]
+        _, u, y = pieces[0]
+        cut = len(u) - math.ceil(fraction * len(u))
+        return ([("the training part", u[:cut], y[:cut])],
+                [("the held-out part", u[cut:], y[cut:])])
+
+    def orders(self) -> dict:
+        """``na``, ``nb`` and ``affine``, as a hyper-parameter table gives them."""
+        return {"na": self.na, "nb": self.nb, "affine": self.affine}
+
+    def describe(self) -> dict:
+        """The registration as plain values (the registry file's entry)."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+
+class DatasetRegistry:
+    """The user's data sets, kept in one JSON file.
+
+    Parameters
+    ----------
+    path : path-like
+        The registry file; it need not exist yet (no data sets).
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path).resolve()
+
+    def _read(self) -> dict[str, dict]:
+        if not self.path.is_file():
+            return {}
+        try:
+            content = json.loads(self.path.read_text())
+            return dict(content["datasets"])
+        except (json.JSONDecodeError, KeyError, TypeError) as exc:
+            raise ValueError(f"the data-set registry {self.path} is unreadable ({exc}); fix "
+                             f"or delete it") from None
+
+    def _write(self, entries: dict[str, dict]) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps({"version": REGISTRY_VERSION, "datasets": entries},
+                                  indent=2, sort_keys=True) + "\n")
+        os.replace(tmp, self.path)
+
+    def _lock(self) -> FileLock:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        return FileLock(str(self.path) + ".lock", timeout=30)
+
+    def names(self) -> list[str]:
+        """The registered names, sorted."""
+        return sorted(self._read())
+
+    def get(self, name: str) -> UserDataset:
+        """The registration of ``name`` (KeyError naming the known ones)."""
+        entries = self._read()
+        if name not in entries:
+            raise KeyError(f"no data set {name!r} in {self.path}; registered: {sorted(entries)}")
+        entry = entries[name]
+        return UserDataset(**{**entry, "u": tuple(entry["u"]), "y": tuple(entry["y"]),
+                              "test_experiments": tuple(entry["test_experiments"])})
+
+    def add(self, spec: UserDataset, replace: bool = False) -> Dataset:
+        """Check ``spec`` by loading its file, then register it.
+
+        Returns
+        -------
+        Dataset
+            The loaded data set.
+
+        Raises
+        ------
+        FileNotFoundError, ValueError
+            From :meth:`UserDataset.load`, or the name is taken and ``replace`` is false.
+            Nothing is written then.
+        """
+        data = spec.load()
+        with self._lock():
+            entries = self._read()
+            if spec.name in entries and not replace:
+                raise ValueError(f"data set {spec.name!r} is already registered in "
+                                 f"{self.path}; remove it first or replace it")
+            entries[spec.name] = spec.describe()
+            self._write(entries)
+        return data
+
+    def remove(self, name: str) -> UserDataset:
+        """Unregister ``name`` (its file and results stay); KeyError if unknown."""
+        with self._lock():
+            spec = self.get(name)
+            entries = self._read()
+            del entries[name]
+            self._write(entries)
+        return spec
