@@ -24,7 +24,7 @@ from mlflow.tracking import MlflowClient
 
 from benchmarks._common import RESULTS, Timer, write_json
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.partitions import all_keys, default_keys
+from pwa_pipeline.orchestration.partitions import DEFAULT_SETS, all_keys, runnable_keys
 from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
 from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
 
@@ -38,7 +38,8 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
     resources = {
         "io_manager": PartitionedFileIOManager(base_dir=str(tmp / "storage")),
         "settings": PipelineSettings(cache_dir=str(tmp / "cache"), cache_local_models=cache,
-                                     hparams_path=defs.resources["settings"].hparams_path),
+                                     hparams_path=defs.resources["settings"].hparams_path,
+                                     datasets_path=defs.resources["settings"].datasets_path),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),
     }
     instance = dg.DagsterInstance.ephemeral()
@@ -58,7 +59,8 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
 def default_partitions() -> list[dict]:
     defs = build_definitions()
     with tempfile.TemporaryDirectory() as tmp:
-        return _materialise(defs, default_keys(partitions_of(defs)), Path(tmp), cache=True)
+        keys, _ = runnable_keys(partitions_of(defs), defs.resources["settings"], DEFAULT_SETS)
+        return _materialise(defs, keys, Path(tmp), cache=True)
 
 
 def sweep() -> dict:

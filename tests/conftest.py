@@ -1,11 +1,21 @@
 """Shared, seeded test data (built once per session)."""
 
+import os
+import tempfile
+
 import numpy as np
 import pytest
 
 from pwa_pipeline import PWARX
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak
 from pwa_pipeline.scoring.metrics import match_submodels
+
+
+def pytest_configure(config):
+    """Keep the developer's own registered data sets out of the tests (set before any test
+    module imports the definitions)."""
+    os.environ["PWA_DATASETS"] = os.path.join(tempfile.mkdtemp(prefix="pwa-datasets-"),
+                                              "datasets.json")
 
 
 @pytest.fixture(scope="session")

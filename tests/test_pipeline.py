@@ -175,7 +175,7 @@ def test_local_models_are_reused_when_only_eps_changes(resources, tmp_path):
     sweep = build_definitions(path)
     steps = [a for a in sweep.assets if a.key.to_user_string() in
              ("configuration", "raw_benchmark", "regressors", "local_models", "clusters")]
-    resources["settings"] = resources["settings"].with_hparams(path)
+    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
     runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
             for i in (0, 1)]
     meta = [r.asset_materializations_for_node("local_models")[0].metadata for r in runs]
@@ -247,7 +247,7 @@ def test_a_failing_noise_check_stops_the_steps_after_clustering(resources, tmp_p
                     "local_models.n_rho = 18\nclustering.eps = 0.07\n"
                     "clustering.min_pts = 20\n")  # one cluster, 96 % noise
     noisy = build_definitions(path)
-    resources["settings"] = resources["settings"].with_hparams(path)
+    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
     result = dg.materialize(list(noisy.assets), partition_key="hure_vasak|noisy",
                             resources=resources, raise_on_error=False)
     check = next(e for e in result.get_asset_check_evaluations()

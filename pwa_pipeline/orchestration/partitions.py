@@ -1,21 +1,24 @@
 """The partitions: data set × hyper-parameter set, keys like ``"kuka_robot|paper"``."""
 
-import sys
+from pathlib import Path
 
 import dagster as dg
 
 from ..config import HParamsFile
 from ..datasets import DATASETS, default_kuka_path
 from ..datasets.kuka import find_kuka
+from .resources import PipelineSettings
 
 #: What ``python -m pwa_pipeline run`` materialises unless told otherwise.
 DEFAULT_SETS = ("paper", "default")
 
 
-def build_partitions(hparams: HParamsFile) -> dg.MultiPartitionsDefinition:
-    """Every data set × every set of ``hparams`` (the same file the resource reads)."""
+def build_partitions(hparams: HParamsFile, registered: list[str]
+                     ) -> dg.MultiPartitionsDefinition:
+    """Every data set (built-in, then the ``registered`` ones) × every set of ``hparams``
+    (the same files the ``settings`` resource reads)."""
     return dg.MultiPartitionsDefinition({
-        "dataset": dg.StaticPartitionsDefinition(list(DATASETS)),
+        "dataset": dg.StaticPartitionsDefinition([*DATASETS, *registered]),
         "hparams": dg.StaticPartitionsDefinition(hparams.sets),
     })
 
@@ -51,19 +54,55 @@ def all_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
     return [str(k) for k in partitions_def.get_partition_keys()]
 
 
-def unavailable_datasets() -> dict[str, str]:
+def unavailable_datasets(settings: PipelineSettings) -> dict[str, str]:
     """The data sets whose files are missing, with the reason (the simulated one never is)."""
-    if find_kuka() is not None:
-        return {}
-    return {"kuka_robot": f"no KUKA data at {default_kuka_path()} (set PWA_KUKA_DATA)"}
+    missing = {}
+    if find_kuka(settings.kuka_path or None) is None:
+        where = settings.kuka_path or default_kuka_path()
+        missing["kuka_robot"] = f"no KUKA data at {where} (set PWA_KUKA_DATA)"
+    registry = settings.registry()
+    for name in registry.names():
+        path = Path(registry.get(name).path)
+        if not path.is_file():
+            missing[name] = f"its file {path} is missing (registered in {registry.path})"
+    return missing
 
 
-def default_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
-    """``<dataset>|<set>`` for :data:`DEFAULT_SETS` and the available data sets (a note on
-    stderr says why any is left out)."""
-    missing = unavailable_datasets()
-    for dataset, reason in missing.items():
-        print(f"note: {dataset} partitions left out: {reason}", file=sys.stderr)
-    datasets = [d for d in DATASETS if d not in missing]
-    known = set(all_keys(partitions_def))
-    return [k for k in (f"{ds}|{hp}" for ds in datasets for hp in DEFAULT_SETS) if k in known]
+def runnable_keys(partitions_def: dg.MultiPartitionsDefinition, settings: PipelineSettings,
+                  sets: tuple[str, ...] | None = None) -> tuple[list[str], dict[str, str]]:
+    """The partition keys that can run, data set by data set, and why the others cannot.
+
+    Parameters
+    ----------
+    partitions_def : MultiPartitionsDefinition
+    settings : PipelineSettings
+        The resource of the same definitions (files and registry).
+    sets : tuple of str, optional
+        Only these hyper-parameter sets, in this order (default: every set).
+
+    Returns
+    -------
+    keys : list of str
+    skipped : dict
+        Reason by data set (its data are missing) or by key (the set has no values for a
+        data set, e.g. the paper's set for a user's data set).
+    """
+    dims = {d.name: d.partitions_def.get_partition_keys()
+            for d in partitions_def.partitions_defs}
+    hparams = settings.hparams()
+    registered = set(settings.registry().names())
+    skipped = unavailable_datasets(settings)
+    keys = []
+    for dataset in dims["dataset"]:
+        if dataset in skipped:
+            continue
+        for hp in sets or dims["hparams"]:
+            key = f"{dataset}|{hp}"
+            if hp not in dims["hparams"]:
+                continue
+            if hparams.covers(hp, dataset, dataset in registered):
+                keys.append(key)
+            else:
+                skipped[key] = (f"set {hp!r} has no values for {dataset!r} in {hparams.path}"
+                                + (f' (add [{hp}."*"])' if dataset in registered else ""))
+    return keys, skipped

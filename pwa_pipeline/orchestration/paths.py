@@ -28,6 +28,13 @@ def default_storage_dir() -> Path:
     return project_dir() / "storage"
 
 
+def default_datasets_path() -> Path:
+    """``$PWA_DATASETS``, else ``<project>/storage/datasets.json``: the user's registered data
+    sets (:class:`~pwa_pipeline.datasets.user.DatasetRegistry`)."""
+    env = os.environ.get("PWA_DATASETS")
+    return Path(env).resolve() if env else default_storage_dir() / "datasets.json"
+
+
 def dagster_home() -> Path:
     """``$DAGSTER_HOME``, else ``<project>/.dagster_home``."""
     env = os.environ.get("DAGSTER_HOME")

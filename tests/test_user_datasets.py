@@ -1,0 +1,187 @@
+"""The user's own data sets: registration checks, the split, the CLI and the partitions."""
+
+import shutil
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import pytest
+
+from pwa_pipeline.config import BUNDLED_HPARAMS
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
+from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.partitions import all_keys, runnable_keys
+from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
+from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+
+COLUMNS = dict(u=("u1", "u2"), y=("y1", "y2"))
+
+
+@pytest.fixture(scope="module")
+def table():
+    """The paper's system (N = 1200) as a user's table: four experiments of 300 rows."""
+    d = make_hure_vasak(n_samples=1200, seed=7)
+    return pd.DataFrame({"t": np.arange(1200) * 0.01, "run": np.repeat(list("abcd"), 300),
+                         "u1": d.u[:, 0], "u2": d.u[:, 1], "y1": d.y[:, 0], "y2": d.y[:, 1]})
+
+
+@pytest.fixture()
+def csv(tmp_path, table):
+    path = tmp_path / "plant.csv"
+    table.to_csv(path, index=False)
+    return path
+
+
+@pytest.fixture()
+def registry(tmp_path):
+    return DatasetRegistry(tmp_path / "reg" / "datasets.json")
+
+
+def test_registration_round_trips_and_splits_by_experiment(registry, csv, table):
+    spec = UserDataset("plant", csv, **COLUMNS, experiment="run", time="t",
+                       test_experiments=("b",))
+    data = registry.add(spec)
+    assert registry.names() == ["plant"] and registry.get("plant") == spec
+    assert [len(u) for u in data.u_train] == [300, 300, 300] and len(data.u_test) == 1
+    held = table[table.run == "b"]
+    np.testing.assert_array_equal(data.u_test[0], held[["u1", "u2"]].to_numpy())
+    np.testing.assert_array_equal(data.y_train[1], table[table.run == "c"][["y1", "y2"]])
+    assert registry.remove("plant") == spec and registry.names() == []
+
+
+def test_default_split_holds_out_the_last_experiments_or_the_end_of_one_record(
+        registry, tmp_path, csv, table):
+    by_exp = UserDataset("p", csv, **COLUMNS, experiment="run", test_fraction=0.5).load()
+    assert len(by_exp.u_train) == 2 and by_exp.n_test == 600
+    np.testing.assert_array_equal(by_exp.y_test[1], table[table.run == "d"][["y1", "y2"]])
+    path = tmp_path / "one.parquet"
+    table.to_parquet(path)
+    one = registry.add(UserDataset("one", path, **COLUMNS))  # default: the last 25 %
+    assert (one.n_train, one.n_test) == (900, 300)
+    np.testing.assert_array_equal(one.u_test[0], table[["u1", "u2"]].to_numpy()[900:])
+
+
+@pytest.mark.parametrize("edit, kwargs, message", [
+    (None, dict(u=("u1", "speed")), r"no column\(s\) \['speed'\]"),
+    (lambda df: df.assign(y2=df["y2"].astype(object).where(df.index != 17, "abc")), {},
+     r"column 'y2' has 1 non-numeric.*'abc' at row 17"),
+    (lambda df: df.assign(u1=df["u1"].where(df.index != 40)), {}, "column 'u1'.*at row 40"),
+    (lambda df: df.assign(t=df["t"].where(df.index != 11, df.loc[10, "t"])), {},
+     "time column 't' is repeated in experiment 'a': row 11 follows row 10"),
+    (lambda df: df.assign(t=df["t"].where(df.index != 320, 0.0)), {},
+     r"time column 't' is decreasing \(the rows are not sorted by time\) in experiment 'b'"),
+    (None, dict(test_experiments=("z",)), r"test experiment\(s\) \['z'\] are not in column"),
+    (None, dict(test_experiments=tuple("abcd")), "none is left for training"),
+    (lambda df: df.drop(index=range(303, 600)), {},
+     "experiment 'b' has 3 sample.*needs at least 5 with na = 4"),
+    (lambda df: df.drop(index=range(1, 1200)), dict(experiment=None, na=1,
+                                                                  test_fraction=0.5),
+     "has 0 sample"),
+])
+def test_a_bad_file_is_refused_with_one_message_and_nothing_registered(
+        registry, tmp_path, table, edit, kwargs, message):
+    df = table if edit is None else edit(table)
+    path = tmp_path / "bad.csv"
+    df.to_csv(path, index=False)
+    args = dict(**COLUMNS, experiment="run", time="t", na=4, nb=1, test_experiments=("d",))
+    args.update(kwargs)
+    if "test_fraction" in kwargs or args["experiment"] is None:
+        args.pop("test_experiments")
+    with pytest.raises(ValueError, match=message):
+        registry.add(UserDataset("bad", path, **args))
+    assert registry.names() == [] and not registry.path.exists()
+
+
+def test_too_few_rows_for_the_local_sets_and_clashing_names_are_refused(registry, tmp_path,
+                                                                        table):
+    path = tmp_path / "short.csv"
+    table.iloc[:40].to_csv(path, index=False)  # 20 training samples
+    half = dict(**COLUMNS, test_fraction=0.5)
+    with pytest.raises(ValueError, match="18 regressor rows, fewer than .* n_rho = 3d = 24"):
+        registry.add(UserDataset("short", path, **half, na=2, nb=2))
+    with pytest.raises(ValueError, match="'kuka_robot' is a built-in data set"):
+        UserDataset("kuka_robot", path, **COLUMNS)
+    with pytest.raises(ValueError, match="invalid data set name 'my plant'"):
+        UserDataset("my plant", path, **COLUMNS)
+    registry.add(UserDataset("p", path, **half))
+    with pytest.raises(ValueError, match="already registered"):
+        registry.add(UserDataset("p", path, **half, nb=2))
+    assert registry.get("p").na == 1
+
+
+def test_the_cli_registers_lists_and_removes(tmp_path, csv, capsys, monkeypatch):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    assert main(["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2",
+                 "--experiment", "run", "--time", "t", "--test-experiments", "d"]) == 0
+    out = capsys.readouterr().out
+    assert "training : 3 experiment(s), 900 samples" in out and "plant|default" in out
+    assert main(["add-dataset", "plant2", str(csv), "--u", "u1", "--y", "y9"]) == 2
+    assert "error: plant.csv has no column(s) ['y9']" in capsys.readouterr().err
+    assert main(["list-datasets"]) == 0
+    out = capsys.readouterr().out
+    assert "1 registered data set(s)" in out and "test experiments ['d']" in out
+    assert main(["partitions"]) == 0
+    assert "plant|default" in capsys.readouterr().out.split()
+    assert main(["remove-dataset", "plant"]) == 0
+    assert main(["remove-dataset", "plant"]) == 2
+    assert "no data set 'plant'" in capsys.readouterr().err
+
+
+def test_a_registered_data_set_is_a_partition_that_runs(tmp_path, csv, mlflow_template):
+    registry = DatasetRegistry(tmp_path / "datasets.json")
+    registry.add(UserDataset("plant", csv, **COLUMNS, experiment="run", time="t"))
+    defs = build_definitions(BUNDLED_HPARAMS, registry.path)
+    partitions = partitions_of(defs)
+    assert {"plant|default", "plant|paper"} <= set(all_keys(partitions))
+    settings = defs.resources["settings"]
+    keys, skipped = runnable_keys(partitions, settings, ("paper", "default"))
+    assert "plant|default" in keys and "plant|paper" not in keys
+    assert "has no values for 'plant'" in skipped["plant|paper"]
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
+                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"))
+                 .with_files(settings.hparams_path, settings.datasets_path),
+                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}")}
+    result = dg.materialize(list(defs.assets), partition_key="plant|default",
+                            resources=resources)
+    model = result.output_for_node("pwa_model")
+    assert result.success and model.n_submodels_ >= 2 and (model.na, model.nb) == (1, 1)
+    scores = result.output_for_node("comparison")
+    assert set(scores["method"]) == {"pwa", "linear_arx", "subspace"}
+    # the file disappears: its partitions are skipped, saying why
+    csv.unlink()
+    keys, skipped = runnable_keys(partitions, settings)
+    assert not any(k.startswith("plant|") for k in keys)
+    assert "plant.csv is missing" in skipped["plant"]
+
+
+def test_hparams_tables_for_unregistered_data_sets_fail_at_load(tmp_path):
+    path = tmp_path / "h.toml"
+    path.write_text('[s.plant]\nna = 1\nnb = 1\n[s."*"]\nna = 2\n')
+    with pytest.raises(ValueError, match=r"\['na'\] come from each data set's registration"):
+        build_definitions(path, tmp_path / "datasets.json")
+    path.write_text("[s.plant]\nna = 1\nnb = 1\n")
+    with pytest.raises(ValueError, match=r"tables for unknown data set\(s\) \['plant'\]"):
+        build_definitions(path, tmp_path / "datasets.json")
+
+
+def test_the_readme_example_registers_the_bundled_table(tmp_path, monkeypatch, capsys):
+    import shlex
+    from pathlib import Path
+
+    from pwa_pipeline.orchestration.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "README.md").read_text()
+    start = readme.index("python -m pwa_pipeline add-dataset plant")
+    command = readme[start:readme.index("\n", readme.index("\\\n", start) + 2)]
+    args = shlex.split(command.replace("\\\n", " "))[3:]
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    monkeypatch.chdir(root)
+    assert main(args) == 0
+    assert "training : 3 experiment(s), 1,800 samples" in capsys.readouterr().out
+    assert DatasetRegistry(tmp_path / "datasets.json").get("plant").test_experiments == ("r4",)
