@@ -5,8 +5,10 @@ Every method of the registry (pwa_pipeline.methods) is scored by the same protoc
 experiment after a 10-sample warm-up. PWA runs with the sets ``paper`` and ``default`` of
 data/hparams.toml, the baselines with ``default``. Writes results/comparison.csv (dataset,
 hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
-layout, one block per data set and mode) and results/comparison_fit.csv (fit times, sub-model
-counts, divergence flags).
+layout, one block per data set and mode), results/comparison_fit.csv (fit times, sub-model
+counts, divergence flags) and results/conventions.md: every method's free run in each
+convention of pwa_pipeline.scoring.conventions, with published figures beside them in the
+convention they were published in.
 
 Usage: python -m benchmarks.compare [--datasets hure_vasak kuka_robot]
 """
@@ -22,16 +24,22 @@ from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import DATASETS, load_dataset
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.scoring.comparison import table1
+from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores
 
 #: (set, method) pairs compared: the PWA model in both settings, the baselines once.
 RUNS = [("paper", "pwa")] + [("default", m) for m in METHODS]
+#: Published free-run scores on the KUKA test record, each in its own convention:
+#: Fañanás-Anaya et al. (2025), Table VI — RMSE / range per joint, the test record run once.
+PUBLISHED = [("MA-LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.125),
+             ("LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.142),
+             ("NARX-NN (Fañanás-Anaya et al. 2025)", "range_single_run", 0.146)]
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=list(DATASETS), choices=DATASETS)
     args = parser.parse_args(argv)
-    rows, fits = [], []
+    rows, fits, conventions = [], [], []
     for name in args.datasets:
         try:
             data = load_dataset(name)
@@ -45,6 +53,8 @@ def main(argv: list[str] | None = None) -> None:
             ev = evaluate(model, data.u_test, data.y_test, warmup=cfg.warmup,
                           output_names=data.y_names)
             rows.append(ev.table.assign(dataset=name, hparams=hparams, method=method))
+            conventions.append({"dataset": name, "model": f"{method} ({hparams})",
+                                **convention_scores(model, data.u_test, data.y_test)})
             fits.append({"dataset": name, "hparams": hparams, "method": method,
                          "fit_seconds": t.seconds,
                          "n_submodels": getattr(model, "n_submodels_", None),
@@ -59,6 +69,26 @@ def main(argv: list[str] | None = None) -> None:
     md = [f"## {ds} — {mode}\n\n" + table1(table, ds, mode).to_markdown(floatfmt=".4g") + "\n"
           for ds in table["dataset"].unique() for mode in ("one_step", "free_run")]
     (RESULTS / "comparison.md").write_text("\n".join(md))
+    print("\n".join(md))
+    write_conventions(pd.DataFrame(conventions))
+
+
+def write_conventions(scores: pd.DataFrame) -> None:
+    """results/conventions.md: the free run of every method in every convention, and the
+    published KUKA figures in theirs (blank where a figure was not published that way)."""
+    published = pd.DataFrame([{"dataset": "kuka_robot", "model": f"published: {label}",
+                               key: value} for label, key, value in PUBLISHED])
+    if "kuka_robot" in set(scores["dataset"]):
+        scores = pd.concat([scores, published], ignore_index=True)
+    notes = "\n".join(f"- `{c.name}`: normalised by {c.normalisation}, "
+                      f"{'restarted at every experiment' if c.restart else 'one run'}, "
+                      f"warm-up {c.warmup}" for c in CONVENTIONS.values())
+    md = ["# Free-run scores in each convention\n", "Compare numbers within a column only.\n",
+          notes + "\n"]
+    md += [f"## {ds}\n\n" + g.drop(columns="dataset").set_index("model")
+           .to_markdown(floatfmt=".4g") + "\n" for ds, g in scores.groupby("dataset", sort=False)]
+    scores.to_csv(RESULTS / "conventions.csv", index=False)
+    (RESULTS / "conventions.md").write_text("\n".join(md))
     print("\n".join(md))
 
 
