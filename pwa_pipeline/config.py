@@ -5,7 +5,10 @@ The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys c
 classmethod that builds its step objects), ``na``, ``nb``, ``affine``, and each step's
 parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
-subspace baseline's parameters (``subspace.order``, ``subspace.horizon``).
+subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). A sub-table
+``refinement`` (e.g. ``refinement.max_iter = 30``) adds simulation-error refinement
+(:class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`) to the PWA model and, so that
+the comparison is fair, to the linear ARX baseline.
 
 A table ``[<set>."*"]`` applies the set to every data set a user registers
 (:mod:`pwa_pipeline.datasets.user`); it gives no orders, which come from the registration
@@ -25,6 +28,7 @@ from sklearn.base import BaseEstimator
 from ._validation import check_name
 from .methods import METHODS
 from .pwa.estimator import PWARX
+from .pwa.output_error import OutputErrorRefinement
 from .scoring.evaluation import WARMUP
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
@@ -108,9 +112,19 @@ def build_pwarx(table: dict) -> PWARX:
         model = PWARX.paper(**orders, **values)
     else:
         raise ValueError(f"unknown preset {preset!r}; use 'default' or 'paper'")
+    if "refinement" in table:
+        refinement = table.pop("refinement")
+        if not isinstance(refinement, dict):
+            raise ValueError("refinement must be a table, e.g. refinement.max_iter = 30 "
+                             "(an empty [<set>.<dataset>.refinement] table for the defaults)")
+        known = OutputErrorRefinement().get_params()
+        unknown = sorted(set(refinement) - set(known))
+        if unknown:
+            raise ValueError(f"unknown refinement parameter(s) {unknown}; it has {sorted(known)}")
+        model.set_params(refinement=OutputErrorRefinement(**refinement))
     model.set_params(**_flatten(table))
     model._validate_params()
-    for step in model.steps().values():
+    for step in [*model.steps().values(), *filter(None, [model.refinement])]:
         step._validate_params()
     return model
 

@@ -34,7 +34,8 @@ class Method:
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("pwa", "PWA", lambda pwa, base: pwa),
     Method("linear_arx", "linear ARX",
-           lambda pwa, base: LinearARX(na=pwa.na, nb=pwa.nb, affine=pwa.affine)),
+           lambda pwa, base: LinearARX(na=pwa.na, nb=pwa.nb, affine=pwa.affine,
+                                       refinement=pwa.refinement)),
     Method("subspace", "subspace",
            lambda pwa, base: SubspaceSS(**base.get("subspace", {}), warmup=base["warmup"])),
 )}

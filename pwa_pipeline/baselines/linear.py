@@ -3,8 +3,8 @@
 from numbers import Integral
 
 import numpy as np
-from sklearn.base import _fit_context
-from sklearn.utils._param_validation import Interval
+from sklearn.base import BaseEstimator, _fit_context, clone
+from sklearn.utils._param_validation import HasMethods, Interval
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
@@ -20,10 +20,15 @@ class LinearARX(ARXModelBase):
     na, nb : int
         Orders of eq. (3).
     affine : bool, default False
+    refinement : estimator, optional
+        An :class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`: θ refined from the
+        least-squares fit to minimise the free-run error on the training experiments. None:
+        least squares only.
 
     Attributes
     ----------
     theta_ : ndarray of shape (d, m)
+    refinement_ : fitted refinement step (with ``refinement`` only)
     n_inputs_, n_outputs_ : int
 
     Examples
@@ -42,12 +47,15 @@ class LinearARX(ARXModelBase):
         "na": [Interval(Integral, 0, None, closed="left")],
         "nb": [Interval(Integral, 0, None, closed="left")],
         "affine": ["boolean"],
+        "refinement": [HasMethods(["fit"]), None],
     }
 
-    def __init__(self, na: int = 1, nb: int = 1, affine: bool = False):
+    def __init__(self, na: int = 1, nb: int = 1, affine: bool = False,
+                 refinement: BaseEstimator | None = None):
         self.na = na
         self.nb = nb
         self.affine = affine
+        self.refinement = refinement
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, u: Signals, y: Signals) -> "LinearARX":
@@ -60,14 +68,23 @@ class LinearARX(ARXModelBase):
                 f"{reg.phi.shape[1]} parameters per output"
             )
         self.theta_ = np.linalg.lstsq(reg.phi, reg.target, rcond=None)[0]
+        if self.refinement is not None:
+            self.refinement_ = clone(self.refinement).fit(
+                self.theta_[None], [p[0] for p in pairs], [p[1] for p in pairs], self.na,
+                self.nb, self.affine)
+            self.theta_ = self.refinement_.thetas_[0]
         self.n_inputs_ = pairs[0][0].shape[1]
         self.n_outputs_ = pairs[0][1].shape[1]
         self.n_features_in_ = self.n_inputs_
         return self
 
     def resolved_params(self) -> dict:
-        """The parameters (nothing is chosen at fit)."""
-        return self.get_params()
+        """The parameters as ``get_params(deep=True)`` names them (nothing is chosen at
+        fit), the refinement step by its class name."""
+        params = self.get_params(deep=True)
+        if self.refinement is not None:
+            params["refinement"] = type(self.refinement).__name__
+        return params
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         return phi @ self.theta_

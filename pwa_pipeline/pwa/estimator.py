@@ -55,13 +55,19 @@ class PWARX(ARXModelBase):
         Step 5. None: ``RefinedSubModels()``; the paper's is ``ClusterCentres()``.
     regions : estimator, optional
         Step 6. None: ``SVMRegions()``.
+    refinement : estimator, optional
+        After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
+        minimise the free-run error on the training experiments, the regions kept. None (the
+        paper's route and the default): no refinement.
 
     Attributes
     ----------
     local_models_, clustering_, submodels_, regions_ : fitted step estimators
         ``regions_.predict(phi)`` gives the region of each regressor row.
+    refinement_ : fitted refinement step (with ``refinement`` only)
     thetas_ : ndarray of shape (s, d, m)
-        Sub-model parameter matrices θ_i (eq. 4).
+        Sub-model parameter matrices θ_i (eq. 4), refined when ``refinement`` is given
+        (``submodels_.thetas_`` keeps step 5's).
     n_submodels_ : int
     labels_ : ndarray of shape (n,)
         Sub-model of each training regressor row (−1: DBSCAN noise, paper setting only).
@@ -91,6 +97,7 @@ class PWARX(ARXModelBase):
         "clustering": [HasMethods(["fit"]), None],
         "submodels": [HasMethods(["fit"]), None],
         "regions": [HasMethods(["fit", "predict"]), None],
+        "refinement": [HasMethods(["fit"]), None],
     }
 
     def __init__(
@@ -102,6 +109,7 @@ class PWARX(ARXModelBase):
         clustering: BaseEstimator | None = None,
         submodels: BaseEstimator | None = None,
         regions: BaseEstimator | None = None,
+        refinement: BaseEstimator | None = None,
     ):
         self.na = na
         self.nb = nb
@@ -110,6 +118,7 @@ class PWARX(ARXModelBase):
         self.clustering = clustering
         self.submodels = submodels
         self.regions = regions
+        self.refinement = refinement
 
     @classmethod
     def default(cls, na: int = 1, nb: int = 1, affine: bool = False) -> "PWARX":
@@ -163,7 +172,8 @@ class PWARX(ARXModelBase):
         """
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
-        reg = build_regressors(as_experiments(u, y), self.na, self.nb, self.affine)
+        experiments = as_experiments(u, y)
+        reg = build_regressors(experiments, self.na, self.nb, self.affine)
         timings["regressors"] = time.perf_counter() - t0
         fitted = {}
         for name in STEPS:
@@ -171,8 +181,28 @@ class PWARX(ARXModelBase):
             fitted[name] = self.fit_step(name, reg, **fitted)
             timings[name] = time.perf_counter() - t0
         self.assemble(reg, **fitted)
+        if self.refinement is not None:
+            t0 = time.perf_counter()
+            self.assemble(reg, **fitted, refinement=self.fit_refinement(experiments))
+            timings["refinement"] = time.perf_counter() - t0
         self.timings_ = timings
         return self
+
+    def fit_refinement(self, experiments: list[tuple[Float2D, Float2D]]) -> BaseEstimator:
+        """Fit a clone of ``refinement`` from the assembled model's θ_i and regions.
+
+        Parameters
+        ----------
+        experiments : list of (u, y)
+            The training experiments (:func:`~pwa_pipeline._validation.as_experiments`).
+
+        Returns
+        -------
+        The fitted refinement step, for :meth:`assemble`.
+        """
+        return clone(self.refinement).fit(
+            self.submodels_.thetas_, [e[0] for e in experiments], [e[1] for e in experiments],
+            self.na, self.nb, self.affine, region_of=self.regions_.predict)
 
     def fit_step(self, name: str, reg: Regressors, **fitted: BaseEstimator) -> BaseEstimator:
         """Fit a clone of the step ``name`` (one of :data:`STEPS`) on the regressors.
@@ -210,14 +240,17 @@ class PWARX(ARXModelBase):
 
     def assemble(self, reg: Regressors, local_models: BaseEstimator,
                  clustering: BaseEstimator, submodels: BaseEstimator,
-                 regions: BaseEstimator) -> "PWARX":
-        """Set the fitted attributes from the fitted steps; returns self."""
+                 regions: BaseEstimator, refinement: BaseEstimator | None = None) -> "PWARX":
+        """Set the fitted attributes from the fitted steps (and the fitted refinement, whose
+        θ_i replace step 5's); returns self."""
         self.n_inputs_ = reg.n_inputs
         self.n_outputs_ = reg.n_outputs
         self.n_features_in_ = self.n_inputs_
         self.local_models_, self.clustering_ = local_models, clustering
         self.submodels_, self.regions_ = submodels, regions
-        self.thetas_ = submodels.thetas_
+        self.thetas_ = submodels.thetas_ if refinement is None else refinement.thetas_
+        if refinement is not None:
+            self.refinement_ = refinement
         self.n_submodels_ = submodels.n_submodels_
         self.labels_ = submodels.labels_
         self.timings_ = {}
@@ -233,6 +266,9 @@ class PWARX(ARXModelBase):
             params = step.resolved_params() if hasattr(step, "resolved_params") \
                 else step.get_params()
             out.update({f"{name}__{k}": v for k, v in params.items()})
+        if self.refinement is not None:
+            out["refinement"] = type(self.refinement).__name__
+            out.update({f"refinement__{k}": v for k, v in self.refinement.get_params().items()})
         return out
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
