@@ -16,6 +16,12 @@ DAGSTER_YAML = """telemetry:
   enabled: false
 nux:
   enabled: false
+# sweep_dask runs share dask task keys (see pwa_pipeline.orchestration.jobs): one at a time
+run_queue:
+  tag_concurrency_limits:
+    - key: "pwa/executor"
+      value: "dask"
+      limit: 1
 """
 
 

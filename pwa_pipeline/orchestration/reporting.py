@@ -71,3 +71,35 @@ def training_table(data: Dataset) -> pd.DataFrame:
                       .assign(experiment=str(i)) for i, (u, y) in
                       enumerate(zip(data.u_train, data.y_train, strict=True))],
                      ignore_index=True)
+
+
+def _sig4(value: float) -> str:
+    return f"{value:.4g}"
+
+
+def leaderboard_markdown(table: pd.DataFrame, missing: dict[str, list[str]] | None = None
+                         ) -> str:
+    """The leaderboard (:func:`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
+    table per data set, numbers to 4 significant digits, a diverged free run shown as
+    :func:`score_metrics` logs it (NRMSE capped at the divergence limit, R² at 1 − limit²)
+    and flagged; then the partitions never materialised (``missing``: key → methods)."""
+    parts = []
+    for dataset, rows in table.groupby("dataset", sort=False):
+        shown = pd.DataFrame({
+            "rank": rows["rank"], "method": rows["method"], "hparams": rows["hparams"],
+            "one-step NRMSE": rows["one_step_nrmse"].map(_sig4),
+            "one-step R²": rows["one_step_r2"].map(_sig4),
+            "free-run NRMSE": [f"≥ {_sig4(DIVERGENCE)} (diverged)" if d else _sig4(v)
+                               for v, d in zip(rows["free_run_nrmse"],
+                                               rows["free_run_diverged"], strict=True)],
+            "free-run R²": [f"≤ {_sig4(1 - DIVERGENCE**2)} (diverged)" if d else _sig4(v)
+                            for v, d in zip(rows["free_run_r2"], rows["free_run_diverged"],
+                                            strict=True)]})
+        parts.append(f"### {dataset}\n\n{shown.to_markdown(index=False)}")
+    if table.empty:
+        parts.append("No partition has been materialised yet.")
+    if missing:
+        lines = "\n".join(f"- `{key}`: {', '.join(methods)}"
+                          for key, methods in missing.items())
+        parts.append(f"Not materialised (partition: methods without scores):\n\n{lines}")
+    return "\n\n".join(parts) + "\n"

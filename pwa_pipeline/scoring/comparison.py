@@ -1,5 +1,7 @@
-"""Comparison tables of the methods' scores: the paper's Table 1 layout and mean scores."""
+"""Comparison tables of the methods' scores: the paper's Table 1 layout, mean scores, the
+leaderboard."""
 
+import numpy as np
 import pandas as pd
 
 
@@ -49,3 +51,39 @@ def mean_scores(table: pd.DataFrame) -> pd.DataFrame:
         wide["free-run diverged"] = means[means["mode"] == "free_run"].set_index(
             "method")["diverged"]
     return wide
+
+
+#: Columns of :func:`leaderboard`.
+LEADERBOARD_COLUMNS = ["dataset", "rank", "method", "hparams", "one_step_nrmse", "one_step_r2",
+                       "free_run_nrmse", "free_run_r2", "free_run_diverged"]
+
+
+def leaderboard(scores: pd.DataFrame) -> pd.DataFrame:
+    """Every data set × hyper-parameter set × method in one table, ranked by free run.
+
+    ``scores`` has columns dataset, hparams, method, mode, output, nrmse, r2 and diverged
+    (evaluation tables stacked, one per partition and method). Each row holds the
+    output-averaged NRMSE and R² of one-step prediction and free run and whether the free run
+    diverged; ``rank`` orders the rows of a data set by free-run NRMSE (1 is best, ties share
+    a rank, a diverged or non-finite free run ranks last). Rows are sorted by data set (as
+    they come), rank, then method (registry order) and set.
+    """
+    from ..methods import METHODS
+
+    means = scores[scores["output"] == "mean"]
+    keys = ["dataset", "hparams", "method"]
+    # unstack, not pivot_table: a NaN score keeps its row, and no absent combination appears
+    wide = means.set_index([*keys, "mode"])[["nrmse", "r2"]].unstack("mode")
+    wide.columns = [f"{mode}_{metric}" for metric, mode in wide.columns]
+    free = means[means["mode"] == "free_run"].set_index(keys)["diverged"].astype(bool)
+    table = wide.join(free.rename("free_run_diverged")).reset_index()
+    table["free_run_diverged"] = table["free_run_diverged"].fillna(False).astype(bool)
+    finite = table["free_run_nrmse"].where(~table["free_run_diverged"]
+                                           & np.isfinite(table["free_run_nrmse"]), np.inf)
+    table["rank"] = finite.groupby(table["dataset"], sort=False).rank(method="min").astype(int)
+    order = {m: i for i, m in enumerate(METHODS)}
+    datasets = {d: i for i, d in enumerate(dict.fromkeys(scores["dataset"]))}
+    table = table.assign(_d=table["dataset"].map(datasets),
+                         _m=table["method"].map(order).fillna(len(order)))
+    table = table.sort_values(["_d", "rank", "_m", "hparams"], kind="stable")
+    return table[LEADERBOARD_COLUMNS].reset_index(drop=True)
