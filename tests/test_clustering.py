@@ -1,10 +1,18 @@
 import numpy as np
 import pytest
 from sklearn.cluster import DBSCAN
+from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import InvalidParameterError
 
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
-from pwa_pipeline.pwa.clustering import cluster_local_models, confident_models, k_distance_eps
+from pwa_pipeline._arrays import relabel_by_size
+from pwa_pipeline.pwa.clustering import (
+    cluster_local_models,
+    confident_models,
+    dbscan_cluster_counts,
+    k_distance_eps,
+    k_distances,
+)
 
 
 def _blobs(seed=0, spread=0.05):
@@ -45,12 +53,35 @@ def test_labels_are_scikit_learns_dbscan_relabelled_by_size():
     step = DBSCANClustering(eps=0.08, min_pts=6, unit_free=False, confidence=None,
                             max_clustered=None).fit(_Local(theta), np.ones((390, 1)))
     ref = DBSCAN(eps=0.08, min_samples=6).fit_predict(theta.reshape(390, 2))
-    # the same partition: a one-to-one map between the two labellings, noise kept as noise
-    pairs = set(zip(ref.tolist(), step.labels_.tolist(), strict=True))
-    assert len(pairs) == len(set(ref)) == len(set(step.labels_))
-    assert np.array_equal(ref == -1, step.labels_ == -1)
+    # the same labels, border points included, numbered by size
+    np.testing.assert_array_equal(step.labels_, relabel_by_size(ref))
+    assert ref.max() >= 1
     sizes = np.bincount(step.labels_[step.labels_ >= 0])
     assert np.all(np.diff(sizes) <= 0)  # 0 is the largest cluster
+
+
+def _counts_on_the_radius_graph(x, grid, min_pts):
+    """The previous k_distance_eps's counts: scikit-learn's DBSCAN on one radius graph."""
+    graph = NearestNeighbors(radius=grid[-1]).fit(x).radius_neighbors_graph(
+        mode="distance", sort_results=True)
+    graph.data = np.maximum(graph.data, np.finfo(float).tiny)  # keep exact duplicates
+    return [DBSCAN(eps=e, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max() + 1
+            for e in grid]
+
+
+@pytest.mark.parametrize(("seed", "dims", "min_pts"), [
+    (0, 1, 3), (1, 2, 8), (2, 2, 1), (3, 3, 12), (4, 8, 5), (5, 15, 20)])
+def test_cluster_counts_are_scikit_learns_at_every_candidate_eps(seed, dims, min_pts):
+    # Blobs and noise on a 0.1 grid (many distances tie), candidates at the k-distance
+    # quantiles as k_distance_eps takes them: pairs at exactly a candidate ε occur.
+    rng = np.random.default_rng(seed)
+    x = np.round(np.vstack([rng.normal(rng.uniform(-5, 5, dims), 0.5, (150, dims))
+                            for _ in range(3)] + [rng.uniform(-8, 8, (60, dims))]), 1)
+    grid = np.unique(np.maximum(
+        np.quantile(k_distances(x, min_pts), np.linspace(0.02, 0.6, 20)), 1e-6))
+    counts = dbscan_cluster_counts(x, grid, min_pts)
+    np.testing.assert_array_equal(counts, _counts_on_the_radius_graph(x, grid, min_pts))
+    assert counts.max() >= 2
 
 
 def test_unit_free_theta_makes_eps_independent_of_the_output_scale():

@@ -4,14 +4,16 @@ from numbers import Integral, Real
 
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context
-from sklearn.cluster import DBSCAN
 from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._arrays import column_rms, relabel_by_size
+from .dbscan import dbscan
 from .embedding import EMBEDDINGS
 
 _EPS_SAMPLE = 5000
+_DENSE = 1 << 24
+"""Largest n² for which :func:`dbscan_cluster_counts` keeps every distance (128 MB)."""
 
 
 def confident_models(residual_var: np.ndarray, factor: float) -> np.ndarray:
@@ -42,28 +44,106 @@ def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0) -> np.ndarray:
 def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     """ε from the k-distance curve: the candidate that separates the most clusters.
 
-    Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. DBSCAN runs at each (on
-    one radius-neighbour graph computed once at the largest), and the largest ε giving the
+    Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. The number of DBSCAN
+    clusters at every candidate comes from one minimum spanning tree of the mutual
+    reachability distances (:func:`dbscan_cluster_counts`), and the largest ε giving the
     most clusters wins. Over-splitting a mode is harmless where sub-models that predict
     alike are merged afterwards (as :class:`pwa_pipeline.pwa.submodels.RefinedSubModels`
-    does);
-    merging two modes is not repairable, and the classic knee of the curve does that when one
-    mode is much larger than another.
+    does); merging two modes is not repairable, and the classic knee of the curve does that
+    when one mode is much larger than another.
     """
     dist = k_distances(emb, min_pts)
     # Distances below 1e-6 of the parameters' size are rounding error (noise-free data).
     floor = 1e-6 * max(float(np.median(np.linalg.norm(emb, axis=1))), np.finfo(float).tiny)
     grid = np.unique(np.maximum(np.quantile(dist, np.linspace(0.02, 0.6, n_grid)), floor))
-    graph = NearestNeighbors(radius=grid[-1]).fit(emb).radius_neighbors_graph(
-        mode="distance", sort_results=True
-    )
-    graph.data = np.maximum(graph.data, np.finfo(float).tiny)  # keep exact duplicates
-    counts = [
-        DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(graph).labels_.max() + 1
-        for eps in grid
-    ]
+    counts = dbscan_cluster_counts(emb, grid, min_pts)
     best = max(range(len(grid)), key=lambda i: (counts[i], i))
     return float(grid[best])
+
+
+def _sq_distances(xt: np.ndarray, sq: np.ndarray | None, rows: np.ndarray) -> np.ndarray:
+    """Squared distances of the points ``rows`` to every point, rounded as scikit-learn's
+    radius search rounds them: its k-d tree's Σ_j (x_pj − x_qj)² summed in feature order
+    when ``sq`` is None, else (‖p‖² − 2 p·q) + ‖q‖² clipped at 0, like its brute force.
+    ``xt`` is the points' transpose (d, n)."""
+    if sq is None:
+        acc = np.subtract(xt[0], xt[0, rows, None])
+        acc *= acc
+        for j in range(1, len(xt)):
+            diff = np.subtract(xt[j], xt[j, rows, None])
+            diff *= diff
+            acc += diff
+        return acc
+    acc = xt[:, rows].T @ xt
+    acc *= -2
+    acc += sq[rows, None]
+    acc += sq
+    return np.maximum(acc, 0, out=acc)
+
+
+def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.ndarray:
+    """Number of DBSCAN clusters of ``x`` at every ε of ``grid``, no neighbourhood stored.
+
+    At ε the core points are those whose (MinPts − 1)-th nearest other point lies within ε
+    (their core distance c_p), and the clusters are the connected components of the core
+    points under "within ε": the components of the graph of mutual reachability distances
+    max(c_p, c_q, ‖p − q‖) ≤ ε. One minimum spanning tree of that graph (Prim's algorithm,
+    one row of distances at a time) gives them all: clusters(ε) = #{c_p ≤ ε} − #{tree edges
+    ≤ ε}. Distances are rounded as scikit-learn's radius search at the largest ε rounds
+    them (its k-d tree up to 15 dimensions, its brute force above) and compared with ε as
+    its DBSCAN on that precomputed radius graph compares them, so up to 15 dimensions the
+    counts are exactly those (tested); above, pairs within ~1e-13 relative of an ε may
+    differ. Time O(n² d); memory n² floats up to n = 4096, O(n) above.
+    """
+    n = len(x)
+    grid = np.asarray(grid, dtype=float)
+    r2 = float(grid[-1]) ** 2
+    xt = np.ascontiguousarray(x.T)
+    # scikit-learn's NearestNeighbors(radius=...) picks its brute force above 15 dimensions
+    # and for tiny sets (5 default neighbours >= n // 2), its k-d tree otherwise
+    sq = np.einsum("ij,ij->i", x, x) if x.shape[1] > 15 or 5 >= n // 2 else None
+
+    def dist(rows: np.ndarray) -> np.ndarray:
+        acc = _sq_distances(xt, sq, rows)
+        far = acc > r2
+        np.sqrt(acc, out=acc)
+        acc[far] = np.inf
+        return acc
+
+    # All distances at once when they fit _DENSE entries (one BLAS product), else by rows.
+    dense = np.empty((n, n)) if n * n <= _DENSE else None
+    core = np.zeros(n)
+    step = max(1, (1 << 22) // n)
+    for a in range(0, n if min_pts > 1 or dense is not None else 0, step):
+        rows = np.arange(a, min(n, a + step))
+        d = dist(rows)
+        if dense is not None:
+            dense[rows] = d
+        if min_pts > 1:
+            d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
+            core[rows] = (np.partition(d, min_pts - 2, axis=1)[:, min_pts - 2]
+                          if min_pts - 1 < n else np.inf)
+    # Prim's algorithm on max(c_p, c_q, d(p, q)); an inf edge starts a new tree.
+    best = np.full(n, np.inf)
+    done = np.zeros(n, bool)
+    edges = np.empty(max(n - 1, 0))
+    u = 0
+    for it in range(n):
+        done[u] = True
+        if it:
+            edges[it - 1] = best[u]
+        best[u] = np.inf
+        row = dense[u] if dense is not None else dist(np.array([u]))[0]
+        np.maximum(row, core, out=row)
+        np.maximum(row, core[u], out=row)
+        row[done] = np.inf
+        np.minimum(best, row, out=best)
+        u = int(np.argmin(best))
+        if best[u] == np.inf:  # no finite edge left: a new tree from any point left
+            u = int(np.argmin(done))
+    core.sort()
+    edges.sort()
+    return np.searchsorted(core, grid, "right") - np.searchsorted(edges, grid, "right")
 
 
 def cluster_local_models(
@@ -74,6 +154,9 @@ def cluster_local_models(
     clustered: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """Cluster local parameter matrices with DBSCAN on the Vθ distance (eq. 8–10).
+
+    DBSCAN is :func:`pwa_pipeline.pwa.dbscan.dbscan` (scikit-learn's labels, border points
+    included, in bounded memory).
 
     Parameters
     ----------
@@ -111,7 +194,7 @@ def cluster_local_models(
     if eps is None:
         eps = k_distance_eps(emb, min_pts)
     labels = np.full(n, -1)
-    labels[mask] = DBSCAN(eps=eps, min_samples=min_pts).fit_predict(emb)
+    labels[mask] = dbscan(emb, eps, min_pts)
     labels = relabel_by_size(labels)
     if labels.max() < 0:
         raise ValueError(

@@ -32,12 +32,21 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     embedding of the local parameter matrices, the Euclidean distance is the Vθ distance of
     Lassoued & Abderrahim (2023), section 4, eq. (8)–(10).
 
-    Border rule: scikit-learn gives a border point to whichever cluster's expansion reaches
-    it first, which depends on the visiting order. Here a border point takes the cluster of
-    its nearest core point within ``eps`` (of equally near ones, the one of lowest index), so
-    the labels do not depend on the order of the points. Core points, noise and the
-    partition of the core points are scikit-learn's (distances are compared with ``eps`` in
-    float64 as there, so only pairs within rounding, ~1e-13 relative, of ``eps`` could differ).
+    Border rule: scikit-learn's. Its expansion visits the points in index order and finishes
+    one cluster before starting the next, so clusters are numbered by their lowest-indexed
+    core point and a border point within ``eps`` of core points of several clusters goes to
+    the cluster of lowest such number (the first to reach it). Ties at ``eps``: a pair within
+    rounding of ``eps`` (as when ε is a k-distance, see
+    :func:`~pwa_pipeline.pwa.clustering.k_distance_eps`) is decided by
+    Σ_j (x_pj − x_qj)² ≤ ε² summed in feature order on the points as given, scikit-learn's
+    k-d tree test bit for bit. The labels are then scikit-learn's, cluster numbers included,
+    where it searches with its k-d tree (up to 15 dimensions; tested on ties in
+    ``tests/test_dbscan.py``), except for its shortcut that takes a whole tree node once the
+    node's bounding box lies within ``eps``. Above 15 dimensions it searches by brute force
+    with ‖p‖² − 2 p·q + ‖q‖² rounded by BLAS (the rounding depends on its chunking of the
+    matrix product and on which point is the query), so a pair within ~1e-13 relative of
+    ``eps`` may go either way there; the sum of squared differences used here is the more
+    accurate of the two.
 
     How: the distances to 64 random pivot points certify most dense points as core at once (a
     pivot whose ``min_pts``-th nearest point is at ``r`` makes every point within
@@ -64,8 +73,9 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     Returns
     -------
     labels : ndarray of shape (n,)
-        Cluster 0 … s−1 of each point, −1 for noise; clusters are numbered in no particular
-        order (:func:`pwa_pipeline._arrays.relabel_by_size` numbers them by size).
+        Cluster 0 … s−1 of each point, −1 for noise; clusters are numbered by their
+        lowest-indexed core point, as scikit-learn numbers them
+        (:func:`pwa_pipeline._arrays.relabel_by_size` numbers them by size).
 
     Raises
     ------
@@ -86,6 +96,7 @@ def _dbscan(x: Float2D, eps: float, min_pts: int,
     if eps <= 0 or min_pts < 1:
         raise ValueError(f"need eps > 0 and min_pts >= 1, got eps = {eps}, min_pts = {min_pts}")
     x = np.asarray(x, dtype=float)
+    given = x
     n = x.shape[0]
     if n == 0:
         return np.empty(0, dtype=np.intp), np.empty(0, dtype=bool)
@@ -126,7 +137,7 @@ def _dbscan(x: Float2D, eps: float, min_pts: int,
     dist_g = dist[cell[nq:], order[nq:]]
     del dist
 
-    geo = _Geometry(x, sq, norm, eps, tol)
+    geo = _Geometry(x, sq, norm, eps, tol, given[order])
     state = _State(known, min_pts)
     a, b = np.nonzero(linked)
     state.merge(np.r_[np.flatnonzero(known), where[piv[a]]],
@@ -134,15 +145,17 @@ def _dbscan(x: Float2D, eps: float, min_pts: int,
     _sweep_q(geo, state, nq, block)
     if nq < n:
         _sweep_g(geo, state, nq, block, cell[nq:], dist_g, dist_q, g_piv)
-    labels, core = state.labels_of(geo, order)
+    labels, core = state.labels_of(order)
     return labels[where], core[where]
 
 
 class _Geometry:
     """The points with float32 copies for blocks of ``‖p − q‖² <= ε²`` tests."""
 
-    def __init__(self, x: Float2D, sq: np.ndarray, norm: np.ndarray, eps: float, tol: float):
+    def __init__(self, x: Float2D, sq: np.ndarray, norm: np.ndarray, eps: float, tol: float,
+                 given: Float2D):
         self.x, self.sq, self.norm, self.eps, self.tol, self.eps2 = x, sq, norm, eps, tol, eps * eps
+        self.given = given  # the points as passed (not centred), in this object's order
         # ‖p − q‖² <= ε²  ⇔  [p, 1]·[q, −‖q‖²/2] >= (‖p‖² − ε²)/2: one product and one test.
         self.left = np.ones((len(x), x.shape[1] + 1), dtype=np.float32)
         self.left[:, :-1] = x
@@ -152,12 +165,17 @@ class _Geometry:
         # float32 rounding of such a product, per unit of Σ|terms| (Higham's γ, doubled)
         self.unit = 2 * (x.shape[1] + 3) * float(np.finfo(np.float32).eps)
 
-    def sq_dist(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Squared distances of the pairs (p, q) in float64."""
-        return self.sq[p] + self.sq[q] - 2 * np.einsum("ij,ij->i", self.x[p], self.x[q])
+    def within_eps(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """``Σ_j (x_pj − x_qj)² <= ε²`` for the pairs (p, q), summed in feature order on the
+        points as given: scikit-learn's k-d tree test, bit for bit."""
+        acc = np.zeros(len(p))
+        for j in range(self.given.shape[1]):
+            diff = self.given[p, j] - self.given[q, j]
+            acc += diff * diff
+        return acc <= self.eps2
 
     def near(self, rows: np.ndarray | slice, cols: slice) -> np.ndarray:
-        """Boolean block ``‖x[rows] − x[cols]‖ <= ε``, exact as in float64."""
+        """Boolean block ``‖x[rows] − x[cols]‖ <= ε``, pairs near ε by :meth:`within_eps`."""
         rows = np.arange(len(self.x))[rows]
         prod = self.left[rows] @ self.right[cols].T
         top = self.norm[cols].max()
@@ -165,8 +183,7 @@ class _Geometry:
         low = prod >= (self.thr[rows] - margin).astype(np.float32)[:, None]
         near = prod >= (self.thr[rows] + margin).astype(np.float32)[:, None]
         i, j = _nonzero(np.not_equal(low, near, out=low))  # within rounding of ε: decide again
-        j_abs = np.arange(len(self.x))[cols][j]
-        near[i, j] = self.sq_dist(rows[i], j_abs) <= self.eps2
+        near[i, j] = self.within_eps(rows[i], np.arange(len(self.x))[cols][j])
         return near
 
 
@@ -205,22 +222,32 @@ class _State:
         self.merge(p[both], q[both])
         self.kept.append(np.stack([p[~both], q[~both]]))
 
-    def labels_of(self, geo: _Geometry, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Final labels (border points by their nearest core point) and core points.
+    def labels_of(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Final labels, numbered and with border points assigned as scikit-learn does, and
+        the core points.
 
-        ``ids`` are the points' original indices, which break ties between core points.
+        ``ids`` are the points' original indices: a cluster's number is the rank of its
+        lowest-indexed core point, and a border point takes the lowest number among the
+        clusters of its core neighbours (scikit-learn's first cluster to reach it).
         """
         core = self.sure()
         p, q = np.concatenate(self.kept, axis=1) if self.kept else np.empty((2, 0), np.intp)
         both = core[p] & core[q]
         self.merge(p[both], q[both])
+
         out = np.full(len(core), -1)
-        out[core] = np.unique(self.labels[core], return_inverse=True)[1]
+        comp = np.unique(self.labels[core], return_inverse=True)[1]
+        lowest = np.full(comp.max(initial=-1) + 1, len(core))
+        np.minimum.at(lowest, comp, ids[core])
+        rank = np.empty(lowest.size, dtype=np.intp)
+        rank[np.argsort(lowest)] = np.arange(lowest.size)
+        out[core] = rank[comp]
         one = core[p] != core[q]
         border, nearest = np.where(core[p], q, p)[one], np.where(core[p], p, q)[one]
-        first = np.lexsort((ids[nearest], geo.sq_dist(border, nearest), border))
-        first = first[np.diff(border[first], prepend=-1) != 0]  # the nearest per border point
-        out[border[first]] = out[nearest[first]]
+        first = np.full(len(core), len(core))
+        np.minimum.at(first, border, out[nearest])
+        reached = first < len(core)
+        out[reached] = first[reached]
         return out, core
 
 
