@@ -94,3 +94,17 @@ def test_the_pipeline_refines_pwa_and_linear_arx_when_the_set_asks(tmp_path, mlf
     assert linear.refinement_.n_iter_ >= 1
     meta = result.asset_materializations_for_node("output_error_refinement")[0].metadata
     assert meta["refined"].value is True and meta["iterations"].value == 3
+
+
+def test_validation_experiments_choose_the_iterate_and_are_not_fitted():
+    u, y = _output_noise_system(seed=9, n=2500)
+    us, ys = np.array_split(u, 5), np.array_split(y, 5)
+    step = OutputErrorRefinement(max_iter=30, validation_fraction=0.2, warmup=1)
+    ls = LinearARX(1, 1).fit(us[:4], ys[:4])
+    step.fit(ls.theta_[None], us, ys, 1, 1, False)
+    assert step.validation_experiments_ == [4]
+    held = _Runs([us[4]], [ys[4]], 1, 1, False, 1)
+    assert held.simulate(step.thetas_, None, False)[0] == pytest.approx(step.validation_cost_)
+    assert step.validation_cost_ < step.validation_cost_start_
+    fitted = _Runs(us[:4], ys[:4], 1, 1, False, 1)  # the cost is over the other four only
+    assert fitted.simulate(step.thetas_, None, False)[0] == pytest.approx(step.cost_)

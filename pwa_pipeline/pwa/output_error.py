@@ -43,6 +43,9 @@ class OutputErrorResult:
     seconds : float
     stop : str
         Why it stopped.
+    validation_start, validation_cost : float
+        The same on the validation experiments (NaN without them); ``thetas`` is then the
+        iterate with the lowest validation cost.
     """
 
     thetas: np.ndarray
@@ -51,6 +54,8 @@ class OutputErrorResult:
     n_iter: int
     seconds: float
     stop: str
+    validation_start: float = float("nan")
+    validation_cost: float = float("nan")
 
 
 class _Runs:
@@ -133,7 +138,9 @@ class _Runs:
 def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int,
                         nb: int, affine: bool, region_of: Callable | None = None,
                         warmup: int | None = None, max_iter: int = 20,
-                        max_seconds: float = 240.0, tol: float = 1e-4) -> OutputErrorResult:
+                        max_seconds: float = 240.0, tol: float = 1e-4,
+                        validation: tuple[list[Float2D], list[Float2D]] | None = None,
+                        patience: int = 3) -> OutputErrorResult:
     """Minimise the free-run error over the training experiments (see the module doc).
 
     Parameters
@@ -154,11 +161,16 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         Stop after the step that passes this time.
     tol : float
         Stop when an accepted step lowers the cost by less than this fraction.
+    validation : (u, y) lists of ndarrays, optional
+        Experiments held out of the training ones: the result is the iterate with the
+        lowest free-run error on them, and the search stops after ``patience`` accepted
+        steps without a new lowest.
+    patience : int
 
     Returns
     -------
     OutputErrorResult
-        ``thetas`` is the start when no step lowered the cost.
+        ``thetas`` is the start when no step lowered the (validation) cost.
 
     Raises
     ------
@@ -174,6 +186,9 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         raise ValueError("the starting model's free run diverges on the training data; "
                          "output-error refinement needs a start whose free run stays finite")
     start, lam, stop, it = cost, 1.0, f"max_iter = {max_iter} reached", 0
+    held = None if validation is None else _Runs(*validation, na, nb, affine, runs.warmup)
+    val_start = np.nan if held is None else held.simulate(theta, region_of, False)[0]
+    best, best_val, since_best = theta, val_start, 0
     for it in range(1, max_iter + 1):
         scale = np.maximum(np.diag(jtj), 1e-12 * max(np.diag(jtj).max(), 1e-300))
         step = np.linalg.solve(jtj + lam * np.diag(scale), -jtr).reshape(theta.shape)
@@ -183,6 +198,15 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
             gain = (cost - trial_cost) / cost
             theta, cost, jtj, jtr = trial, trial_cost, trial_jtj, trial_jtr
             lam = max(lam / 3, 1e-9)
+            if held is None:
+                best = theta
+            else:
+                val = held.simulate(theta, region_of, False)[0]
+                since_best = 0 if val < best_val else since_best + 1
+                best, best_val = (theta, val) if val < best_val else (best, best_val)
+                if since_best >= patience:
+                    stop = f"validation error not lower for {patience} steps"
+                    break
             if gain < tol:
                 stop = f"relative decrease {gain:.2g} < tol"
                 break
@@ -194,8 +218,11 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         if time.perf_counter() - t0 > max_seconds:
             stop = f"max_seconds = {max_seconds:g} passed"
             break
-    return OutputErrorResult(thetas=theta, cost_start=start, cost=cost, n_iter=it,
-                             seconds=time.perf_counter() - t0, stop=stop)
+    if best is not theta:
+        cost = runs.simulate(best, region_of, False)[0]
+    return OutputErrorResult(thetas=best, cost_start=start, cost=cost, n_iter=it,
+                             seconds=time.perf_counter() - t0, stop=stop,
+                             validation_start=val_start, validation_cost=best_val)
 
 
 class OutputErrorRefinement(BaseEstimator):
@@ -217,13 +244,23 @@ class OutputErrorRefinement(BaseEstimator):
     warmup : int or None, default 10
         Measured samples that start each training run (None: max(na, nb)); as the
         evaluation protocol's warm-up.
+    validation_fraction : float, default 0.1
+        Share of the training experiments (the last ones, at least one) held out to choose
+        the iterate and stop: model selection on training data only, the test data never
+        seen. 0, or a single training experiment: no validation, the last iterate is kept.
+    patience : int, default 3
+        Accepted steps without a lower validation error before stopping.
 
     Attributes
     ----------
     thetas_ : ndarray of shape (s, d, m)
     cost_start_, cost_ : float
-        Mean squared free-run error per sample and output on the training data, before
-        and after.
+        Mean squared free-run error per sample and output on the fitting experiments,
+        before and after.
+    validation_experiments_ : list of int
+        Indices (in the training list) of the experiments held out for validation.
+    validation_cost_start_, validation_cost_ : float
+        The same on them (NaN without validation).
     n_iter_ : int
     stop_ : str
     seconds_ : float
@@ -234,14 +271,19 @@ class OutputErrorRefinement(BaseEstimator):
         "max_seconds": [Interval(Real, 0, None, closed="neither")],
         "tol": [Interval(Real, 0, None, closed="left")],
         "warmup": [Interval(Integral, 1, None, closed="left"), None],
+        "validation_fraction": [Interval(Real, 0, 1, closed="left")],
+        "patience": [Interval(Integral, 1, None, closed="left")],
     }
 
     def __init__(self, max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
-                 warmup: int | None = 10):
+                 warmup: int | None = 10, validation_fraction: float = 0.1,
+                 patience: int = 3):
         self.max_iter = max_iter
         self.max_seconds = max_seconds
         self.tol = tol
         self.warmup = warmup
+        self.validation_fraction = validation_fraction
+        self.patience = patience
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int, nb: int,
@@ -249,10 +291,18 @@ class OutputErrorRefinement(BaseEstimator):
         """Refine ``thetas`` on the experiments ``(u, y)``; arguments as
         :func:`refine_output_error`."""
         warmup = max(na, nb) if self.warmup is None else max(self.warmup, na, nb)
-        result = refine_output_error(thetas, u, y, na, nb, affine, region_of=region_of,
-                                     warmup=warmup, max_iter=self.max_iter,
-                                     max_seconds=self.max_seconds, tol=self.tol)
+        n = len(u)
+        n_val = min(max(1, round(self.validation_fraction * n)), n - 1) \
+            if self.validation_fraction > 0 and n >= 2 else 0
+        self.validation_experiments_ = list(range(n - n_val, n))
+        fit, held = slice(0, n - n_val), slice(n - n_val, n)
+        result = refine_output_error(
+            thetas, u[fit], y[fit], na, nb, affine, region_of=region_of, warmup=warmup,
+            max_iter=self.max_iter, max_seconds=self.max_seconds, tol=self.tol,
+            validation=(u[held], y[held]) if n_val else None, patience=self.patience)
         self.thetas_ = result.thetas
         self.cost_start_, self.cost_ = result.cost_start, result.cost
+        self.validation_cost_start_ = result.validation_start
+        self.validation_cost_ = result.validation_cost
         self.n_iter_, self.stop_, self.seconds_ = result.n_iter, result.stop, result.seconds
         return self
