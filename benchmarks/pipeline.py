@@ -24,6 +24,7 @@ from mlflow.tracking import MlflowClient
 
 from benchmarks._common import RESULTS, Timer, write_json
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.jobs import SWEEP_SELECTION
 from pwa_pipeline.orchestration.partitions import DEFAULT_SETS, all_keys, runnable_keys
 from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
 from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
@@ -48,7 +49,8 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
     for key in keys:
         with Timer() as t:
             result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
-                                    instance=instance, run_config=quiet, raise_on_error=False)
+                                    selection=SWEEP_SELECTION, instance=instance,
+                                    run_config=quiet, raise_on_error=False)
         local = result.asset_materializations_for_node("local_models")[0].metadata
         rows.append({"partition": key, "seconds": t.seconds, "success": result.success,
                      "local_models_seconds": local["seconds"].value,

@@ -4,7 +4,8 @@ configuration, raw_benchmark → regressors → local_models → clusters → su
 svm_regions → pwa_model; linear_arx_model and subspace_model beside it; each model scored by
 ``<method>_scores`` (the evaluation protocol, one MLflow run each); ``comparison`` puts them
 side by side. Every asset is partitioned by data set × hyper-parameter set, and every
-partition's configuration is resolved once, by the ``configuration`` asset. Methods come from
+partition's configuration is resolved once, by the ``configuration`` asset; only
+``leaderboard`` is not: it ranks the stored scores of every partition. Methods come from
 :data:`pwa_pipeline.methods.METHODS`.
 """
 
@@ -21,6 +22,7 @@ from ..datasets import Dataset
 from ..methods import METHODS, Method
 from ..pwa import PWARX, STEPS
 from ..pwa.regressors import Regressors, build_regressors, regressor_names
+from ..scoring.comparison import leaderboard as leaderboard_table
 from ..scoring.comparison import mean_scores
 from ..scoring.evaluation import evaluate
 from .checks import (
@@ -38,9 +40,11 @@ from .figures import (
     switching_figure,
     to_markdown,
 )
+from .jobs import LEADERBOARD
 from .mlflow_models import ModelToLog, Simulator, example_table
 from .partitions import split_key
 from .reporting import (
+    leaderboard_markdown,
     markdown,
     nrmse_summary,
     params_table,
@@ -51,7 +55,15 @@ from .reporting import (
     training_table,
 )
 from .resources import MLflowTracker, PipelineSettings
-from .storage import UnsignedFileError, cache_key, inside, load_object, save_object, signing_key
+from .storage import (
+    ALL_PARTITIONS,
+    UnsignedFileError,
+    cache_key,
+    inside,
+    load_object,
+    save_object,
+    signing_key,
+)
 
 GROUP = "identification"
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`.
@@ -297,10 +309,64 @@ def _comparison_asset(partitions_def):
     return comparison
 
 
+def _leaderboard_asset(partitions_def):
+    @dg.asset(name=LEADERBOARD, group_name="comparison", kinds={"pandas", "mlflow"},
+              ins={f"{name}_scores": dg.AssetIn(metadata={ALL_PARTITIONS: True})
+                   for name in METHODS})
+    def leaderboard(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
+                    **scores: dict) -> pd.DataFrame:
+        """Every data set × hyper-parameter set × method, one-step and free run, ranked by
+        free-run NRMSE within each data set: read from the stored ``<method>_scores`` of
+        every partition materialised so far (the others are listed as missing), shown here
+        and logged to MLflow (``leaderboard.csv`` and ``.md``, one run per data set in its
+        experiment)."""
+        keys = [str(k) for k in
+                partitions_def.get_partition_keys(dynamic_partitions_store=context.instance)]
+        stacked, missing = [], {}
+        for key in keys:
+            dataset, hparams = split_key(key)
+            absent = [m for m in METHODS if key not in scores[f"{m}_scores"]]
+            if absent:
+                missing[key] = absent
+            stacked += [scores[f"{m}_scores"][key].assign(dataset=dataset, hparams=hparams,
+                                                          method=m)
+                        for m in METHODS if m not in absent]
+        if not stacked:
+            context.log.warning("leaderboard: no partition has scores yet")
+            table = leaderboard_table(pd.DataFrame(columns=[
+                "dataset", "hparams", "method", "mode", "output", "nrmse", "r2", "diverged"]))
+        else:
+            table = leaderboard_table(pd.concat(stacked, ignore_index=True))
+        text = leaderboard_markdown(table, missing)
+        links = {}
+        for dataset, rows in table.groupby("dataset", sort=False):
+            scored = rows[~rows["free_run_diverged"]]["free_run_nrmse"]
+            run_id = mlflow.log_run(
+                dataset=dataset, hparams="all", method=LEADERBOARD, run_name=LEADERBOARD,
+                params={"partitions": ", ".join(dict.fromkeys(
+                    f"{dataset}|{h}" for h in rows["hparams"]))},
+                metrics={"rows": len(rows), "best_free_run_nrmse":
+                         float(scored.min()) if len(scored) else None},
+                tags={"dagster_run_id": context.run.run_id},
+                artifacts={"leaderboard.csv": rows.reset_index(drop=True),
+                           "leaderboard.md": leaderboard_markdown(rows)})
+            links[f"mlflow_run {dataset}"] = dg.MetadataValue.url(mlflow.run_url(run_id))
+        context.log.info(f"leaderboard: {len(table)} rows from {len(keys) - len(missing)} of "
+                         f"{len(keys)} partitions ({len(missing)} not (fully) materialised)")
+        context.add_output_metadata({
+            "leaderboard": dg.MetadataValue.md(text), "rows": len(table),
+            "partitions_scored": len(keys) - len(missing), "partitions_missing": len(missing),
+            "missing": ", ".join(missing) or "none", **links})
+        return table
+
+    return leaderboard
+
+
 def build_assets(partitions_def: dg.PartitionsDefinition) -> list[dg.AssetsDefinition]:
-    """Every asset of the pipeline on ``partitions_def``."""
+    """Every asset of the pipeline on ``partitions_def``: the partitioned ones, then the
+    unpartitioned ``leaderboard``."""
     baselines = [m for m in METHODS.values() if m.name != "pwa"]
     return [*_identification_assets(partitions_def),
             *(_baseline_model_asset(m, partitions_def) for m in baselines),
             *(_scores_asset(m, partitions_def) for m in METHODS.values()),
-            _comparison_asset(partitions_def)]
+            _comparison_asset(partitions_def), _leaderboard_asset(partitions_def)]

@@ -20,7 +20,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ..scoring.comparison import mean_scores
     from .definitions import defs, partitions_of
+    from .jobs import LEADERBOARD, SWEEP_SELECTION
     from .partitions import all_keys, check_keys, default_keys
+    from .reporting import leaderboard_markdown
     from .resources import MLflowTracker
 
     partitions_def = partitions_of(defs)
@@ -37,11 +39,8 @@ def run(args: argparse.Namespace) -> int:
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
     failed = []
     summaries = []
-    for key in keys:
-        print(f"\n=== materialising {key} ===", flush=True)
-        t0 = time.perf_counter()
-        result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
-                                instance=instance, run_config=quiet, raise_on_error=False)
+    for key, result, t0 in _partition_runs(args, defs, keys, instance, resources, quiet,
+                                           SWEEP_SELECTION):
         if not result.success:
             failed.append(key)
             summaries.append(f"{key}: FAILED after {time.perf_counter() - t0:.1f} s (run "
@@ -52,6 +51,17 @@ def run(args: argparse.Namespace) -> int:
         print(mean_scores(table).to_markdown(floatfmt=".4g"))
         summaries.append(_summary(key, result, table, time.perf_counter() - t0))
     print("\nSummary\n  " + "\n  ".join(summaries))
+    # the leaderboard ranks every partition stored so far, not only the ones just run
+    board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
+                           instance=instance, run_config=quiet, raise_on_error=False)
+    if board.success:
+        meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
+        print(f"\nLeaderboard (every partition stored so far; "
+              f"{meta['partitions_missing'].value} not materialised)\n")
+        print(leaderboard_markdown(board.output_for_node(LEADERBOARD)), end="")
+    else:
+        failed.append(LEADERBOARD)
+        print(f"\nLeaderboard: FAILED (run {board.run_id} in the Dagster UI)")
     experiments = "" if uri.startswith(("http://", "https://")) else \
         "      then open http://127.0.0.1:5000/#/experiments (the runs of each data set)\n"
     print(f"""
@@ -64,6 +74,40 @@ Open the UIs on the same stores:
   mlflow ui --backend-store-uri {uri} --workers 1          # http://127.0.0.1:5000
 {experiments}""", end="")
     return 1 if failed else 0
+
+
+def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, resources: dict,
+                    run_config: dict, selection):
+    """``(key, result, start time)`` of each partition's run, in one process
+    (``dg.materialize``) or, with ``--executor dask``, as ``sweep_dask`` runs on a dask
+    cluster (a LocalCluster unless ``--scheduler``)."""
+    import dagster as dg
+
+    def announce(key: str) -> None:
+        print(f"\n=== materialising {key} ===", flush=True)
+
+    if args.executor != "dask":
+        for key in keys:
+            announce(key)
+            t0 = time.perf_counter()
+            yield key, dg.materialize(list(defs.assets), partition_key=key, selection=selection,
+                                      resources=resources, instance=instance,
+                                      run_config=run_config, raise_on_error=False), t0
+        return
+    from .dask_sweep import dask_scheduler, sweep_on_dask
+
+    if args.tracking_uri:  # the workers build their resources from run configuration
+        run_config = {**run_config,
+                      "resources": {"mlflow": {"config": {"tracking_uri": args.tracking_uri}}}}
+    with dask_scheduler(args.scheduler, n_workers=args.workers) as address:
+        print(f"dask scheduler {address}" + ("" if args.scheduler else
+              f" (a LocalCluster of {args.workers} worker processes; dashboard on port "
+              f"8787 if it was free)"), flush=True)
+        t0 = time.perf_counter()
+        for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
+                                         io_manager=resources["io_manager"]):
+            yield key, result, t0
+            t0 = time.perf_counter()
 
 
 def _summary(key: str, result, table, seconds: float) -> str:
@@ -113,6 +157,17 @@ def main(argv: list[str] | None = None) -> int:
                             "default: hure_vasak and kuka_robot (if its data are present) "
                             "with the 'paper' and 'default' sets")
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
+    p_run.add_argument("--executor", choices=("in-process", "dask"), default="in-process",
+                       help="in-process (default): each partition one run, every step in "
+                            "this process; dask: each partition one run of the sweep_dask "
+                            "job whose steps are tasks on a dask cluster (a LocalCluster "
+                            "started here, or --scheduler); partitions run one at a time")
+    p_run.add_argument("--scheduler", default="", metavar="ADDRESS",
+                       help="address of a running dask scheduler, e.g. tcp://10.0.0.5:8786 "
+                            "(implies --executor dask; its workers need pwa-pipeline installed "
+                            "and the same stores)")
+    p_run.add_argument("--workers", type=int, default=2, metavar="N",
+                       help="worker processes of the LocalCluster (default 2)")
     p_run.add_argument("--tracking-uri", default="",
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")
@@ -128,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     p_doc.add_argument("--tracking-uri", default="", help="MLflow tracking URI (default as "
                                                           "for run)")
     args = parser.parse_args(argv)
+    if args.command == "run" and args.scheduler:
+        args.executor = "dask"
     if args.command == "partitions":
         from .definitions import defs, partitions_of
         from .partitions import all_keys

@@ -7,6 +7,7 @@ import dagster as dg
 from ..config import HParamsFile
 from ..datasets import DATASETS
 from .assets import build_assets
+from .jobs import build_jobs
 from .partitions import build_partitions
 from .resources import MLflowTracker, PipelineSettings
 from .schedules import build_sweep
@@ -34,7 +35,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None, **resources
     settings = resources.pop("settings", PipelineSettings())
     return dg.Definitions(
         assets=build_assets(partitions_def),
-        jobs=[job],
+        jobs=[job, *build_jobs()],
         schedules=[schedule],
         # One process per run: the steps take seconds, while the multiprocess executor
         # started a process per step (each importing Dagster, MLflow and scikit-learn) and
@@ -50,8 +51,8 @@ def build_definitions(hparams_path: str | os.PathLike | None = None, **resources
 
 
 def partitions_of(defs: dg.Definitions) -> dg.MultiPartitionsDefinition:
-    """The partitions every asset of ``defs`` shares."""
-    return next(iter(defs.assets)).partitions_def
+    """The partitions every partitioned asset of ``defs`` shares."""
+    return next(a.partitions_def for a in defs.assets if a.partitions_def is not None)
 
 
 defs = build_definitions()

@@ -267,20 +267,22 @@ class MLflowTracker(dg.ConfigurableResource):
         tags: dict[str, str],
         artifacts: dict[str, object],
         model: "ModelToLog | None" = None,
+        run_name: str | None = None,
     ) -> str:
         """Create, fill and close one run; returns its id.
 
-        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV) or
-        matplotlib figures (as PNG). ``model`` is logged as the run's MLflow model (a pyfunc
-        with signature and input example, registered as ``<prefix>.<dataset>.<method>``)
-        and its training table as the run's dataset.
+        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
+        matplotlib figures (as PNG) or text (as it is). ``model`` is logged as the run's MLflow
+        model (a pyfunc with signature and input example, registered as
+        ``<prefix>.<dataset>.<method>``) and its training table as the run's dataset.
+        ``run_name`` defaults to ``<method>|<hparams>``.
         """
         from mlflow.entities import Metric, Param, RunTag
 
         self.check_reachable()
         client = self.client()
         exp_id = self._experiment(client, dataset)
-        run = client.create_run(exp_id, run_name=f"{method}|{hparams}",
+        run = client.create_run(exp_id, run_name=run_name or f"{method}|{hparams}",
                                 tags={"dataset": dataset, "hparams": hparams,
                                       "method": method, **tags})
         run_id = run.info.run_id
@@ -300,6 +302,8 @@ class MLflowTracker(dg.ConfigurableResource):
                     client.log_figure(run_id, obj, name)
                 elif isinstance(obj, pd.DataFrame):
                     client.log_text(run_id, obj.to_csv(index=False), name)
+                elif isinstance(obj, str):
+                    client.log_text(run_id, obj, name)
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             if model is not None:

@@ -1,16 +1,18 @@
-"""The sweep job over every asset, and a schedule that requests every partition."""
+"""The sweep job over every partitioned asset, and a schedule that requests every partition."""
 
 import dagster as dg
 
+from .jobs import SWEEP_SELECTION
 from .partitions import all_keys, split_key, unavailable_datasets
 
 
 def build_sweep(partitions_def: dg.MultiPartitionsDefinition
                 ) -> tuple:
     """The ``sweep`` job (every asset of one partition) and ``sweep_schedule``."""
-    job = dg.define_asset_job("sweep", selection=dg.AssetSelection.all(),
+    job = dg.define_asset_job("sweep", selection=SWEEP_SELECTION,
                               executor_def=dg.in_process_executor,
-                              description="Every asset of one partition, in one process.")
+                              description="Every asset of one partition, in one process "
+                                          "(all but the unpartitioned leaderboard).")
 
     @dg.schedule(job=job, cron_schedule="0 2 * * 6",
                  default_status=dg.DefaultScheduleStatus.STOPPED)

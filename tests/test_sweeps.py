@@ -1,0 +1,275 @@
+"""Sweeps: the jobs the runs belong to, the schedule, the dask executor, the leaderboard."""
+
+import io
+import shutil
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import pytest
+
+from pwa_pipeline.config import BUNDLED_HPARAMS
+from pwa_pipeline.definitions import defs
+from pwa_pipeline.methods import METHODS
+from pwa_pipeline.orchestration.definitions import partitions_of
+from pwa_pipeline.orchestration.jobs import LEADERBOARD, SCHEDULER_ENV, build_jobs
+from pwa_pipeline.orchestration.partitions import all_keys
+from pwa_pipeline.orchestration.reporting import leaderboard_markdown
+from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+from pwa_pipeline.scoring.comparison import leaderboard
+
+KEYS = ["hure_vasak|paper", "hure_vasak|default"]
+
+
+def _jobs_of(asset: str) -> set[str]:
+    repo = defs.get_repository_def()
+    return {job.name for job in repo.get_all_jobs()
+            if dg.AssetKey(asset) in job.asset_layer.selected_asset_keys}
+
+
+def test_every_partitioned_asset_belongs_to_the_sweep_jobs_and_the_leaderboard_to_its_own():
+    repo = defs.get_repository_def()
+    partitioned = [a.key.to_user_string() for a in defs.assets if a.partitions_def is not None]
+    assert len(partitioned) == len(list(defs.assets)) - 1
+    for asset in partitioned:
+        assert _jobs_of(asset) == {"__ASSET_JOB", "sweep", "sweep_dask"}, asset
+    assert _jobs_of(LEADERBOARD) == {"__ASSET_JOB", "refresh_leaderboard"}
+    sweep = repo.get_job("sweep")
+    assert sweep.partitions_def == partitions_of(defs)
+    assert sweep.executor_def.name == "in_process"  # a UI launch costs one process start
+    assert repo.get_job("sweep_dask").executor_def.name == "dask"
+    assert repo.get_job("refresh_leaderboard").partitions_def is None
+
+
+def test_sweep_dask_uses_a_local_cluster_unless_a_scheduler_is_configured(monkeypatch):
+    def cluster():
+        job = dg.Definitions(assets=list(defs.assets), jobs=build_jobs(),
+                             resources=defs.resources).resolve_job_def("sweep_dask")
+        config = job.get_run_config_for_partition_key(KEYS[0])  # what a launch starts from
+        return config["execution"]["config"]["cluster"]
+
+    monkeypatch.delenv(SCHEDULER_ENV, raising=False)
+    assert cluster() == {"local": {"n_workers": 2, "threads_per_worker": 1}}
+    monkeypatch.setenv(SCHEDULER_ENV, "tcp://127.0.0.1:8786")
+    assert cluster() == {"existing": {"address": "tcp://127.0.0.1:8786"}}
+
+
+def test_schedule_requests_are_sweep_runs_with_partition_keys():
+    repo = defs.get_repository_def()
+    schedule = repo.get_schedule_def("sweep_schedule")
+    assert schedule.job_name == "sweep"
+    ctx = dg.build_schedule_context(scheduled_execution_time=pd.Timestamp("2026-11-21T02:00"))
+    requests = list(schedule(ctx))
+    assert requests and all(r.job_name in (None, "sweep") for r in requests)
+    assert {r.partition_key for r in requests} <= set(all_keys(partitions_of(defs)))
+    # what the daemon launches: sweep runs tagged with the partition and its dimensions
+    sweep = repo.get_job("sweep")
+    for request in requests:
+        tags = request.with_resolved_tags_and_config(
+            target_definition=sweep, dynamic_partitions_requests=[],
+            dynamic_partitions_store=None).tags
+        dataset, hparams = request.partition_key.split("|")
+        assert tags["dagster/partition"] == request.partition_key
+        assert (tags["dagster/partition/dataset"], tags["dagster/partition/hparams"]) == (
+            dataset, hparams)
+
+
+def test_leaderboard_ranks_by_free_run_and_puts_diverged_runs_last():
+    rows = []
+    for method, hparams, one, free, diverged in [
+            ("pwa", "paper", 0.2, 0.5, False), ("linear_arx", "paper", 0.3, 0.4, False),
+            ("subspace", "paper", 0.1, 1e30, True), ("pwa", "default", 0.1, 0.4, False),
+            ("linear_arx", "default", 0.3, np.nan, True)]:
+        for mode, nrmse in (("one_step", one), ("free_run", free)):
+            rows += [{"dataset": "sim", "hparams": hparams, "method": method, "mode": mode,
+                      "output": out, "nrmse": nrmse, "r2": 1 - nrmse**2,
+                      "diverged": diverged and mode == "free_run"} for out in ("y1", "mean")]
+    rows.append({**rows[1], "dataset": "robot", "nrmse": 0.123456789})  # one-step mean
+    rows.append({**rows[3], "dataset": "robot", "nrmse": 0.87654321})  # free-run mean
+    table = leaderboard(pd.DataFrame(rows))
+    sim = table[table["dataset"] == "sim"]
+    assert list(zip(sim["method"], sim["hparams"], sim["rank"], strict=True)) == [
+        ("pwa", "default", 1), ("linear_arx", "paper", 1), ("pwa", "paper", 3),
+        ("linear_arx", "default", 4), ("subspace", "paper", 4)]  # diverged: last, NaN too
+    assert sim["free_run_diverged"].tolist() == [False, False, False, True, True]
+    assert table["free_run_nrmse"].iloc[4] == 1e30  # the table keeps the exact value
+    assert list(table["dataset"]) == ["sim"] * 5 + ["robot"]
+    text = leaderboard_markdown(table, {"robot|default": ["pwa", "subspace"]})
+    line = next(row for row in text.splitlines() if "subspace" in row)
+    assert "≥ 10 (diverged)" in line and "≤ -99 (diverged)" in line and "1e+30" not in line
+    assert "0.1235" in text and "0.8765" in text and "0.12346" not in text  # 4 digits
+    assert "### sim" in text and "### robot" in text
+    assert "- `robot|default`: pwa, subspace" in text
+
+
+@pytest.fixture(scope="module")
+def dask_sweep(tmp_path_factory, mlflow_template):
+    """Two partitions of the simulated data set swept through the dask executor (a
+    LocalCluster of one worker thread), on a persistent instance and fresh stores."""
+    from dask.distributed import Client, get_task_stream
+
+    from pwa_pipeline.orchestration.dask_sweep import dask_scheduler, sweep_on_dask
+
+    folder = tmp_path_factory.mktemp("dask_sweep")
+    shutil.copy(mlflow_template, folder / "mlflow.db")
+    uri = f"sqlite:///{folder / 'mlflow.db'}"
+    run_config = {"resources": {
+        "io_manager": {"config": {"base_dir": str(folder / "storage")}},
+        "settings": {"config": {"cache_dir": str(folder / "cache"),
+                                "hparams_path": str(BUNDLED_HPARAMS)}},
+        "mlflow": {"config": {"tracking_uri": uri}}}}
+    io_manager = PartitionedFileIOManager(base_dir=str(folder / "storage"))
+    (folder / "home").mkdir()
+    with dg.DagsterInstance.local_temp(str(folder / "home")) as instance, \
+            dask_scheduler(n_workers=1, processes=False, dashboard=None) as address, \
+            Client(address) as client:
+        with get_task_stream(client) as stream:  # the tasks the scheduler ran
+            runs = [run for _, run in sweep_on_dask(KEYS, instance, address, run_config,
+                                                    io_manager=io_manager)]
+        tasks = {task["key"] for task in stream.data}
+        board = defs.resolve_job_def("refresh_leaderboard").execute_in_process(
+            instance=instance, run_config=run_config)
+        records = {run.run_id: instance.get_run_by_id(run.run_id) for run in runs}
+        yield dict(runs=runs, records=records, address=address, tasks=tasks, board=board,
+                   io_manager=io_manager, uri=uri, folder=folder)
+
+
+def test_a_two_partition_sweep_runs_on_the_dask_executor(dask_sweep):
+    from mlflow.tracking import MlflowClient
+
+    runs, records = dask_sweep["runs"], dask_sweep["records"]
+    assert [run.success for run in runs] == [True, True]
+    for key, run in zip(KEYS, runs, strict=True):
+        record = records[run.run_id]
+        assert record.job_name == "sweep_dask" and record.tags["dagster/partition"] == key
+        assert record.run_config["execution"]["config"]["cluster"] == {
+            "existing": {"address": dask_sweep["address"]}}
+    # every step was a task on the cluster (dagster-dask names them <job>.<step>)
+    assert {f"sweep_dask.{m}_scores" for m in METHODS} | {
+        "sweep_dask.pwa_model", "sweep_dask.comparison"} <= dask_sweep["tasks"]
+    # both partitions' assets stored, scores included, in the run's own store
+    for key in KEYS:
+        model = runs[0].io_manager.load(dg.AssetKey("pwa_model"), key)
+        assert model.n_submodels_ >= 1
+        for method in METHODS:
+            scores = dask_sweep["io_manager"].load(dg.AssetKey(f"{method}_scores"), key)
+            assert set(scores["mode"]) == {"one_step", "free_run"}
+        comparison = runs[KEYS.index(key)].output_for_node("comparison")
+        assert list(dict.fromkeys(comparison["method"])) == list(METHODS)
+    # and logged: one MLflow run per method and partition, tagged with its Dagster run
+    client = MlflowClient(tracking_uri=dask_sweep["uri"])
+    exp = client.get_experiment_by_name("pwa-pipeline/hure_vasak")
+    logged = client.search_runs([exp.experiment_id], filter_string="tags.method != 'leaderboard'")
+    assert sorted((r.data.tags["partition"], r.data.tags["method"]) for r in logged) == sorted(
+        (k, m) for k in KEYS for m in METHODS)
+    assert {r.data.tags["dagster_run_id"] for r in logged} == {run.run_id for run in runs}
+
+
+def test_the_leaderboard_ranks_every_stored_partition_and_lists_the_missing(dask_sweep):
+    from mlflow.tracking import MlflowClient
+
+    board = dask_sweep["board"]
+    assert board.success
+    table = board.output_for_node(LEADERBOARD)
+    assert sorted(zip(table["hparams"], table["method"], strict=True)) == sorted(
+        (k.split("|")[1], m) for k in KEYS for m in METHODS)
+    # the leaderboard's numbers are the stored scores' output means
+    io_manager = dask_sweep["io_manager"]
+    for row in table.itertuples():
+        scores = io_manager.load(dg.AssetKey(f"{row.method}_scores"), f"hure_vasak|{row.hparams}")
+        free = scores[(scores["mode"] == "free_run") & (scores["output"] == "mean")]
+        assert row.free_run_nrmse == free["nrmse"].iloc[0]
+    assert (np.diff(table["free_run_nrmse"]) >= 0).all() and table["rank"].iloc[0] == 1
+    meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
+    others = set(all_keys(partitions_of(defs))) - set(KEYS)
+    assert meta["partitions_scored"].value == 2
+    assert meta["partitions_missing"].value == len(others)
+    assert set(meta["missing"].value.split(", ")) == others
+    assert "kuka_robot|paper" in meta["leaderboard"].value
+    assert "### hure_vasak" in meta["leaderboard"].value
+    assert (dask_sweep["folder"] / "storage" / "leaderboard.parquet").is_file()
+    # logged as a run of its own in the data set's experiment, csv + md
+    client = MlflowClient(tracking_uri=dask_sweep["uri"])
+    exp = client.get_experiment_by_name("pwa-pipeline/hure_vasak")
+    [run] = client.search_runs([exp.experiment_id],
+                               filter_string="tags.method = 'leaderboard'")
+    assert run.info.run_name == "leaderboard" and run.data.tags["latest"] == "true"
+    assert {a.path for a in client.list_artifacts(run.info.run_id)} == {
+        "leaderboard.csv", "leaderboard.md"}
+    import mlflow
+
+    mlflow.set_tracking_uri(dask_sweep["uri"])
+    csv = mlflow.artifacts.load_text(f"runs:/{run.info.run_id}/leaderboard.csv")
+    logged = pd.read_csv(io.StringIO(csv))
+    assert list(logged["method"]) == list(table["method"])
+    np.testing.assert_allclose(logged["free_run_nrmse"], table["free_run_nrmse"])
+    assert run.data.metrics["best_free_run_nrmse"] == pytest.approx(table["free_run_nrmse"].min())
+
+
+def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, monkeypatch,
+                                                    capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))  # stores, MLflow and Dagster home
+    for name in ("MLFLOW_TRACKING_URI", "PWA_HPARAMS", "PWA_DATASETS"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    assert main(["run", "--partition", "hure_vasak|paper"]) == 0
+    out = capsys.readouterr().out
+    summary, board = out.split("\nLeaderboard (every partition stored so far; ")
+    assert "hure_vasak|paper: " in summary
+    assert board.startswith(f"{len(all_keys(partitions_of(defs))) - 1} not materialised)")
+    rows = [line for line in board.splitlines() if line.startswith("|") and "paper" in line]
+    assert sorted(row.split("|")[2].strip() for row in rows) == sorted(METHODS)
+    assert (tmp_path / "storage" / "leaderboard.parquet").is_file()
+
+
+def test_runs_launched_from_the_sweep_page_of_the_ui_are_sweep_runs(tmp_path):
+    """What the UI sends when *Materialize all…* is clicked on *Jobs → sweep*: one partition
+    is a run of ``sweep``, several a backfill of ``sweep``; both on the job's Runs tab."""
+    from dagster_graphql.client.query import (
+        LAUNCH_PARTITION_BACKFILL_MUTATION,
+        LAUNCH_PIPELINE_EXECUTION_MUTATION,
+    )
+    from dagster_graphql.test.utils import (
+        define_out_of_process_context,
+        execute_dagster_graphql,
+        infer_repository_selector,
+    )
+
+    workspace = tmp_path / "workspace.yaml"
+    workspace.write_text("load_from:\n  - python_module:\n      module_name: "
+                         "pwa_pipeline.definitions\n      location_name: pwa_pipeline\n")
+    (tmp_path / "home").mkdir()
+    queued = {"run_coordinator": {"module": "dagster.core.run_coordinator",
+                                  "class": "QueuedRunCoordinator"}}  # runs wait, none executes
+    with dg.DagsterInstance.local_temp(str(tmp_path / "home"), overrides=queued) as instance, \
+            define_out_of_process_context(str(workspace), None, instance) as ctx:
+        nodes = execute_dagster_graphql(
+            ctx, "{ assetNodes { assetKey { path } jobNames } }").data["assetNodes"]
+        jobs = {"/".join(n["assetKey"]["path"]): n["jobNames"] for n in nodes}
+        # the UI launches the first job in this list unless it is on a job's own page
+        assert jobs[LEADERBOARD] == ["__ASSET_JOB", "refresh_leaderboard"]
+        swept = [n["assetKey"] for n in nodes if n["assetKey"]["path"] != [LEADERBOARD]]
+        assert all(jobs["/".join(a["path"])] == ["__ASSET_JOB", "sweep", "sweep_dask"]
+                   for a in swept)
+        repository = infer_repository_selector(ctx)
+        single = execute_dagster_graphql(ctx, LAUNCH_PIPELINE_EXECUTION_MUTATION, variables={
+            "executionParams": {
+                "selector": {**repository, "pipelineName": "sweep", "assetSelection": swept},
+                "runConfigData": "{}", "mode": "default",
+                "executionMetadata": {"tags": [{"key": "dagster/partition",
+                                                "value": KEYS[0]}]}}})
+        assert single.data["launchPipelineExecution"]["__typename"] == "LaunchRunSuccess"
+        backfill = execute_dagster_graphql(ctx, LAUNCH_PARTITION_BACKFILL_MUTATION, variables={
+            "backfillParams": {
+                "selector": {"partitionSetName": "sweep_partition_set",
+                             "repositorySelector": repository},
+                "assetSelection": swept, "partitionNames": KEYS, "fromFailure": False,
+                "forceSynchronousSubmission": True}}).data["launchPartitionBackfill"]
+        assert backfill["__typename"] == "LaunchBackfillSuccess"
+        runs = instance.get_runs(dg.RunsFilter(job_name="sweep"))  # the job's Runs tab
+        assert sorted(r.tags["dagster/partition"] for r in runs) == sorted([KEYS[0], *KEYS])
+        assert {r.run_id for r in runs} >= set(backfill["launchedRunIds"])
+        assert not instance.get_runs(dg.RunsFilter(job_name="__ASSET_JOB"))
