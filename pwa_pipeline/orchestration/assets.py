@@ -1,8 +1,8 @@
 """The identification pipeline as software-defined assets.
 
 configuration, raw_benchmark → regressors → local_models → clusters → sub_models →
-svm_regions → pwa_model; linear_arx_model and subspace_model beside it; each model scored by
-``<method>_scores`` (the evaluation protocol, one MLflow run each); ``comparison`` puts them
+svm_regions → output_error_refinement (a no-op unless the set asks for it) → pwa_model;
+linear_arx_model and subspace_model beside it; each model scored by ``<method>_scores`` (the evaluation protocol, one MLflow run each); ``comparison`` puts them
 side by side. Every asset is partitioned by data set × hyper-parameter set, and every
 partition's configuration is resolved once, by the ``configuration`` asset; only
 ``leaderboard`` is not: it ranks the stored scores of every partition. Methods come from
@@ -19,12 +19,14 @@ from sklearn.base import BaseEstimator, clone
 from .._validation import as_experiments
 from ..config import Configuration
 from ..datasets import Dataset
+from ..datasets.registry import GroundTruth
 from ..methods import METHODS, Method
 from ..pwa import PWARX, STEPS
 from ..pwa.regressors import Regressors, build_regressors, regressor_names
 from ..scoring.comparison import leaderboard as leaderboard_table
 from ..scoring.comparison import mean_scores
 from ..scoring.evaluation import evaluate
+from ..scoring.truth import ground_truth_scores
 from .checks import (
     CLUSTER_CHECKS,
     COMPARISON_CHECKS,
@@ -66,13 +68,36 @@ from .storage import (
 )
 
 GROUP = "identification"
-#: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`.
-STEP_ASSETS = dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
-                       strict=True))
+#: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.
+STEP_ASSETS = {**dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
+                          strict=True)), "refinement": "output_error_refinement"}
 
 
 def _phi_names(pwa: PWARX, data: Dataset) -> list[str]:
     return regressor_names(data.y_names, data.u_names, pwa.na, pwa.nb, pwa.affine)
+
+
+def _truth(model: PWARX, data: Dataset) -> GroundTruth | None:
+    """The data set's ground truth when it has one and the model has its structure."""
+    truth = data.truth
+    if truth is None or (model.na, model.nb, model.affine) != (truth.na, truth.nb,
+                                                               truth.affine):
+        return None
+    return truth
+
+
+def _truth_metadata(model: PWARX, data: Dataset) -> dict:
+    """Parameter error and region accuracy on the held-out data against the true system
+    (simulated data sets), or why they are not given."""
+    if data.truth is None:
+        return {}
+    truth = _truth(model, data)
+    if truth is None:
+        t = data.truth
+        return {"ground_truth": f"not comparable: the model's (na, nb, affine) = "
+                                f"{(model.na, model.nb, model.affine)}, the system's "
+                                f"{(t.na, t.nb, t.affine)}"}
+    return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
 
 
 def _latest_metadata(context: dg.AssetExecutionContext, asset: str, key: str) -> float:
@@ -207,29 +232,59 @@ def _identification_assets(partitions_def) -> list:
                                              "hyperplanes": markdown(table)}))
         return step
 
+    @dg.asset(**part, kinds={"scipy"})
+    def output_error_refinement(context: dg.AssetExecutionContext,
+                                configuration: Configuration, raw_benchmark: Dataset,
+                                regressors: Regressors, local_models: BaseEstimator,
+                                clusters: BaseEstimator, sub_models: BaseEstimator,
+                                svm_regions: BaseEstimator) -> BaseEstimator | None:
+        """θ_i refined to minimise the free-run error on the training experiments, regions
+        kept (the fitted ``refinement`` step); None when the set configures no refinement."""
+        pwa = configuration.pwa
+        if pwa.refinement is None:
+            context.add_output_metadata({"refined": False, "seconds": 0.0})
+            return None
+        model = clone(pwa).assemble(regressors, local_models=local_models, clustering=clusters,
+                                    submodels=sub_models, regions=svm_regions)
+        step = model.fit_refinement(as_experiments(raw_benchmark.u_train,
+                                                   raw_benchmark.y_train))
+        context.log.info(f"refinement: training free-run MSE {step.cost_start_:.4g} → "
+                         f"{step.cost_:.4g} in {step.n_iter_} steps, {step.seconds_:.1f} s "
+                         f"({step.stop_})")
+        context.add_output_metadata(rounded({
+            "refined": True, "cost_start": step.cost_start_, "cost": step.cost_,
+            "iterations": step.n_iter_, "stop": step.stop_, "seconds": step.seconds_}))
+        return step
+
     @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
     def pwa_model(context: dg.AssetExecutionContext, configuration: Configuration,
                   raw_benchmark: Dataset, regressors: Regressors, local_models: BaseEstimator,
                   clusters: BaseEstimator, sub_models: BaseEstimator,
-                  svm_regions: BaseEstimator) -> PWARX:
+                  svm_regions: BaseEstimator,
+                  output_error_refinement: BaseEstimator | None) -> PWARX:
         """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores."""
         model = clone(configuration.pwa).assemble(
             regressors, local_models=local_models, clustering=clusters, submodels=sub_models,
-            regions=svm_regions)
+            regions=svm_regions, refinement=output_error_refinement)
         model.timings_ = {name: _latest_metadata(context, asset, "seconds")
                           for name, asset in STEP_ASSETS.items()}
         data = raw_benchmark
-        switching = switching_figure(model, data.u_test[0], data.y_test[0])
+        truth = _truth(model, data)
+        switching = switching_figure(
+            model, data.u_test[0], data.y_test[0],
+            true_modes=truth.modes_test[0] if truth else None,
+            true_thetas=truth.thetas if truth else None)
         regions = regions_figure(model, regressors.phi, _phi_names(model, data))
         context.add_output_metadata(rounded({
             "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
             "resolved parameters": markdown(params_table(model.resolved_params())),
+            **_truth_metadata(model, data),
             "switching (first held-out experiment)": dg.MetadataValue.md(to_markdown(switching)),
             "regions": dg.MetadataValue.md(to_markdown(regions))}))
         return model
 
     return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
-            svm_regions, pwa_model]
+            svm_regions, output_error_refinement, pwa_model]
 
 
 def _baseline_model_asset(method: Method, partitions_def):
@@ -268,7 +323,9 @@ def _scores_asset(method: Method, partitions_def):
         if isinstance(model, PWARX):
             extra_metrics.update(n_submodels=model.n_submodels_,
                                  noise_share=model.clustering_.noise_share_,
-                                 eps=model.clustering_.eps_)
+                                 eps=model.clustering_.eps_,
+                                 **{k: v for k, v in _truth_metadata(model, data).items()
+                                    if not isinstance(v, str)})
             thetas = theta_table(model.thetas_, _phi_names(model, data), data.y_names)
             artifacts["parameter_matrices.json"] = {
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),

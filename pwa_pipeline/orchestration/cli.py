@@ -1,4 +1,5 @@
-"""Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end.
+"""Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end;
+``add-dataset``, ``list-datasets`` and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and
 MLflow's embedded store ``<project>/mlflow.db`` (or ``$MLFLOW_TRACKING_URI``), so the Dagster
@@ -9,8 +10,9 @@ import argparse
 import sys
 import time
 
+from ..datasets.user import DEFAULT_TEST_FRACTION
 from .instance import prepare_instance
-from .paths import default_storage_dir, default_tracking_uri
+from .paths import default_datasets_path, default_storage_dir, default_tracking_uri
 from .resources import mask_credentials
 
 
@@ -19,16 +21,22 @@ def run(args: argparse.Namespace) -> int:
     import dagster as dg
 
     from ..scoring.comparison import mean_scores
-    from .definitions import defs, partitions_of
+    from .definitions import build_definitions, partitions_of
     from .jobs import LEADERBOARD, SWEEP_SELECTION
-    from .partitions import all_keys, check_keys, default_keys
+    from .partitions import DEFAULT_SETS, check_keys, runnable_keys
     from .reporting import leaderboard_markdown
     from .resources import MLflowTracker
 
+    defs = build_definitions()  # read now: a data set may have been registered since import
     partitions_def = partitions_of(defs)
-    keys = all_keys(partitions_def) if args.all else (args.partition
-                                                     or default_keys(partitions_def))
-    check_keys(partitions_def, keys)  # a clear error for a mistyped key before anything runs
+    if args.partition:
+        keys = args.partition
+        check_keys(partitions_def, keys)  # a clear error for a mistyped key before any run
+    else:
+        keys, skipped = runnable_keys(partitions_def, defs.resources["settings"],
+                                      None if args.all else DEFAULT_SETS)
+        for what, reason in skipped.items():
+            print(f"note: {what} left out: {reason}", file=sys.stderr)
     instance = prepare_instance()
     home = instance.root_directory
     resources = dict(defs.resources)
@@ -120,6 +128,70 @@ def _summary(key: str, result, table, seconds: float) -> str:
             f"({seconds:.1f} s)")
 
 
+def add_dataset(args: argparse.Namespace) -> int:
+    """Check a CSV/Parquet file and register it as a data set (nothing is registered when
+    the check fails)."""
+    from ..config import HParamsFile
+    from ..datasets.user import DatasetRegistry, UserDataset
+
+    registry = DatasetRegistry(default_datasets_path())
+    spec = UserDataset(
+        name=args.name, path=args.file, u=tuple(args.u), y=tuple(args.y),
+        experiment=args.experiment, time=args.time,
+        test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
+        na=args.na, nb=args.nb, affine=args.affine)
+    data = registry.add(spec, replace=args.replace)
+    hparams = HParamsFile()
+    sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
+    others = [s for s in hparams.sets if s not in sets]
+    print(f"registered {spec.name!r} in {registry.path}\n"
+          f"  file     : {spec.path}\n"
+          f"  inputs   : {', '.join(spec.u)}; outputs: {', '.join(spec.y)}; na = {spec.na}, "
+          f"nb = {spec.nb}, affine = {spec.affine}\n"
+          f"  training : {len(data.u_train)} experiment(s), {data.n_train:,} samples\n"
+          f"  held out : {len(data.u_test)} experiment(s), {data.n_test:,} samples")
+    if sets:
+        print(f"  partitions: {', '.join(f'{spec.name}|{s}' for s in sets)}")
+    if others:
+        print(f"  sets {others} have no values for it: add a [<set>.\"*\"] or "
+              f"[<set>.{spec.name}] table to {hparams.path}")
+    if sets:
+        print(f"Run it:  python -m pwa_pipeline run --partition '{spec.name}|{sets[0]}'")
+    print("In a running Dagster UI, reload the code location (Deployment → Reload) to see it.")
+    return 0
+
+
+def list_datasets(args: argparse.Namespace) -> int:
+    """Print the registered data sets, one per line, with their columns, split and orders."""
+    from pathlib import Path
+
+    from ..datasets.user import DatasetRegistry
+
+    registry = DatasetRegistry(default_datasets_path())
+    names = registry.names()
+    print(f"{len(names)} registered data set(s) in {registry.path}")
+    for name in names:
+        spec = registry.get(name)
+        split = (f"test experiments {list(spec.test_experiments)}" if spec.test_experiments
+                 else f"test fraction {spec.test_fraction or DEFAULT_TEST_FRACTION:g}")
+        state = "" if Path(spec.path).is_file() else "  [FILE MISSING]"
+        print(f"  {name}: {spec.path}{state}\n    u = {list(spec.u)}, y = {list(spec.y)}, "
+              f"experiment = {spec.experiment}, time = {spec.time}, {split}, na = {spec.na}, "
+              f"nb = {spec.nb}, affine = {spec.affine}")
+    return 0
+
+
+def remove_dataset(args: argparse.Namespace) -> int:
+    """Unregister a data set; its file and any results already computed stay."""
+    from ..datasets.user import DatasetRegistry
+
+    registry = DatasetRegistry(default_datasets_path())
+    spec = registry.remove(args.name)
+    print(f"removed {spec.name!r} from {registry.path} (its file {spec.path} and its results "
+          f"in the stores are kept); reload the code location in a running Dagster UI")
+    return 0
+
+
 def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
@@ -172,6 +244,38 @@ def main(argv: list[str] | None = None) -> int:
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")
     sub.add_parser("partitions", help="list the partition keys")
+    p_add = sub.add_parser(
+        "add-dataset", help="check a CSV or Parquet file and register it as a data set: it "
+                            "becomes a 'dataset' partition",
+        description="Check a CSV or Parquet file and register it as a data set, a new "
+                    "'dataset' partition of the pipeline (with every hyper-parameter set "
+                    "that has a [<set>.\"*\"] table). The whole file is read and checked "
+                    "first; on any problem nothing is registered. The registry is "
+                    "$PWA_DATASETS or <project>/storage/datasets.json.")
+    p_add.add_argument("name", help="the data set's name (letters, digits, '_', '-')")
+    p_add.add_argument("file", help="a .csv or .parquet file")
+    p_add.add_argument("--u", nargs="+", required=True, metavar="COL", help="input columns")
+    p_add.add_argument("--y", nargs="+", required=True, metavar="COL", help="output columns")
+    p_add.add_argument("--experiment", metavar="COL",
+                       help="column of experiment ids (lags never span two experiments)")
+    p_add.add_argument("--time", metavar="COL",
+                       help="numeric or date-time column; must increase strictly within "
+                            "each experiment (rows are not reordered)")
+    split = p_add.add_mutually_exclusive_group()
+    split.add_argument("--test-experiments", nargs="+", metavar="ID",
+                       help="experiment ids held out for testing")
+    split.add_argument("--test-fraction", type=float, metavar="F",
+                       help=f"share held out: the last experiments in file order, or the end "
+                            f"of a single record (default {DEFAULT_TEST_FRACTION})")
+    p_add.add_argument("--na", type=int, default=1, help="output order (default 1)")
+    p_add.add_argument("--nb", type=int, default=1, help="input order (default 1)")
+    p_add.add_argument("--affine", action="store_true", help="add a constant term")
+    p_add.add_argument("--replace", action="store_true",
+                       help="replace a data set registered under the same name")
+    sub.add_parser("list-datasets", help="list the registered data sets")
+    p_rm = sub.add_parser("remove-dataset",
+                          help="unregister a data set (its file and results are kept)")
+    p_rm.add_argument("name")
     p_doc = sub.add_parser(
         "doctor", help="list Dagster runs left STARTED, MLflow runs left RUNNING and temporary "
                        "files left by interrupted runs; --repair marks the runs failed/killed "
@@ -186,14 +290,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "run" and args.scheduler:
         args.executor = "dask"
     if args.command == "partitions":
-        from .definitions import defs, partitions_of
+        from .definitions import build_definitions, partitions_of
         from .partitions import all_keys
 
-        print("\n".join(all_keys(partitions_of(defs))))
+        print("\n".join(all_keys(partitions_of(build_definitions()))))
         return 0
-    if args.command == "doctor":
-        return doctor(args)
-    return run(args)
+    commands = {"doctor": doctor, "add-dataset": add_dataset, "list-datasets": list_datasets,
+                "remove-dataset": remove_dataset, "run": run}
+    try:
+        return commands[args.command](args)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"pwa-pipeline {args.command}: error: {message}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

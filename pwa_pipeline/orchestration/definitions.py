@@ -6,33 +6,42 @@ import dagster as dg
 
 from ..config import HParamsFile
 from ..datasets import DATASETS
+from ..datasets.user import DatasetRegistry
 from .assets import build_assets
 from .jobs import build_jobs
 from .partitions import build_partitions
+from .paths import default_datasets_path
 from .resources import MLflowTracker, PipelineSettings
 from .schedules import build_sweep
 from .storage import PartitionedFileIOManager
 
 
-def build_definitions(hparams_path: str | os.PathLike | None = None, **resources
+def build_definitions(hparams_path: str | os.PathLike | None = None,
+                      datasets_path: str | os.PathLike | None = None, **resources
                       ) -> dg.Definitions:
-    """The assets, sweep job, schedule and resources for one hyper-parameter file.
+    """The assets, sweep job, schedule and resources for one hyper-parameter file and one
+    registry of user data sets.
 
-    The partitions' set names and the ``settings`` resource read the same file
-    (``hparams_path``; default ``$PWA_HPARAMS`` or ``data/hparams.toml``), which is read and
-    validated here, so a bad set (or a table for an unknown data set) fails when the
-    definitions load. ``resources`` replace the
-    defaults (``io_manager``, ``settings``, ``mlflow``); a replacement ``settings`` gets
-    ``hparams_path`` set to that file.
+    The partitions and the ``settings`` resource read the same files: ``hparams_path``
+    (default ``$PWA_HPARAMS`` or ``data/hparams.toml``) gives the ``hparams`` dimension and
+    ``datasets_path`` (default ``$PWA_DATASETS`` or ``<project>/storage/datasets.json``)
+    adds the registered data sets to the ``dataset`` dimension. Both are read and checked
+    here, so a bad set (or a table for an unknown data set) fails when the definitions load;
+    a data set registered later appears when the definitions are reloaded. ``resources``
+    replace the defaults (``io_manager``, ``settings``, ``mlflow``); a replacement
+    ``settings`` gets both paths set to these files.
     """
     hparams = HParamsFile(hparams_path)
-    unknown = sorted(hparams.datasets - set(DATASETS))
+    registry = DatasetRegistry(datasets_path or default_datasets_path())
+    registered = registry.names()
+    unknown = sorted(hparams.datasets - set(DATASETS) - set(registered))
     if unknown:
         raise ValueError(f"{hparams.path} has tables for unknown data set(s) {unknown}; the "
-                         f"data sets are {list(DATASETS)}")
-    partitions_def = build_partitions(hparams)
-    job, schedule = build_sweep(partitions_def)
-    settings = resources.pop("settings", PipelineSettings())
+                         f"data sets are {[*DATASETS, *registered]}")
+    partitions_def = build_partitions(hparams, registered)
+    settings = resources.pop("settings", PipelineSettings()).with_files(hparams.path,
+                                                                        registry.path)
+    job, schedule = build_sweep(partitions_def, settings)
     return dg.Definitions(
         assets=build_assets(partitions_def),
         jobs=[job, *build_jobs()],
@@ -45,7 +54,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None, **resources
             "io_manager": PartitionedFileIOManager(),
             "mlflow": MLflowTracker(),
             **resources,
-            "settings": settings.with_hparams(hparams.path),
+            "settings": settings,
         },
     )
 

@@ -17,7 +17,8 @@ import pandas as pd
 
 from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
-from .paths import default_storage_dir, default_tracking_uri
+from ..datasets.user import DatasetRegistry
+from .paths import default_datasets_path, default_storage_dir, default_tracking_uri
 
 if TYPE_CHECKING:
     from .mlflow_models import ModelToLog
@@ -63,6 +64,10 @@ class PipelineSettings(dg.ConfigurableResource):
         The hyper-parameter file. :func:`~pwa_pipeline.orchestration.definitions.build_definitions`
         sets it to the file its partitions were read from; empty: ``$PWA_HPARAMS`` or
         ``data/hparams.toml``.
+    datasets_path : str
+        The registry of the user's data sets (``python -m pwa_pipeline add-dataset``); set by
+        ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
+        ``<project>/storage/datasets.json``.
     cache_dir : str
         Local-model cache; empty: ``<project>/storage/cache``.
     cache_local_models : bool
@@ -71,25 +76,40 @@ class PipelineSettings(dg.ConfigurableResource):
 
     kuka_path: str = ""
     hparams_path: str = ""
+    datasets_path: str = ""
     cache_dir: str = ""
     cache_local_models: bool = True
 
-    def with_hparams(self, path: str | os.PathLike) -> "PipelineSettings":
-        """A copy reading the hyper-parameter file ``path``.
+    def with_files(self, hparams_path: str | os.PathLike,
+                   datasets_path: str | os.PathLike) -> "PipelineSettings":
+        """A copy reading the hyper-parameter file and data-set registry given.
 
         (pydantic's ``model_copy(update=...)`` changes the attribute but not the
         configuration Dagster runs with, so the copy is built anew.)
         """
         values = {name: getattr(self, name) for name in type(self).model_fields}
-        return type(self)(**{**values, "hparams_path": str(path)})
+        return type(self)(**{**values, "hparams_path": str(hparams_path),
+                             "datasets_path": str(datasets_path)})
+
+    def hparams(self) -> HParamsFile:
+        """The hyper-parameter file, read and checked."""
+        return HParamsFile(self.hparams_path or None)
+
+    def registry(self) -> DatasetRegistry:
+        """The user's registered data sets."""
+        return DatasetRegistry(self.datasets_path or default_datasets_path())
 
     def dataset(self, name: str) -> Dataset:
-        """The named data set (raises FileNotFoundError naming the KUKA path if absent)."""
-        return load_dataset(name, kuka_path=self.kuka_path or None)
+        """The named data set (raises FileNotFoundError naming the path if its file is
+        absent)."""
+        return load_dataset(name, kuka_path=self.kuka_path or None, registry=self.registry())
 
     def configuration(self, hparams: str, dataset: str) -> Configuration:
-        """The resolved configuration of one partition (the file read and checked once)."""
-        return HParamsFile(self.hparams_path or None).configuration(hparams, dataset)
+        """The resolved configuration of one partition; a registered data set brings its
+        orders (see :meth:`HParamsFile.configuration`)."""
+        registry = self.registry()
+        orders = registry.get(dataset).orders() if dataset in registry.names() else None
+        return self.hparams().configuration(hparams, dataset, orders)
 
     def cache_root(self) -> Path:
         """The local-model cache folder."""

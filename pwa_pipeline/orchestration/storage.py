@@ -5,8 +5,8 @@ objects and estimators, the core's frozen dataclasses) as a signed pickle: a hea
 HMAC-SHA256 of the payload under the store's key, then the pickle (protocol 5). Files live at
 ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}`` (an unpartitioned asset:
 ``<base_dir>/<asset>.{parquet,pkl}``); the names are checked against
-:data:`pwa_pipeline.config.NAME_PATTERN` and every path is resolved and checked to stay inside
-the store. Every write goes to a temporary file in the same folder and is moved into place
+:data:`pwa_pipeline._validation.NAME_PATTERN` and every path is resolved and checked to stay
+inside the store. Every write goes to a temporary file in the same folder and is moved into place
 with ``os.replace``, so a failed or killed run never leaves a half-written file; temporary
 files a killed run left behind are removed once they are an hour old.
 
@@ -30,7 +30,7 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
-from ..config import check_name
+from .._validation import check_name
 from .partitions import split_key
 from .paths import default_storage_dir
 
