@@ -2,10 +2,11 @@
 
 configuration, raw_benchmark → regressors → local_models → clusters → sub_models →
 svm_regions → output_error_refinement (a no-op unless the set asks for it) → pwa_model;
-linear_arx_model and subspace_model beside it; each model scored by ``<method>_scores`` (the evaluation protocol, one MLflow run each); ``comparison`` puts them
-side by side. Every asset is partitioned by data set × hyper-parameter set, and every
-partition's configuration is resolved once, by the ``configuration`` asset; only
-``leaderboard`` is not: it ranks the stored scores of every partition. Methods come from
+linear_arx_model and subspace_model beside it; each model scored by ``<method>_scores``
+(the evaluation protocol, one MLflow run each); ``comparison`` puts them side by side.
+Every asset is partitioned by data set × hyper-parameter set, and every partition's
+configuration is resolved once, by the ``configuration`` asset; only ``leaderboard`` is
+not: it ranks the stored scores of every partition. Methods come from
 :data:`pwa_pipeline.methods.METHODS`.
 """
 
