@@ -2,8 +2,9 @@
 
 Every method of the registry (pwa_pipeline.methods) is scored by the same protocol
 (pwa_pipeline.scoring.evaluation): one-step-ahead and free-run, restarted at each held-out
-experiment after a 10-sample warm-up. PWA runs with the sets ``paper`` and ``default`` of
-data/hparams.toml, the baselines with ``default``. Writes results/comparison.csv (dataset,
+experiment after a 10-sample warm-up. PWA runs with the sets ``paper``, ``default`` and
+``output_error`` of data/hparams.toml, the baselines with ``default`` (and linear ARX also with
+``output_error``). Writes results/comparison.csv (dataset,
 hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
 layout, one block per data set and mode), results/comparison_fit.csv (fit times, sub-model
 counts, divergence flags) and results/conventions.md: every method's free run in each
@@ -26,8 +27,10 @@ from pwa_pipeline.methods import METHODS
 from pwa_pipeline.scoring.comparison import table1
 from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores
 
-#: (set, method) pairs compared: the PWA model in both settings, the baselines once.
-RUNS = [("paper", "pwa")] + [("default", m) for m in METHODS]
+#: (set, method) pairs compared: the PWA model in both settings, the baselines once, and
+#: the PWA model and linear ARX with simulation-error refinement (set ``output_error``).
+RUNS = ([("paper", "pwa")] + [("default", m) for m in METHODS]
+        + [("output_error", "pwa"), ("output_error", "linear_arx")])
 #: Published free-run scores on the KUKA test record, each in its own convention:
 #: Fañanás-Anaya et al. (2025), Table VI — RMSE / range per joint, the test record run once.
 PUBLISHED = [("MA-LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.125),
