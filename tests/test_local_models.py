@@ -70,3 +70,40 @@ def test_only_the_rank_deficient_sets_are_marked():
     good = ~local.degenerate_
     np.testing.assert_allclose(local.theta_[good, :, 0],
                                np.broadcast_to([1.0, 2.0, 3.0], (good.sum(), 3)))
+
+
+@pytest.mark.parametrize(("standardize", "ridge"), [(True, 0.0), (False, 0.0), (True, 0.1)])
+def test_same_local_models_as_a_plain_implementation(standardize, ridge):
+    # A seeded 3-output ARX record with 16 regressors (the blocked neighbour search), against
+    # scikit-learn's brute-force neighbours and one least-squares solve per local set.
+    from sklearn.neighbors import NearestNeighbors
+
+    from pwa_pipeline._arrays import column_rms
+    from pwa_pipeline.pwa.regressors import build_regressors
+
+    rng = np.random.default_rng(11)
+    u = rng.normal(size=(1500, 2)).cumsum(axis=0) * 0.1 + rng.normal(size=(1500, 2))
+    y = np.zeros((1500, 3))
+    a, b = rng.normal(size=(3, 3)) * 0.2, rng.normal(size=(2, 3))
+    for k in range(1, 1500):
+        y[k] = y[k - 1] @ a + u[k - 1] @ b + 0.01 * rng.normal(size=3)
+    reg = build_regressors([(u, y)], 4, 2, False)
+    phi, target = reg.phi, reg.target
+    assert phi.shape[1] == 16
+    local = LocalLeastSquares(n_rho=40, standardize=standardize, ridge=ridge).fit(phi, target)
+
+    x = (phi - phi.mean(0)) / phi.std(0) if standardize else phi
+    ref = NearestNeighbors(n_neighbors=40, algorithm="brute").fit(x).kneighbors(
+        x, return_distance=False)
+    np.testing.assert_array_equal(np.sort(local.neighbours_, 1), np.sort(ref, 1))
+    scale = column_rms(phi)
+    for k in range(0, len(phi), 37):
+        p, t = phi[ref[k]] / scale, target[ref[k]]
+        if ridge:
+            th = np.linalg.solve(p.T @ p + ridge * np.eye(16), p.T @ t)
+        else:
+            th = np.linalg.lstsq(p, t, rcond=None)[0]
+        np.testing.assert_allclose(local.theta_[k], th / scale[:, None], rtol=1e-8,
+                                   atol=1e-10 * np.abs(th / scale[:, None]).max())
+        np.testing.assert_allclose(local.residual_var_[k],
+                                   ((t - p @ th) ** 2).sum(0) / (40 - 16), rtol=1e-7)

@@ -1,17 +1,21 @@
 """Local sets and local least-squares parameter matrices (paper steps 2–3, eq. 6–7)."""
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from numbers import Integral, Real
 
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context
 from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import Interval
+from threadpoolctl import threadpool_limits
 
 from .._arrays import column_rms
 from .._typing import Float2D
+from .neighbours import nearest_neighbours
 
 _RANK_TOL = 1e-10
-_CHUNK = 4096
+_CHUNK = 1024
 
 
 def check_n_rho(n_rho: int, d: int) -> None:
@@ -34,6 +38,10 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
     standardize : bool
         Search on z-scored regressors (constant columns dropped) instead of raw ones, so that
         large-valued channels do not dominate the distance.
+
+    Above 12 dimensions the search is :func:`~pwa_pipeline.pwa.neighbours.nearest_neighbours`
+    (exact, blocked float32 products; equal distances go to the lower row index), below it
+    scikit-learn's tree search.
     """
     n, d = phi.shape
     if n_rho > n:
@@ -49,8 +57,10 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
                 "every regressor column is constant (the data do not vary): no local sets"
             )
         x = (phi[:, keep] - phi[:, keep].mean(axis=0)) / std[keep]
-    nn = NearestNeighbors(n_neighbors=n_rho, algorithm="brute" if d > 12 else "auto")
-    idx = nn.fit(x).kneighbors(x, return_distance=False)
+    if d > 12:  # blocked float32 products (exact); trees lose to brute force there
+        idx = nearest_neighbours(x, n_rho)
+    else:
+        idx = NearestNeighbors(n_neighbors=n_rho).fit(x).kneighbors(x, return_distance=False)
     # Duplicated regressors can put another row first; keep C_k's own row at position 0.
     own = np.arange(n)
     not_first = idx[:, 0] != own
@@ -64,23 +74,27 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
 
 
 def local_least_squares(
-    phi: Float2D, target: Float2D, neighbours: np.ndarray, ridge: float = 0.0
+    phi: Float2D, target: Float2D, neighbours: np.ndarray, ridge: float = 0.0,
+    workers: int | None = None,
 ) -> tuple[np.ndarray, Float2D, np.ndarray, np.ndarray]:
     """Least-squares θ_k on every local set, batched over k (eq. 6–7).
 
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
-    matrix Φ_k; with ``ridge > 0`` the rows √ridge·I are appended (Tikhonov regularisation in
-    scaled units). A local set whose Φ_k is rank-deficient (e.g. every row inside one hold of
-    a piecewise-constant input) has no unique θ_k: it gets the minimum-norm solution (in the
-    unit-RMS columns, so independent of the channels' units) and is marked degenerate, never
-    an error.
+    matrix Φ_k with the targets appended as columns, [Φ_k | Y_k] = QR: the leading block
+    R₁₁ is Φ_k's R, θ_k solves R₁₁ θ_k = R₁₂, and the column norms of R₂₂ are the residual
+    norms. Only R is formed (LAPACK ``geqrf`` on blocks of local sets, one thread each, BLAS
+    single-threaded). With ``ridge > 0`` the rows √ridge·I are appended (Tikhonov
+    regularisation in scaled units). A local set whose Φ_k is rank-deficient (e.g. every
+    row inside one hold of a piecewise-constant input) has no unique θ_k: it gets the
+    minimum-norm solution (in the unit-RMS columns, so independent of the channels' units)
+    and is marked degenerate, never an error.
 
     Returns
     -------
     theta : ndarray of shape (n, d, m)
         θ_k of eq. (6), in the regressors' own units.
     residual_var : ndarray of shape (n, m)
-        SSR / (n_ρ − d) of each local fit, per output.
+        SSR / (n_ρ − d) of each local fit, per output (the n_ρ data rows only).
     phi_scale : ndarray of shape (d,)
         Root mean square of each regressor column (the column scaling of the solve).
     degenerate : ndarray of shape (n,), bool
@@ -96,31 +110,56 @@ def local_least_squares(
     n_rho = neighbours.shape[1]
     check_n_rho(n_rho, d)
     scale = column_rms(phi)
-    xs = phi / scale
     m = target.shape[1]
+    both = np.empty((n, d + m))
+    both[:, :d], both[:, d:] = phi / scale, target
     theta = np.empty((n, d, m))
     resvar = np.empty((n, m))
     degenerate = np.zeros(n, bool)
     damp = np.sqrt(ridge) * np.eye(d) if ridge > 0 else None
-    for start in range(0, n, _CHUNK):
+
+    def solve(start: int) -> None:
         idx = neighbours[start : start + _CHUNK]
-        p, t = xs[idx], target[idx]
+        c, rows = len(idx), slice(start, start + len(idx))
+        a = np.take(both, idx, axis=0)
         if damp is not None:
-            p = np.concatenate([p, np.broadcast_to(damp, (len(idx), d, d))], axis=1)
-            t = np.concatenate([t, np.zeros((len(idx), d, m))], axis=1)
-        q, r = np.linalg.qr(p)
-        diag = np.abs(np.diagonal(r, axis1=1, axis2=2))
+            extra = np.zeros((c, d, d + m))
+            extra[:, :, :d] = damp
+            a = np.concatenate([a, extra], axis=1)
+        r = np.linalg.qr(a, mode="r")
+        diag = np.abs(np.diagonal(r[:, :d, :d], axis1=1, axis2=2))
         singular = diag.min(axis=1) <= _RANK_TOL * diag.max(axis=1)
-        th = np.empty((len(idx), d, m))
-        th[~singular] = np.linalg.solve(r[~singular],
-                                        q[~singular].transpose(0, 2, 1) @ t[~singular])
+        th = np.empty((c, d, m))
+        ok = ~singular
+        th[ok] = _back_substitute(r[ok, :d, :d], r[ok, :d, d:])
         if singular.any():
-            th[singular] = np.linalg.pinv(p[singular], rtol=_RANK_TOL) @ t[singular]
-        degenerate[start : start + len(idx)] = singular
-        res = target[idx] - xs[idx] @ th
-        theta[start : start + len(idx)] = th / scale[:, None]
-        resvar[start : start + len(idx)] = (res**2).sum(axis=1) / (n_rho - d)
+            th[singular] = np.linalg.pinv(a[singular, :, :d], rtol=_RANK_TOL) @ a[singular, :, d:]
+        if damp is None:  # the column norms of R₂₂ are the residual norms
+            ssr = np.einsum("kij,kij->kj", r[:, d:, d:], r[:, d:, d:])
+            if singular.any():
+                res = a[singular, :, d:] - a[singular, :, :d] @ th[singular]
+                ssr[singular] = np.einsum("kij,kij->kj", res, res)
+        else:
+            res = a[:, :n_rho, d:] - a[:, :n_rho, :d] @ th
+            ssr = np.einsum("kij,kij->kj", res, res)
+        degenerate[rows] = singular
+        theta[rows] = th / scale[:, None]
+        resvar[rows] = ssr / (n_rho - d)
+
+    with threadpool_limits(1, user_api="blas"), \
+            ThreadPoolExecutor(workers or len(os.sched_getaffinity(0))) as pool:
+        list(pool.map(solve, range(0, n, _CHUNK)))
     return theta, resvar, scale, degenerate
+
+
+def _back_substitute(upper: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve upper[k] · x[k] = rhs[k] for a stack of upper-triangular matrices, one row of
+    all of them at a time."""
+    x = np.empty_like(rhs)
+    for j in range(upper.shape[1] - 1, -1, -1):
+        acc = rhs[:, j] - np.einsum("ki,kim->km", upper[:, j, j + 1 :], x[:, j + 1 :])
+        x[:, j] = acc / upper[:, j, j, None]
+    return x
 
 
 class LocalLeastSquares(BaseEstimator):
