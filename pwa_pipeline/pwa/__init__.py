@@ -5,8 +5,9 @@ the :class:`PWARX` estimator built from those step objects."""
 from .clustering import DBSCANClustering
 from .estimator import PWARX, STEPS
 from .local_models import LocalLeastSquares
+from .memory import FitMemoryError
 from .regions import SVMRegions
 from .submodels import ClusterCentres, RefinedSubModels
 
-__all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "LocalLeastSquares",
-           "RefinedSubModels", "SVMRegions"]
+__all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
+           "LocalLeastSquares", "RefinedSubModels", "SVMRegions"]

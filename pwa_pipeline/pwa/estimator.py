@@ -12,6 +12,7 @@ from .._validation import as_experiments
 from .arx import ARXModelBase
 from .clustering import DBSCANClustering
 from .local_models import LocalLeastSquares
+from .memory import check_fit_memory
 from .regions import SVMRegions
 from .regressors import Regressors, build_regressors
 from .submodels import ClusterCentres, RefinedSubModels
@@ -169,6 +170,10 @@ class PWARX(ARXModelBase):
             On NaN/inf, mismatched lengths or dimensions, too few samples for n_ρ, n_ρ ≤ d,
             too few usable (non-degenerate) local sets to cluster, or when DBSCAN finds no
             cluster.
+        pwa_pipeline.pwa.memory.FitMemoryError
+            At once, before any step, when the fit's estimated memory exceeds what the
+            machine has available (:func:`~pwa_pipeline.pwa.memory.check_fit_memory`); the
+            message gives the estimate and the setting to change.
         """
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
@@ -225,7 +230,9 @@ class PWARX(ARXModelBase):
         """
         steps = self.steps()
         step = clone(steps[name])
-        if name == "local_models":
+        if name == "local_models":  # the first step: fail now if the fit cannot fit in memory
+            check_fit_memory(*reg.phi.shape, reg.target.shape[1], steps,
+                             base=reg.phi.nbytes + reg.target.nbytes)
             return step.fit(reg.phi, reg.target)
         if name == "clustering":
             return step.fit(fitted["local_models"], reg.target)

@@ -1,0 +1,54 @@
+"""The memory guard: a fit that cannot fit in memory fails at once, saying what to change."""
+
+import numpy as np
+import pytest
+
+from pwa_pipeline import PWARX, make_hure_vasak
+from pwa_pipeline.pwa import LocalLeastSquares, memory
+from pwa_pipeline.pwa.memory import FitMemoryError, available_memory, fit_memory
+
+
+def test_a_fit_beyond_the_available_memory_fails_before_any_step(monkeypatch):
+    data = make_hure_vasak(n_samples=600, snr_db=None, seed=0)  # 599 rows, d = 4, m = 2
+    need = fit_memory(599, 4, 2, PWARX.default().steps())
+    # the largest step fits, not with the regressors (599 × (4 + 2) floats) on top
+    monkeypatch.setattr(memory, "available_memory", lambda: max(need.values()))
+
+    def never(*args, **kwargs):
+        raise AssertionError("a step ran")
+
+    monkeypatch.setattr(LocalLeastSquares, "fit", never)
+    with pytest.raises(FitMemoryError, match=r"needs an estimated \d+\.\d\d GiB") as err:
+        PWARX().fit(data.u, data.y)
+    assert "available" in str(err.value) and "lower " in str(err.value)
+    assert isinstance(err.value, MemoryError)
+
+
+def test_the_message_names_the_setting_of_the_largest_step(monkeypatch):
+    monkeypatch.setattr(memory, "available_memory", lambda: 1)
+    est = PWARX.paper(2, 2, n_rho=61, eps=8.0, min_pts=22).set_params(
+        clustering__embedding="literal")  # every local model clustered, 864 dimensions
+    need = fit_memory(10**6, 24, 6, est.steps())
+    assert max(need, key=need.get) == "clustering"
+    with pytest.raises(FitMemoryError, match="clustering__max_clustered"):
+        memory.check_fit_memory(10**6, 24, 6, est.steps())
+    default = PWARX.default(2, 2).set_params(regions__max_rows=None)
+    with pytest.raises(FitMemoryError, match="local_models__n_rho"):
+        memory.check_fit_memory(10**6, 24, 6, default.steps())
+
+
+def test_enough_memory_fits_as_usual(monkeypatch):
+    data = make_hure_vasak(n_samples=600, snr_db=None, seed=0)
+    usual = PWARX().fit(data.u, data.y)
+    need = max(fit_memory(599, 4, 2, PWARX.default().steps()).values()) + 599 * 6 * 8
+    monkeypatch.setattr(memory, "available_memory", lambda: need)  # just enough
+    np.testing.assert_array_equal(PWARX().fit(data.u, data.y).thetas_, usual.thetas_)
+
+
+def test_estimates_grow_with_the_record_and_the_machine_reports_memory():
+    small = fit_memory(10_000, 24, 6, PWARX.default().steps())
+    large = fit_memory(100_000, 24, 6, PWARX.default().steps())
+    assert all(large[k] > small[k] for k in small)
+    avail = available_memory()
+    assert avail is None or avail > 0
+    assert np.isfinite(sum(small.values()))
