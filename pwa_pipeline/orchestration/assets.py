@@ -69,6 +69,9 @@ from .storage import (
 )
 
 GROUP = "identification"
+#: Layout of a cached fitted local-model step; raise it when the step's fitted attributes
+#: change, so that entries written by older code are never loaded.
+LOCAL_MODELS_FORMAT = 2
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.
 STEP_ASSETS = {**dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
                           strict=True)), "refinement": "output_error_refinement"}
@@ -157,7 +160,7 @@ def _identification_assets(partitions_def) -> list:
         step = configuration.pwa.steps()["local_models"]
         t0 = time.perf_counter()
         key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
-                        **step.get_params())
+                        format=LOCAL_MODELS_FORMAT, **step.get_params())
         root = settings.cache_root()
         path = inside(root, "local_models", f"{key}.pkl")
         local = None
