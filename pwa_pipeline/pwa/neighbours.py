@@ -127,6 +127,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
             near_row |= d2 <= thr32[None, c:e]
         r, s = _nonzero(near_row)
         val = d2[r, s]
+        r, s = r.astype(np.int32), s.astype(np.int32)
         keep = val <= thr32[a + r]
         found[i].append((r[keep], c + s[keep], val[keep]))
         if i != j:
@@ -157,10 +158,8 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         count = np.bincount(r, minlength=b - a)
         first = (np.cumsum(count) - count)[:, None] + np.arange(k)
         chosen = s[pick][first]
-        dist = exact[pick][first]
-        rows = np.broadcast_to(np.arange(a, b)[:, None], chosen.shape)
-        inner = np.isneginf(dist)
-        dist[inner] = _exact_sq(xs, rows[inner], chosen[inner])
+        diff = xs[chosen] - xs[a:b, None, :]
+        dist = np.einsum("ijk,ijk->ij", diff, diff)  # exact, for the order and ties
         ranked = np.lexsort((order[chosen], dist), axis=1)
         out[a:b] = order[np.take_along_axis(chosen, ranked, 1)]
         out_sq[a:b] = np.take_along_axis(dist, ranked, 1)
@@ -179,11 +178,8 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
 
 def _exact_sq(x: Float2D, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Σ_j (x_pj − x_qj)² of the pairs (p, q), in float64."""
-    acc = np.zeros(len(p))
-    for j in range(x.shape[1]):
-        diff = x[p, j] - x[q, j]
-        acc += diff * diff
-    return acc
+    diff = x[p] - x[q]
+    return np.einsum("ij,ij->i", diff, diff)
 
 
 def _spatial_order(x: Float2D, leaf: int = 64) -> np.ndarray:
