@@ -12,6 +12,7 @@ import numpy as np
 from scipy.stats import chi2
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import Interval
+from threadpoolctl import threadpool_limits
 
 from .._arrays import relabel_by_size
 from .._typing import Float2D
@@ -27,16 +28,17 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarr
     """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows)."""
     d, m = phi.shape[1], target.shape[1]
     thetas = np.full((s, d, m), np.nan)
-    for i in range(s):
-        rows = labels == i
-        if rows.sum() >= d:
-            thetas[i] = np.linalg.lstsq(phi[rows], target[rows], rcond=None)[0]
+    with threadpool_limits(1, user_api="blas"):  # tall, thin solves: threads only wait
+        for i in range(s):
+            rows = labels == i
+            if rows.sum() >= d:
+                thetas[i] = np.linalg.lstsq(phi[rows], target[rows], rcond=None)[0]
     return thetas
 
 
 def _sq_residuals(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
     """Squared residuals of every row under every sub-model, shape (s, n, m)."""
-    return (target[None] - np.einsum("nd,sdm->snm", phi, thetas)) ** 2
+    return (target[None] - phi @ thetas) ** 2
 
 
 def _noise_var(sq_res: np.ndarray, labels: np.ndarray, n_params: int) -> np.ndarray:
