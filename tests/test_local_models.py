@@ -107,3 +107,21 @@ def test_same_local_models_as_a_plain_implementation(standardize, ridge):
                                    atol=1e-10 * np.abs(th / scale[:, None]).max())
         np.testing.assert_allclose(local.residual_var_[k],
                                    ((t - p @ th) ** 2).sum(0) / (40 - 16), rtol=1e-7)
+
+
+def test_rank_deficient_sets_match_the_pseudo_inverse_of_the_local_matrix():
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(200, 2))
+    phi = np.column_stack([x, x @ [1.0, -2.0]])  # rank 2 of 3 everywhere
+    target = rng.normal(size=(200, 2))
+    local = LocalLeastSquares(n_rho=12, standardize=False).fit(phi, target)
+    assert local.degenerate_.all()
+    from pwa_pipeline._arrays import column_rms
+
+    scale = column_rms(phi)
+    for k in range(0, 200, 23):
+        p, t = phi[local.neighbours_[k]] / scale, target[local.neighbours_[k]]
+        th = np.linalg.pinv(p, rtol=1e-10) @ t
+        np.testing.assert_allclose(local.theta_[k] * scale[:, None], th, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(local.residual_var_[k], ((t - p @ th) ** 2).sum(0) / 9,
+                                   rtol=1e-9)
