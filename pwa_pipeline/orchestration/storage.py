@@ -188,7 +188,7 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         of the partitions materialised, the others left out."""
         if not context.has_asset_partitions:
             return self.load(context.asset_key, None)
-        if not (context.metadata or {}).get(ALL_PARTITIONS):
+        if not (context.definition_metadata or {}).get(ALL_PARTITIONS):
             return self.load(context.asset_key, context.asset_partition_key)
         found = {}
         for key in context.asset_partition_keys:
