@@ -4,8 +4,8 @@ from sklearn.cluster import DBSCAN
 from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import InvalidParameterError
 
-from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
 from pwa_pipeline._arrays import relabel_by_size
+from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
 from pwa_pipeline.pwa.clustering import (
     cluster_local_models,
     confident_models,

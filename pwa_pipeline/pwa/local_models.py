@@ -8,10 +8,10 @@ import numpy as np
 from scipy.spatial import cKDTree
 from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval
-from threadpoolctl import threadpool_limits
 
 from .._arrays import column_rms
 from .._typing import Float2D
+from ._blas import single_threaded_blas
 from .neighbours import nearest_neighbours
 
 _RANK_TOL = 1e-10
@@ -147,7 +147,7 @@ def local_least_squares(
         theta[rows] = th / scale[:, None]
         resvar[rows] = ssr / (n_rho - d)
 
-    with threadpool_limits(1, user_api="blas"), \
+    with single_threaded_blas(), \
             ThreadPoolExecutor(workers or len(os.sched_getaffinity(0))) as pool:
         list(pool.map(solve, range(0, n, _CHUNK)))
     return theta, resvar, scale, degenerate

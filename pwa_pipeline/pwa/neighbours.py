@@ -11,9 +11,9 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from .._typing import Float2D
+from ._blas import single_threaded_blas
 
 _BLOCK = 512
 """Rows of a block; a tile is one block of rows against one block of columns."""
@@ -164,7 +164,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         out[a:b] = order[np.take_along_axis(chosen, ranked, 1)]
         out_sq[a:b] = np.take_along_axis(dist, ranked, 1)
 
-    with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
+    with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
         thr = np.concatenate(list(pool.map(bound, blocks)))
         thr32 = thr.astype(np.float32)
         np.nextafter(thr32, np.float32(np.inf), out=thr32)  # float32 never below the bound

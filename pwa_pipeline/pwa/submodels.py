@@ -12,10 +12,10 @@ import numpy as np
 from scipy.stats import chi2
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import Interval
-from threadpoolctl import threadpool_limits
 
 from .._arrays import relabel_by_size
 from .._typing import Float2D
+from ._blas import single_threaded_blas
 
 
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -30,7 +30,7 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarr
     thetas = np.full((s, d, m), np.nan)
     order = np.argsort(labels, kind="stable")  # each label's rows, in row order
     bounds = np.searchsorted(labels[order], np.arange(s + 1))
-    with threadpool_limits(1, user_api="blas"):  # tall, thin solves: threads only wait
+    with single_threaded_blas():  # tall, thin solves: threads only wait
         for i in range(s):
             rows = order[bounds[i]:bounds[i + 1]]
             if len(rows) >= d:
