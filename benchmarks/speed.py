@@ -1,0 +1,221 @@
+"""Speed and memory on the robot (issue 12): the default and the paper setting, against the
+plain reference and the previous implementation, in one run.
+
+On the full KUKA training record (39,988 samples, na = nb = 2, d = 24, m = 6), each fit in a
+fresh subprocess (so that its peak resident memory, VmHWM of /proc/self/status, is its own;
+the value just before the fit, with Python, the libraries and the data loaded, is reported
+as the baseline), ``--repeats`` times, the runs of every variant interleaved so that they
+share the machine's load:
+
+- ``default``: ``PWARX.default`` (n_rho = 3d = 72, ε from the data), all steps;
+- ``default, n_rho=61``: the same with n_rho = 61 (the setting of benchmarks.identify);
+- ``paper``: the paper's setting (n_rho = 61, ε = 8, MinPts = 22, every local model
+  clustered, the SVM on every clustered row);
+- ``plain steps 1-4``: benchmarks/_plain.py, a plain numpy/scikit-learn version of steps 1–4
+  of the default (its labels are checked against the library's clustering);
+- ``previous ...``: the default and the paper setting with the code of ``--previous`` (a
+  commit before issue 12's changes, unpacked with ``git archive``), if git can provide it.
+
+Then the paper setting's region SVM alone (in this process) at its former tolerance 1e-4
+and at 1e-2: seconds, and how many regions agree on the training rows and on the held-out
+test record. The 1-minute load average is recorded before and after.
+
+Writes results/speed.json and results/speed.md.
+Usage: python -m benchmarks.speed [--repeats 3] [--previous 70cfa4d]
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks._common import RESULTS, write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+VARIANTS = ("default", "default, n_rho=61", "paper", "plain steps 1-4")
+PREVIOUS = ("default", "paper")
+
+
+def peak_rss_mb() -> float:
+    """High-water mark of this process's resident memory, MB (VmHWM, Linux)."""
+    line = next(s for s in Path("/proc/self/status").read_text().splitlines()
+                if s.startswith("VmHWM:"))
+    return int(line.split()[1]) / 1024
+
+
+def estimator(variant: str):
+    from sklearn.base import clone
+
+    from pwa_pipeline.config import HParamsFile
+
+    hp = HParamsFile()
+    if variant.startswith("paper"):
+        return clone(hp.configuration("paper", "kuka_robot").pwa)
+    est = clone(hp.configuration("default", "kuka_robot").pwa)
+    return est.set_params(local_models__n_rho=61) if "61" in variant else est
+
+
+def worker(variant: str, out: str) -> None:
+    """One fit in this (fresh) process; seconds, step seconds, memory, results to ``out``."""
+    from pwa_pipeline import load_kuka
+
+    robot = load_kuka()
+    result: dict = {"variant": variant}
+    if variant == "plain steps 1-4":
+        from benchmarks._plain import plain_steps_1_to_4
+
+        before = peak_rss_mb()
+        t0 = time.perf_counter()
+        labels, eps = plain_steps_1_to_4(robot.u_train, robot.y_train, 2, 2)
+        result.update(seconds=time.perf_counter() - t0, eps=eps, labels=labels.tolist())
+    else:
+        est = estimator(variant)
+        before = peak_rss_mb()
+        t0 = time.perf_counter()
+        model = est.fit(robot.u_train, robot.y_train)
+        result.update(seconds=time.perf_counter() - t0, steps=model.timings_,
+                      eps=model.clustering_.eps_, n_submodels=model.n_submodels_,
+                      labels=model.clustering_.labels_.tolist(),
+                      thetas=model.thetas_.tolist())
+    import pwa_pipeline
+
+    result.update(peak_mb=peak_rss_mb(), before_mb=before, package=pwa_pipeline.__file__)
+    Path(out).write_text(json.dumps(result))
+
+
+def previous_tree(commit: str, into: Path) -> Path | None:
+    """The package at ``commit``, unpacked under ``into`` (None if git cannot give it)."""
+    try:
+        blob = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "pwa_pipeline"],
+                              check=True, capture_output=True).stdout
+    except (OSError, subprocess.CalledProcessError) as exc:
+        print(f"previous implementation unavailable: {exc}")
+        return None
+    with tarfile.open(fileobj=BytesIO(blob)) as tar:
+        tar.extractall(into, filter="data")
+    return into
+
+
+def run(variant: str, tmp: Path, pythonpath: Path) -> dict:
+    out = tmp / "out.json"
+    env = {**os.environ, "PYTHONPATH": f"{pythonpath}{os.pathsep}{ROOT}"}
+    kuka = os.environ.get("PWA_KUKA_DATA") or str(ROOT.parent / "shared" / "data" / "kuka-kr300")
+    env["PWA_KUKA_DATA"] = kuka
+    # run from tmp: with -m, the working directory would come first on sys.path
+    subprocess.run([sys.executable, "-m", "benchmarks.speed", "--worker", variant, str(out)],
+                   check=True, env=env, cwd=tmp)
+    return json.loads(out.read_text())
+
+
+def svm_tolerance() -> list[dict]:
+    """The paper setting's region SVM at tol 1e-4 and 1e-2 on its own clustering."""
+    from sklearn.base import clone
+
+    from pwa_pipeline import load_kuka
+    from pwa_pipeline._validation import as_experiments
+    from pwa_pipeline.pwa.regressors import build_regressors
+
+    robot = load_kuka()
+    est = estimator("paper")
+    reg = build_regressors(as_experiments(robot.u_train, robot.y_train), 2, 2, False)
+    held = build_regressors(as_experiments(robot.u_test, robot.y_test), 2, 2, False).phi
+    local = est.fit_step("local_models", reg)
+    labels = est.fit_step("clustering", reg, local_models=local).labels_
+    rows, fitted = [], {}
+    for tol in (1e-4, 1e-2):
+        svm = clone(est.regions).set_params(tol=tol)
+        t0 = time.perf_counter()
+        fitted[tol] = svm.fit(reg.phi, labels, int(labels.max()) + 1)
+        rows.append({"tol": tol, "seconds": time.perf_counter() - t0})
+    for row in rows:
+        a, b = fitted[1e-4], fitted[row["tol"]]
+        row["same region, training rows"] = float(np.mean(a.predict(reg.phi) == b.predict(reg.phi)))
+        row["same region, held-out rows"] = float(np.mean(a.predict(held) == b.predict(held)))
+    return rows
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--previous", default="70cfa4d",
+                        help="commit of the implementation before issue 12's changes")
+    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        worker(*args.worker)
+        return
+    load_start = os.getloadavg()[0]
+    runs: dict[str, list[dict]] = {}
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        old = previous_tree(args.previous, tmp / "previous")
+        jobs = [(v, ROOT) for v in VARIANTS]
+        if old is not None:
+            jobs += [(v, old) for v in PREVIOUS]
+        for i in range(args.repeats):
+            for variant, path in jobs:
+                name = variant if path == ROOT else f"previous {variant}"
+                res = run(variant, tmp, path)
+                runs.setdefault(name, []).append(res)
+                print(f"run {i + 1}, {name}: {res['seconds']:.2f} s, peak {res['peak_mb']:.0f} MB",
+                      flush=True)
+    load_end = os.getloadavg()[0]
+    rows = []
+    for name, res in runs.items():
+        row = {"variant": name, "median_seconds": statistics.median(r["seconds"] for r in res),
+               "runs": [round(r["seconds"], 2) for r in res],
+               "peak_mb": max(r["peak_mb"] for r in res),
+               "baseline_mb": statistics.median(r["before_mb"] for r in res)}
+        if "steps" in res[0]:
+            for step in res[0]["steps"]:
+                row[f"step_{step}"] = statistics.median(r["steps"][step] for r in res)
+            row["steps_1_4"] = statistics.median(
+                sum(r["steps"][s] for s in ("regressors", "local_models", "clustering"))
+                for r in res)
+            row["n_submodels"] = res[0]["n_submodels"]
+        row["eps"] = res[0]["eps"]
+        rows.append(row)
+    table = pd.DataFrame(rows).set_index("variant")
+    plain = table.loc["plain steps 1-4", "median_seconds"]
+    table["plain_over_this_fit"] = plain / table["median_seconds"]
+    table["plain_over_steps_1_4"] = plain / table["steps_1_4"]
+    checks = {
+        "plain labels == default clustering labels (first run)":
+            runs["plain steps 1-4"][0]["labels"] == runs["default"][0]["labels"]}
+    for name in PREVIOUS:
+        if f"previous {name}" in runs:
+            a, b = runs[name][0], runs[f"previous {name}"][0]
+            checks[f"{name}: same clustering labels as previous"] = a["labels"] == b["labels"]
+            checks[f"{name}: largest sub-model difference from previous"] = float(
+                np.abs(np.array(a["thetas"]) - np.array(b["thetas"])).max()) if (
+                np.shape(a["thetas"]) == np.shape(b["thetas"])) else "different shapes"
+    svm = svm_tolerance()
+    print(table.drop(columns="runs").to_markdown(floatfmt=".3g"))
+    print(json.dumps(checks, indent=2))
+    print(pd.DataFrame(svm).to_markdown(index=False, floatfmt=".4g"))
+    write_json({"load_average_1min": {"start": load_start, "end": load_end},
+                "repeats": args.repeats, "previous_commit": args.previous,
+                "fits": table.reset_index().to_dict(orient="records"), "checks": checks,
+                "svm_tolerance": svm, "cpus": len(os.sched_getaffinity(0))}, "speed")
+    md = [f"Robot training record, {args.repeats} runs of each variant interleaved, each in a "
+          f"fresh process; 1-minute load average {load_start:.2f} at the start, "
+          f"{load_end:.2f} at the end, {len(os.sched_getaffinity(0))} CPUs.\n",
+          table.drop(columns="runs").to_markdown(floatfmt=".3g"), "",
+          "Checks: " + "; ".join(f"{k}: {v}" for k, v in checks.items()), "",
+          "## The paper setting's region SVM (Crammer–Singer) by solver tolerance\n",
+          pd.DataFrame(svm).to_markdown(index=False, floatfmt=".4g")]
+    (RESULTS / "speed.md").write_text("\n".join(md) + "\n")
+
+
+if __name__ == "__main__":
+    main()
