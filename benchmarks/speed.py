@@ -96,8 +96,8 @@ def worker(variant: str, out: str) -> None:
 def previous_tree(commit: str, into: Path) -> Path | None:
     """The package at ``commit``, unpacked under ``into`` (None if git cannot give it)."""
     try:
-        blob = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "pwa_pipeline"],
-                              check=True, capture_output=True).stdout
+        blob = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "pwa_pipeline",
+                               "data"], check=True, capture_output=True).stdout
     except (OSError, subprocess.CalledProcessError) as exc:
         print(f"previous implementation unavailable: {exc}")
         return None
