@@ -5,7 +5,8 @@ import pytest
 
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.pwa import SVMRegions
-from pwa_pipeline.pwa.submodels import merge_indistinguishable, refine, separable
+from pwa_pipeline.pwa.submodels import (least_squares, merge_indistinguishable, refine,
+                                       separable)
 
 SIGMA = 0.05
 
@@ -107,3 +108,21 @@ def test_merging_many_clusters_tests_few_pairs(monkeypatch):
     assert len(set(merged)) == 2 and n == 28
     assert len({(a, b) for a, b in zip(merged, mode, strict=True)}) == 2  # the true modes
     assert len(calls) <= 60  # the previous scan made one per pair per merge: ~4,000
+
+
+def test_least_squares_equals_lstsq_well_conditioned_or_not():
+    rng = np.random.default_rng(3)
+    # columns of very different sizes (the normal matrix is solved after scaling them)
+    phi = rng.normal(size=(2000, 6)) * np.array([1e-3, 1.0, 1e4, 5.0, 1.0, 1.0])
+    phi[:, 4] += 3 * phi[:, 5]  # correlated, still well conditioned
+    target = phi @ rng.normal(size=(6, 2)) + 0.1 * rng.normal(size=(2000, 2))
+    ref = np.linalg.lstsq(phi, target, rcond=None)[0]
+    # each θ_j times its column's size: what a coefficient contributes to the prediction
+    size = np.sqrt((phi**2).mean(axis=0))[:, None]
+    got = least_squares(phi, target)
+    np.testing.assert_allclose(got * size, ref * size, rtol=0,
+                               atol=1e-10 * np.abs(ref * size).max())
+    # rank deficient (a repeated column) and a zero column: lstsq's minimum-norm solution
+    for bad in (np.column_stack([phi, phi[:, 1]]), np.column_stack([phi, np.zeros(2000)])):
+        ref = np.linalg.lstsq(bad, target, rcond=None)[0]
+        np.testing.assert_allclose(least_squares(bad, target), ref, rtol=1e-12, atol=1e-12)

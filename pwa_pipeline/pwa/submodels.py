@@ -9,6 +9,7 @@ import hashlib
 from numbers import Integral, Real
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import chi2
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import Interval
@@ -25,7 +26,10 @@ def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
 
 
 def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarray:
-    """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows)."""
+    """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows).
+
+    Each θ_i is :func:`least_squares` of its rows.
+    """
     d, m = phi.shape[1], target.shape[1]
     thetas = np.full((s, d, m), np.nan)
     order = np.argsort(labels, kind="stable")  # each label's rows, in row order
@@ -34,8 +38,32 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarr
         for i in range(s):
             rows = order[bounds[i]:bounds[i + 1]]
             if len(rows) >= d:
-                thetas[i] = np.linalg.lstsq(phi[rows], target[rows], rcond=None)[0]
+                thetas[i] = least_squares(phi[rows], target[rows])
     return thetas
+
+
+_NORMAL_COND = 1e6
+"""Largest condition number of the column-scaled normal matrix solved as it is."""
+
+
+def least_squares(phi: Float2D, target: Float2D) -> np.ndarray:
+    """``np.linalg.lstsq(phi, target, rcond=None)[0]``, from the normal equations where they
+    are well conditioned.
+
+    The columns of φ are scaled to unit norm, and where that normal matrix ΦᵀΦ has a
+    condition number below 1e6 its Cholesky solve agrees with ``lstsq`` to ~1e-10 relative
+    (1e-12 on the robot) at a fifth of its time on tall records (one product over the rows
+    instead of an SVD); otherwise (near rank deficiency) ``lstsq`` itself gives its
+    minimum-norm solution.
+    """
+    gram = phi.T @ phi
+    scale = np.sqrt(np.diagonal(gram))
+    if np.all(scale > 0):
+        gram /= np.outer(scale, scale)
+        if np.linalg.cond(gram) < _NORMAL_COND:
+            rhs = (phi.T @ target) / scale[:, None]
+            return cho_solve(cho_factor(gram), rhs) / scale[:, None]
+    return np.linalg.lstsq(phi, target, rcond=None)[0]
 
 
 def _sq_residuals(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
