@@ -134,7 +134,8 @@ class PWARX(ARXModelBase):
               affine: bool = False) -> "PWARX":
         """The paper's setting: raw regressors in the neighbour search, DBSCAN on θ_k as it
         is with every local model, sub-models as cluster centres, the SVM trained on every
-        clustered row (noise left out).
+        clustered row (noise left out; solver tolerance 1e-2, see
+        :class:`~pwa_pipeline.pwa.regions.SVMRegions`).
 
         The paper gives n_ρ, ε and MinPts per data set and no rule, so they are required;
         its values are in ``data/hparams.toml`` (sets ``paper``).
@@ -143,7 +144,7 @@ class PWARX(ARXModelBase):
                    local_models=LocalLeastSquares(n_rho=n_rho, standardize=False),
                    clustering=DBSCANClustering(eps=eps, min_pts=min_pts, unit_free=False,
                                                confidence=None, max_clustered=None),
-                   submodels=ClusterCentres(), regions=SVMRegions(max_rows=None))
+                   submodels=ClusterCentres(), regions=SVMRegions(max_rows=None, tol=1e-2))
 
     def steps(self) -> dict[str, BaseEstimator]:
         """The unfitted step objects, defaults filled in for those left None."""
