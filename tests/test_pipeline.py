@@ -1,8 +1,11 @@
 """The Dagster layer: definitions, materialisation, MLflow tracking, schedule, storage."""
 
+import base64
 import shutil
+from pathlib import Path
 
 import dagster as dg
+import mlflow
 import numpy as np
 import pandas as pd
 import pytest
@@ -132,6 +135,13 @@ def test_materialise_hure_vasak_paper(paper_run):
         "parameter_matrices.json", "scores.csv", "prediction.png"}
     meta = result.asset_materializations_for_node("pwa_scores")[0].metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
+    # the prediction figure is rendered once: the PNG in MLflow is the one on the asset page
+    png = Path(mlflow.artifacts.download_artifacts(run_id=pwa.info.run_id,
+                                                   artifact_path="prediction.png",
+                                                   tracking_uri=resources["mlflow"].uri()))
+    inline = meta["prediction"].value.split("base64,", 1)[1].rstrip(")")
+    assert png.read_bytes().startswith(b"\x89PNG") and \
+        png.read_bytes() == base64.b64decode(inline)
     assert meta["mlflow_run"].value == (f"http://127.0.0.1:5000/#/experiments/"
                                         f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}")
     # MLflow 3's UI opens the experiment in its model-training view, not the GenAI one

@@ -379,9 +379,8 @@ def regions_figure(model: PWARX, phi: np.ndarray, names: list[str],
     return fig
 
 
-def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> str:
-    """The figure as a Markdown image with the PNG inlined (base64), for
-    ``dagster.MetadataValue.md``.
+def to_png(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> bytes:
+    """The figure as PNG bytes, at most ``max_bytes`` (the PNG of :func:`to_markdown`).
 
     Saved at 90 dpi by default; the figures of this module then come out at about 15–250 kB
     (prediction of two outputs ≈ 145 kB, of six noisy outputs ≈ 250 kB; parameter clusters
@@ -395,11 +394,6 @@ def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000)
         Width of the PNG in pixels; None: 90 dpi (900 px for a 10-inch figure).
     max_bytes : int, default 300_000
         Size limit of the PNG (the base64 text is 4/3 of it).
-
-    Returns
-    -------
-    str
-        ``![<suptitle>](data:image/png;base64,...)``.
     """
     dpi = 90.0 if width is None else width / fig.get_figwidth()
     while True:
@@ -407,7 +401,28 @@ def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000)
         fig.savefig(buf, format="png", dpi=dpi)
         png = buf.getvalue()
         if len(png) <= max_bytes or dpi < 30:
-            break
+            return png
         dpi *= 0.75
+
+
+def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000,
+                png: bytes | None = None) -> str:
+    """The figure as a Markdown image with the PNG inlined (base64), for
+    ``dagster.MetadataValue.md``.
+
+    Parameters
+    ----------
+    fig : Figure
+    width, max_bytes
+        As in :func:`to_png`.
+    png : bytes, optional
+        The figure's :func:`to_png`, if already rendered (rendering is the cost).
+
+    Returns
+    -------
+    str
+        ``![<suptitle>](data:image/png;base64,...)``.
+    """
+    png = to_png(fig, width, max_bytes) if png is None else png
     alt = " ".join((fig.get_suptitle() or "figure").replace("[", "(").replace("]", ")").split())
     return f"![{alt}](data:image/png;base64,{base64.b64encode(png).decode('ascii')})"

@@ -4,6 +4,7 @@ import base64
 import json
 import logging
 import os
+import tempfile
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -292,7 +293,7 @@ class MLflowTracker(dg.ConfigurableResource):
         """Create, fill and close one run; returns its id.
 
         ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
-        matplotlib figures (as PNG) or text (as it is). ``model`` is logged as the run's MLflow
+        matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are). ``model`` is logged as the run's MLflow
         model (a pyfunc with signature and input example, registered as
         ``<prefix>.<dataset>.<method>``) and its training table as the run's dataset.
         ``run_name`` defaults to ``<method>|<hparams>``.
@@ -318,7 +319,9 @@ class MLflowTracker(dg.ConfigurableResource):
                 tags=[RunTag(k, str(v)) for k, v in tags.items()],
             )
             for name, obj in artifacts.items():
-                if hasattr(obj, "savefig"):
+                if isinstance(obj, bytes):
+                    _log_bytes(client, run_id, obj, name)
+                elif hasattr(obj, "savefig"):
                     client.log_figure(run_id, obj, name)
                 elif isinstance(obj, pd.DataFrame):
                     client.log_text(run_id, obj.to_csv(index=False), name)
@@ -336,3 +339,11 @@ class MLflowTracker(dg.ConfigurableResource):
             client.set_terminated(run_id, "FAILED" if isinstance(exc, Exception) else "KILLED")
             raise
         return run_id
+
+
+def _log_bytes(client, run_id: str, data: bytes, name: str) -> None:
+    """Store ``data`` as the run's artifact file ``name``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / name
+        path.write_bytes(data)
+        client.log_artifact(run_id, str(path))
