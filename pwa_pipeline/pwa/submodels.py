@@ -37,7 +37,9 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarr
     with single_threaded_blas():  # tall, thin solves: threads only wait
         for i in range(s):
             rows = order[bounds[i]:bounds[i + 1]]
-            if len(rows) >= d:
+            if len(rows) == len(labels):  # one label: every row, no copy
+                thetas[i] = least_squares(phi, target)
+            elif len(rows) >= d:
                 thetas[i] = least_squares(phi[rows], target[rows])
     return thetas
 
@@ -68,7 +70,10 @@ def least_squares(phi: Float2D, target: Float2D) -> np.ndarray:
 
 def _sq_residuals(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
     """Squared residuals of every row under every sub-model, shape (s, n, m)."""
-    return (target[None] - phi @ thetas) ** 2
+    with single_threaded_blas():  # n × d by d × m products: threads only wait
+        sq = np.matmul(phi, thetas)
+    np.subtract(target, sq, out=sq)
+    return np.square(sq, out=sq)
 
 
 def _noise_var(sq_res: np.ndarray, labels: np.ndarray, n_params: int) -> np.ndarray:
