@@ -5,7 +5,7 @@ import pytest
 
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.pwa import SVMRegions
-from pwa_pipeline.pwa.submodels import (least_squares, merge_indistinguishable, refine,
+from pwa_pipeline.pwa.submodels import (least_squares, merge_indistinguishable, refine, refit,
                                        separable)
 
 SIGMA = 0.05
@@ -122,6 +122,19 @@ def test_least_squares_equals_lstsq_well_conditioned_or_not():
     got = least_squares(phi, target)
     np.testing.assert_allclose(got * size, ref * size, rtol=0,
                                atol=1e-10 * np.abs(ref * size).max())
+    # refit: every row under one label; rows by label, −1 left out, a label with < d rows NaN
+    thetas = refit(phi, target, np.zeros(2000, int), 1)
+    np.testing.assert_allclose(thetas[0] * size, ref * size, rtol=0,
+                               atol=1e-10 * np.abs(ref * size).max())
+    labels = np.zeros(2000, int)
+    labels[::7], labels[-300:], labels[:4], labels[4:50] = 1, 2, 3, -1
+    thetas = refit(phi, target, labels, 4)
+    for i in range(3):
+        rows = labels == i
+        one = np.linalg.lstsq(phi[rows], target[rows], rcond=None)[0]
+        np.testing.assert_allclose(thetas[i] * size, one * size, rtol=0,
+                                   atol=1e-10 * np.abs(one * size).max())
+    assert np.isnan(thetas[3]).all()
     # rank deficient (a repeated column) and a zero column: lstsq's minimum-norm solution
     for bad in (np.column_stack([phi, phi[:, 1]]), np.column_stack([phi, np.zeros(2000)])):
         ref = np.linalg.lstsq(bad, target, rcond=None)[0]
