@@ -1,0 +1,138 @@
+"""The README's first command, ``python -m pwa_pipeline run``, on fresh stores: wall time,
+peak memory, and where the time goes (issue 12).
+
+Each repeat runs the command in a fresh process with ``PWA_PIPELINE_HOME`` set to a new
+temporary directory (so the Dagster home, the asset store, the local-model cache and the
+MLflow sqlite store are all created by the run) and ``MLFLOW_TRACKING_URI`` unset. The time
+is then split with the Dagster event log of that home:
+
+- ``start``: process start to the first run's start (imports, definitions, the Dagster
+  instance's creation);
+- per partition: the run's wall time, the seconds of its steps (``STEP_START`` to
+  ``STEP_SUCCESS``) by group — fitting (``*_model``, ``local_models``, ``clusters``,
+  ``sub_models``, ``svm_regions``, ``output_error_refinement``), scoring (``*_scores``:
+  evaluation, figure, MLflow logging), the rest — and, inside scoring, the MLflow logging
+  with model registration (the ``mlflow_log_seconds`` of each ``*_scores`` asset; the first
+  one of the process creates the MLflow store); what the run's wall time has beyond its
+  steps is Dagster's own (events, storage, input loading between steps);
+- ``leaderboard`` and ``end`` (last run to process exit).
+
+Writes results/first_command.json and results/first_command.md; the last line printed is a
+summary. Usage: python -m benchmarks.first_command [--repeats 1]
+"""
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pandas as pd
+
+from benchmarks._common import RESULTS, write_json
+
+ROOT = Path(__file__).resolve().parents[1]
+FIT_STEPS = {"local_models", "clusters", "sub_models", "svm_regions", "output_error_refinement",
+             "pwa_model", "linear_arx_model", "subspace_model"}
+
+
+def one_run(home: Path) -> dict:
+    """Run the command with its stores in ``home``; wall seconds, peak RSS and the split."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MLFLOW_TRACKING_URI", "DAGSTER_HOME", "PWA_DATASETS")}
+    env.update(PWA_PIPELINE_HOME=str(home),
+               PYTHONPATH=f"{ROOT}{os.pathsep}{env.get('PYTHONPATH', '')}".rstrip(os.pathsep))
+    start = time.time()
+    with open(home / "output.txt", "w") as out:
+        code = subprocess.run([sys.executable, "-m", "pwa_pipeline", "run"], cwd=home, env=env,
+                              stdout=out, stderr=subprocess.STDOUT).returncode
+    wall = time.time() - start
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024**2  # GB, largest child
+    return {"wall_seconds": wall, "peak_gb": peak, "exit_code": code,
+            **split(home / ".dagster_home", start, start + wall)}
+
+
+def split(dagster_home: Path, start: float, end: float) -> dict:
+    """Where the time of one command went, from its Dagster event log."""
+    os.environ["DAGSTER_HOME"] = str(dagster_home)
+    import dagster as dg
+
+    instance = dg.DagsterInstance.get()
+    partitions, leaderboard, first, last = [], None, None, None
+    for run in sorted(instance.get_runs(), key=lambda r: instance.all_logs(r.run_id)[0].timestamp):
+        logs = [r for r in instance.all_logs(run.run_id) if r.is_dagster_event]
+        t_start, t_end = logs[0].timestamp, logs[-1].timestamp
+        first = t_start if first is None else first
+        last = t_end
+        steps, mlflow_log = {}, 0.0
+        for r in logs:
+            kind = r.dagster_event.event_type_value
+            if kind == "STEP_START":
+                steps[r.step_key] = -r.timestamp
+            elif kind == "STEP_SUCCESS":
+                steps[r.step_key] += r.timestamp
+            elif kind == "ASSET_MATERIALIZATION":
+                meta = r.dagster_event.event_specific_data.materialization.metadata
+                if "mlflow_log_seconds" in meta:
+                    mlflow_log += meta["mlflow_log_seconds"].value
+        fit = sum(v for k, v in steps.items() if k in FIT_STEPS)
+        score = sum(v for k, v in steps.items() if k.endswith("_scores"))
+        row = {"partition": run.tags.get("dagster/partition"), "seconds": t_end - t_start,
+               "fitting": fit, "scoring": score, "of which MLflow logging": mlflow_log,
+               "other steps": sum(steps.values()) - fit - score,
+               "Dagster between steps": t_end - t_start - sum(steps.values()),
+               "local_models": steps.get("local_models"), "clusters": steps.get("clusters"),
+               "sub_models": steps.get("sub_models"), "svm_regions": steps.get("svm_regions"),
+               "subspace_model": steps.get("subspace_model")}
+        if row["partition"] is None:
+            leaderboard = t_end - t_start
+        else:
+            partitions.append(row)
+    return {"start_seconds": first - start, "leaderboard_seconds": leaderboard,
+            "end_seconds": end - last, "partitions": partitions}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=1)
+    args = parser.parse_args(argv)
+    load_start = os.getloadavg()[0]
+    runs = []
+    for i in range(args.repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            runs.append(one_run(Path(tmp)))
+        print(f"run {i + 1}: {runs[-1]['wall_seconds']:.1f} s, peak {runs[-1]['peak_gb']:.2f} GB, "
+              f"exit code {runs[-1]['exit_code']}", flush=True)
+    load_end = os.getloadavg()[0]
+    wall = statistics.median(r["wall_seconds"] for r in runs)
+    table = pd.DataFrame(runs[0]["partitions"]).set_index("partition")
+    overview = pd.Series({"start (imports, definitions, instance)": runs[0]["start_seconds"],
+                          **{f"partition {k}": v for k, v in table["seconds"].items()},
+                          "leaderboard": runs[0]["leaderboard_seconds"],
+                          "end": runs[0]["end_seconds"]}, name="seconds")
+    cpus = len(os.sched_getaffinity(0))
+    write_json({"load_average_1min": {"start": load_start, "end": load_end}, "cpus": cpus,
+                "repeats": args.repeats, "runs": runs}, "first_command")
+    each = ", ".join(f"{r['wall_seconds']:.1f}" for r in runs)
+    summary = (f"summary: python -m pwa_pipeline run on fresh stores {wall:.1f} s (median of "
+               f"{args.repeats}; runs {each}), "
+               f"peak {max(r['peak_gb'] for r in runs):.2f} GB; load {load_start:.2f} -> "
+               f"{load_end:.2f} on {cpus} CPUs")
+    md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} run(s); 1-minute load "
+          f"average {load_start:.2f} at the start, {load_end:.2f} at the end, {cpus} CPUs. The "
+          f"split is that of the first run.\n",
+          overview.to_markdown(floatfmt=".3g"), "",
+          "Per partition (seconds; scoring includes the MLflow logging with model "
+          "registration):\n", table.to_markdown(floatfmt=".3g"), "", summary]
+    (RESULTS / "first_command.md").write_text("\n".join(md) + "\n")
+    print(json.dumps(runs[0], indent=2, default=float))
+    print(summary)
+
+
+if __name__ == "__main__":
+    main()
