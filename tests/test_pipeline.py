@@ -132,9 +132,10 @@ def test_materialise_hure_vasak_paper(paper_run):
         "parameter_matrices.json", "scores.csv", "prediction.png"}
     meta = result.asset_materializations_for_node("pwa_scores")[0].metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
+    # the link opens MLflow 3.17's UI in its model-training view (the browser test follows it)
     assert meta["mlflow_run"].value == (f"http://127.0.0.1:5000/#/experiments/"
-                                        f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}")
-    # MLflow 3's UI opens the experiment in its model-training view, not the GenAI one
+                                        f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}"
+                                        "?workflowType=machine_learning")
     experiment = client.get_experiment(pwa.info.experiment_id)
     assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     # numbers on the asset pages carry 4 significant digits; checks name their partition
