@@ -137,7 +137,11 @@ def test_the_mlflow_runs_view_lists_every_method_and_compares_them(page, stack, 
     page.goto(f"{stack.dagster_url}/assets/pwa_scores")
     link = page.locator("tr", has=page.get_by_text("mlflow_run", exact=True)).locator("a").first
     experiment = mlflow_experiment_id(stack, DATASET)
-    assert link.get_attribute("href").startswith(f"{stack.mlflow_url}/#/experiments/{experiment}/runs/")
+    href = link.get_attribute("href")
+    assert href.startswith(f"{stack.mlflow_url}/#/experiments/{experiment}/runs/")
+    page.goto(href)  # the run's page, in the model-training view (its sidebar has the registry)
+    page.get_by_role("heading", name=f"pwa|{HPARAMS}").wait_for()
+    page.get_by_role("link", name="Model registry").wait_for()
     page.goto(mlflow_runs_url(stack, experiment))
     runs = [f"{method}|{HPARAMS}" for method in METHODS]
     assert sorted(runs) == [f"{m}|{HPARAMS}" for m in ("linear_arx", "pwa", "subspace")]
