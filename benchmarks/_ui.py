@@ -312,8 +312,29 @@ def open_figure(page, stack: UIStack, asset: str, key: str):
     return image
 
 
-def natural_size(image) -> tuple[int, int]:
-    return tuple(image.evaluate("i => [i.naturalWidth, i.naturalHeight]"))
+#: ``[decoded, naturalWidth, naturalHeight, drawn at the bottom]`` of an <img>: whether the
+#: browser decoded it, its size, and whether its bottom quarter holds a dark pixel (axis
+#: labels; a truncated PNG decodes too, but leaves its lower part empty).
+_IMAGE_STATE = """async i => {
+    const decoded = await i.decode().then(() => true, () => false);
+    if (!decoded || !i.naturalWidth) return [decoded, i.naturalWidth, i.naturalHeight, false];
+    const c = document.createElement("canvas");
+    c.width = i.naturalWidth; c.height = i.naturalHeight;
+    const g = c.getContext("2d");
+    g.drawImage(i, 0, 0);
+    const top = Math.floor(c.height * 0.75);
+    const px = g.getImageData(0, top, c.width, c.height - top).data;
+    let dark = false;
+    for (let k = 0; k < px.length && !dark; k += 4)
+        dark = px[k + 3] > 200 && px[k] + px[k + 1] + px[k + 2] < 300;
+    return [decoded, i.naturalWidth, i.naturalHeight, dark];
+}"""
+
+
+def image_state(image) -> tuple[bool, int, int, bool]:
+    """What the browser made of an <img>: decoded, natural width and height, and whether its
+    bottom quarter is drawn (see ``_IMAGE_STATE``)."""
+    return tuple(image.evaluate(_IMAGE_STATE))
 
 
 def mlflow_experiment_id(stack: UIStack, dataset: str) -> str:

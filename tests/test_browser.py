@@ -17,11 +17,11 @@ from benchmarks._ui import (
     VIEWPORT,
     chromium,
     compare_all_runs,
+    image_state,
     launch_from_sweep,
     missing_browser,
     mlflow_experiment_id,
     mlflow_runs_url,
-    natural_size,
     open_figure,
     ui_stack,
     wait_for_run,
@@ -126,10 +126,10 @@ def test_a_partition_launched_from_the_sweep_job_succeeds(launched):
 ])
 def test_an_asset_page_shows_its_figure(page, stack, launched, asset, key):
     image = open_figure(page, stack, asset, key)
-    width, height = natural_size(image)
-    assert width > 400 and height > 200
-    assert image.is_visible()
     assert image.get_attribute("src").startswith("data:image/png;base64,")
+    decoded, width, height, drawn_to_the_bottom = image_state(image)
+    assert decoded and width > 400 and height > 200 and drawn_to_the_bottom
+    assert image.is_visible()
 
 
 def test_the_mlflow_runs_view_lists_every_method_and_compares_them(page, stack, launched):
