@@ -19,7 +19,7 @@ from .paths import (
     default_storage_dir,
     default_tracking_uri,
 )
-from .resources import mask_credentials
+from .resources import mask_credentials, split_credentials
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
         failed.append(LEADERBOARD)
         print(f"\nLeaderboard: FAILED (run {board.run_id} in the Dagster UI)")
     server = uri.startswith(("http://", "https://"))
-    mlflow_ui = uri.rstrip("/") if server else default_mlflow_ui_url()
+    mlflow_ui = split_credentials(resources["mlflow"].uri())[0].rstrip("/") if server \
+        else default_mlflow_ui_url()
     serve = "" if server else \
         f"  mlflow ui --backend-store-uri {uri} --workers 1          # serves {mlflow_ui}\n"
     print(f"""
