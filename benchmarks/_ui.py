@@ -287,15 +287,19 @@ def launch_from_sweep(page, stack: UIStack, dataset: str, hparams: str) -> str:
     return page.url.rstrip("/").split("/runs/")[1].split("?")[0]
 
 
+#: How the run page labels each final status.
+_ENDED = {"SUCCESS": "Success", "FAILURE": "Failure", "CANCELED": "Canceled"}
+
+
 def wait_for_run(page, stack: UIStack, run_id: str, timeout: float = 300.0) -> dict:
     """Watch the run's page until it ends; the run as the API reports it."""
     page.goto(f"{stack.dagster_url}/runs/{run_id}")
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < timeout:
         run = stack.run(run_id)
-        if run["status"] in ("SUCCESS", "FAILURE", "CANCELED"):
-            page.reload()
-            page.wait_for_load_state("networkidle")
+        if run["status"] in _ENDED:
+            page.reload()  # and wait for the page to say so
+            page.get_by_text(_ENDED[run["status"]], exact=True).first.wait_for(timeout=60_000)
             return run
         time.sleep(1)
     raise TimeoutError(f"run {run_id} not finished after {timeout:.0f} s")

@@ -77,6 +77,7 @@ def launched(browser, stack, shots):
     try:
         run_id = launch_from_sweep(page, stack, DATASET, HPARAMS)
         run = wait_for_run(page, stack, run_id)
+        page.get_by_text(f"partition: {PARTITION}").first.wait_for()
         page.screenshot(path=shots / "sweep_run.png")
         return run, page.inner_text("body")
     finally:
