@@ -142,9 +142,10 @@ def test_materialise_hure_vasak_paper(paper_run):
     inline = meta["prediction"].value.split("base64,", 1)[1].rstrip(")")
     assert png.read_bytes().startswith(b"\x89PNG") and \
         png.read_bytes() == base64.b64decode(inline)
+    # the link opens MLflow 3.17's UI in its model-training view (the browser test follows it)
     assert meta["mlflow_run"].value == (f"http://127.0.0.1:5000/#/experiments/"
-                                        f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}")
-    # MLflow 3's UI opens the experiment in its model-training view, not the GenAI one
+                                        f"{pwa.info.experiment_id}/runs/{pwa.info.run_id}"
+                                        "?workflowType=machine_learning")
     experiment = client.get_experiment(pwa.info.experiment_id)
     assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     # numbers on the asset pages carry 4 significant digits; checks name their partition

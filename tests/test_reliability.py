@@ -2,6 +2,7 @@
 or damaged pickles, runs started at once, interrupts, broken or password-protected servers."""
 
 import base64
+import contextlib
 import multiprocessing
 import os
 import pickle
@@ -151,6 +152,19 @@ def _log_one(args):
                            tags={}, artifacts={})
 
 
+@contextlib.contextmanager
+def _fork_pool(processes: int):
+    """A fork pool ended by close + join: ``Pool.__exit__`` terminates its workers by SIGTERM,
+    which pytest-xdist's workers ignore, and a worker blocked on the task queue's lock (held by
+    the terminating pool) then never ends."""
+    pool = multiprocessing.get_context("fork").Pool(processes)
+    try:
+        yield pool
+    finally:
+        pool.close()
+        pool.join()
+
+
 @pytest.mark.parametrize("fresh", [True, False])
 def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
     from mlflow.tracking import MlflowClient
@@ -159,7 +173,7 @@ def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
     if not fresh:
         shutil.copy(mlflow_template, db)
     uri = f"sqlite:///{db}"
-    with multiprocessing.get_context("fork").Pool(3) as pool:  # separate processes, no re-import
+    with _fork_pool(3) as pool:  # separate processes, no re-import
         ids = pool.map(_log_one, [(uri, i) for i in range(3)])
     client = MlflowClient(tracking_uri=uri)
     exps = [e for e in client.search_experiments() if e.name == "pwa-pipeline/d"]
@@ -258,7 +272,7 @@ def test_instances_created_at_once_share_one_schema(tmp_path):
 
     for trial in range(2):  # without the lock 2 of 3 such trials broke the home
         home = tmp_path / f"home{trial}"
-        with multiprocessing.get_context("fork").Pool(4) as pool:
+        with _fork_pool(4) as pool:
             assert pool.map(_prepare, [str(home)] * 4) == ["ok"] * 4
         db = sqlite3.connect(home / "history" / "runs.db")
         assert db.execute("select count(*) from alembic_version").fetchone() == (1,)

@@ -223,6 +223,9 @@ def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, m
     rows = [line for line in board.splitlines() if line.startswith("|") and "paper" in line]
     assert sorted(row.split("|")[2].strip() for row in rows) == sorted(METHODS)
     assert (tmp_path / "storage" / "leaderboard.parquet").is_file()
+    # and it ends with the pages to open, MLflow's in its model-training view
+    assert "http://127.0.0.1:3000/locations/pwa_pipeline/jobs/sweep" in board
+    assert "http://127.0.0.1:5000/#/experiments?workflowType=machine_learning" in board
 
 
 def test_runs_launched_from_the_sweep_page_of_the_ui_are_sweep_runs(tmp_path):

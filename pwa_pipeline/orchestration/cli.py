@@ -12,8 +12,14 @@ import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .instance import prepare_instance
-from .paths import default_datasets_path, default_storage_dir, default_tracking_uri
-from .resources import mask_credentials
+from .paths import (
+    MLFLOW_TRAINING_VIEW,
+    default_datasets_path,
+    default_mlflow_ui_url,
+    default_storage_dir,
+    default_tracking_uri,
+)
+from .resources import mask_credentials, split_credentials
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,8 +76,11 @@ def run(args: argparse.Namespace) -> int:
     else:
         failed.append(LEADERBOARD)
         print(f"\nLeaderboard: FAILED (run {board.run_id} in the Dagster UI)")
-    experiments = "" if uri.startswith(("http://", "https://")) else \
-        "      then open http://127.0.0.1:5000/#/experiments (the runs of each data set)\n"
+    server = uri.startswith(("http://", "https://"))
+    mlflow_ui = split_credentials(resources["mlflow"].uri())[0].rstrip("/") if server \
+        else default_mlflow_ui_url()
+    serve = "" if server else \
+        f"  mlflow ui --backend-store-uri {uri} --workers 1          # serves {mlflow_ui}\n"
     print(f"""
 Stores
   Dagster instance : {home}
@@ -79,8 +88,9 @@ Stores
   MLflow tracking  : {uri}
 Open the UIs on the same stores:
   DAGSTER_HOME={home} dagster dev -w workspace.yaml        # http://127.0.0.1:3000
-  mlflow ui --backend-store-uri {uri} --workers 1          # http://127.0.0.1:5000
-{experiments}""", end="")
+{serve}  then open http://127.0.0.1:3000/locations/pwa_pipeline/jobs/sweep (launch partitions)
+   and {mlflow_ui}/#/experiments{MLFLOW_TRAINING_VIEW} (the runs of each data set)
+""", end="")
     return 1 if failed else 0
 
 

@@ -16,8 +16,10 @@ DAGSTER_YAML = """telemetry:
   enabled: false
 nux:
   enabled: false
-# sweep_dask runs share dask task keys (see pwa_pipeline.orchestration.jobs): one at a time
 run_queue:
+  # a run launched from the UI leaves the queue within a second (Dagster's default: 5 s)
+  dequeue_interval_seconds: 1
+  # sweep_dask runs share dask task keys (see pwa_pipeline.orchestration.jobs): one at a time
   tag_concurrency_limits:
     - key: "pwa/executor"
       value: "dask"

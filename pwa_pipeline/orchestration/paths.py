@@ -23,6 +23,18 @@ def default_tracking_uri() -> str:
     return os.environ.get("MLFLOW_TRACKING_URI") or f"sqlite:///{project_dir() / 'mlflow.db'}"
 
 
+#: The query that opens MLflow 3.17's UI in its model-training view: the UI keeps a global
+#: GenAI / model-training switch (GenAI until the user flips it, stored in the browser) and
+#: ignores the experiment's ``mlflow.experimentKind`` tag while that switch is shown.
+MLFLOW_TRAINING_VIEW = "?workflowType=machine_learning"
+
+
+def default_mlflow_ui_url() -> str:
+    """``$PWA_MLFLOW_UI_URL``, else ``http://127.0.0.1:5000`` (``mlflow ui``'s default): where
+    the MLflow UI of a local (sqlite) store is served, for the links the pipeline prints."""
+    return (os.environ.get("PWA_MLFLOW_UI_URL") or "http://127.0.0.1:5000").rstrip("/")
+
+
 def default_storage_dir() -> Path:
     """``<project>/storage``: materialised assets and the local-model cache."""
     return project_dir() / "storage"

@@ -19,15 +19,21 @@ import pandas as pd
 from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from ..datasets.user import DatasetRegistry
-from .paths import default_datasets_path, default_storage_dir, default_tracking_uri
+from .paths import (
+    MLFLOW_TRAINING_VIEW,
+    default_datasets_path,
+    default_mlflow_ui_url,
+    default_storage_dir,
+    default_tracking_uri,
+)
 
 if TYPE_CHECKING:
     from .mlflow_models import ModelToLog
 
 #: What a logged model needs to load elsewhere (pinned to the versions that logged it).
 REQUIREMENTS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn", "pandas")
-#: The experiment tag MLflow 3's UI reads to open an experiment in its classic model-training
-#: view rather than the GenAI one.
+#: The experiment tag of MLflow 3 for classic model training (not GenAI); MLflow 3.17's UI
+#: follows its own GenAI / model-training switch instead, so links add ``MLFLOW_TRAINING_VIEW``.
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 #: sqlite tracking stores whose schema this process has created or checked.
 _READY_STORES: set[str] = set()
@@ -137,8 +143,9 @@ class MLflowTracker(dg.ConfigurableResource):
         Empty: ``$MLFLOW_TRACKING_URI`` or the embedded ``sqlite:///<project>/mlflow.db``.
     experiment_prefix : str
     ui_url : str
-        Where the MLflow UI of a local (sqlite) store is served (``mlflow ui``'s default);
-        run links point there, or at the tracking server itself.
+        Where the MLflow UI of a local (sqlite) store is served; empty:
+        ``$PWA_MLFLOW_UI_URL`` or ``http://127.0.0.1:5000`` (``mlflow ui``'s default). Run
+        links point there, or at the tracking server itself, in the model-training view.
     timeout_seconds : float
         How long to wait for a tracking server's health probe before failing.
     request_timeout : float
@@ -149,7 +156,7 @@ class MLflowTracker(dg.ConfigurableResource):
 
     tracking_uri: str = ""
     experiment_prefix: str = "pwa-pipeline"
-    ui_url: str = "http://127.0.0.1:5000"
+    ui_url: str = ""
     timeout_seconds: float = 5.0
     request_timeout: float = 10.0
     request_retries: int = 2
@@ -273,9 +280,9 @@ class MLflowTracker(dg.ConfigurableResource):
         """The link to a run in the MLflow UI (credentials never included)."""
         uri = self.uri()
         base = split_credentials(uri)[0] if uri.startswith(("http://", "https://")) \
-            else self.ui_url
+            else self.ui_url or default_mlflow_ui_url()
         experiment = self.client().get_run(run_id).info.experiment_id
-        return f"{base.rstrip('/')}/#/experiments/{experiment}/runs/{run_id}"
+        return f"{base.rstrip('/')}/#/experiments/{experiment}/runs/{run_id}{MLFLOW_TRAINING_VIEW}"
 
     def log_run(
         self,

@@ -1,0 +1,360 @@
+"""Both UIs on a temporary store, driven by a real browser (the browser tests and
+``benchmarks/screenshots.py``).
+
+:class:`UIStack` starts ``dagster dev`` and ``mlflow ui`` the way the README tells users to,
+each in its own process group on a free loopback port, on stores under one temporary
+directory (``PWA_PIPELINE_HOME``, ``DAGSTER_HOME``, a sqlite MLflow store), and ends both
+groups, whatever happened. :func:`chromium` launches Debian's ``/usr/bin/chromium`` through
+pip's ``playwright`` (never a browser downloaded by ``playwright install``). The page helpers
+below do what a user does: launch a partition from *Jobs → sweep*, open a figure on an asset
+page, select runs in MLflow and compare them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pwa_pipeline.orchestration.instance import DAGSTER_YAML
+from pwa_pipeline.orchestration.paths import MLFLOW_TRAINING_VIEW
+
+ROOT = Path(__file__).resolve().parents[1]
+CHROMIUM = os.environ.get("PWA_CHROMIUM", "/usr/bin/chromium")
+#: Headless, and no background traffic: without the last four, chromium keeps trying to reach
+#: Google's update, sync and field-trial servers.
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+INSTALL = ("install them with: python -m pip install -e '.[test]' (playwright) and "
+           "apt-get install -y chromium (Debian's browser at /usr/bin/chromium; "
+           "`playwright install` is not needed)")
+VIEWPORT = {"width": 1280, "height": 800}
+#: The Dagster code location of ``workspace.yaml``.
+LOCATION = "pwa_pipeline"
+
+
+def missing_browser() -> str | None:
+    """Why the browser cannot run (with how to install it), or None."""
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return f"the Python package playwright is not installed; {INSTALL}"
+    if not (Path(CHROMIUM).is_file() and os.access(CHROMIUM, os.X_OK)):
+        return f"no chromium at {CHROMIUM}; {INSTALL}"
+    return None
+
+
+def free_port() -> int:
+    """A loopback port nobody listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _default_signals() -> None:
+    # a shell's background job ignores SIGINT (and some runners SIGTERM too): give the servers
+    # their default handlers back, so that the SIGTERM of stop() ends them at once
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
+@dataclass
+class Server:
+    """One server process (the leader of its own process group) and its log."""
+
+    name: str
+    url: str
+    process: subprocess.Popen
+    log: Path
+    up_seconds: float = float("nan")
+
+    def tail(self, lines: int = 30) -> str:
+        text = self.log.read_text(errors="replace").splitlines() if self.log.exists() else []
+        return "\n".join(text[-lines:])
+
+    def terminate(self) -> None:
+        """SIGTERM to the whole group (the server, its code server and run workers)."""
+        _signal_group(self.process, signal.SIGTERM)
+
+    def kill(self) -> None:
+        """SIGKILL to what is left of the group, and reap the leader."""
+        _signal_group(self.process, signal.SIGKILL)
+        self.process.wait()
+
+
+def _signal_group(process: subprocess.Popen | None, sig: int) -> None:
+    if process is None:
+        return
+    try:
+        os.killpg(process.pid, sig)
+    except ProcessLookupError:  # the whole group has gone
+        pass
+
+
+def _get(url: str, data: bytes | None = None, timeout: float = 5.0) -> bytes:
+    headers = {"Content-Type": "application/json"} if data else {}
+    request = urllib.request.Request(url, data=data, headers=headers)
+    with urllib.request.urlopen(request, timeout=timeout) as response:
+        return response.read()
+
+
+@dataclass
+class UIStack:
+    """``dagster dev`` and ``mlflow ui`` on fresh stores under ``root``."""
+
+    root: Path
+    servers: dict[str, Server] = field(default_factory=dict)
+
+    @property
+    def env(self) -> dict[str, str]:
+        home = self.root / ".dagster_home"
+        return {**os.environ,
+                "PWA_PIPELINE_HOME": str(self.root), "DAGSTER_HOME": str(home),
+                "MLFLOW_TRACKING_URI": self.tracking_uri,
+                "PWA_DATASETS": str(self.root / "storage" / "datasets.json"),
+                "PWA_MLFLOW_UI_URL": self.mlflow_url,
+                "MLFLOW_DISABLE_TELEMETRY": "true", "DO_NOT_TRACK": "true",
+                "DAGSTER_DISABLE_TELEMETRY": "1", "PYTHONUNBUFFERED": "1"}
+
+    @property
+    def tracking_uri(self) -> str:
+        return f"sqlite:///{self.root / 'mlflow.db'}"
+
+    @property
+    def dagster_url(self) -> str:
+        return self.servers["dagster"].url
+
+    @property
+    def mlflow_url(self) -> str:
+        return self.servers["mlflow"].url
+
+    def start(self, timeout: float = 240.0) -> UIStack:
+        """Start both servers at once; return when Dagster has loaded the code location and
+        MLflow answers ``/health`` (``up_seconds`` of each: from its start)."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        home = self.root / ".dagster_home"
+        home.mkdir(exist_ok=True)
+        # what `python -m pwa_pipeline run` writes on first use (no newsletter dialog, the
+        # run queue's limits); dagster dev creates the schema itself, in one process
+        (home / "dagster.yaml").write_text(DAGSTER_YAML)
+        ports = {"dagster": free_port(), "mlflow": free_port()}
+        for name in ports:
+            self.servers[name] = Server(name, f"http://127.0.0.1:{ports[name]}", None,
+                                        self.root / f"{name}.log")
+        commands = {
+            "dagster": [sys.executable, "-m", "dagster", "dev", "-w", str(ROOT / "workspace.yaml"),
+                        "-h", "127.0.0.1", "-p", str(ports["dagster"])],
+            "mlflow": [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri",
+                       self.tracking_uri, "--host", "127.0.0.1", "--port", str(ports["mlflow"]),
+                       "--workers", "1"]}
+        t0 = time.perf_counter()
+        try:
+            for name, command in commands.items():
+                server = self.servers[name]
+                with open(server.log, "wb") as log:
+                    server.process = subprocess.Popen(
+                        command, cwd=ROOT, env=self.env, stdout=log, stderr=subprocess.STDOUT,
+                        stdin=subprocess.DEVNULL, start_new_session=True,
+                        preexec_fn=_default_signals)
+            probes = {"dagster": self._dagster_loaded, "mlflow": self._mlflow_healthy}
+            waiting = set(probes)
+            while waiting:
+                for name in sorted(waiting):
+                    server = self.servers[name]
+                    if server.process.poll() is not None:
+                        raise RuntimeError(f"{name} exited with {server.process.returncode}:\n"
+                                           f"{server.tail()}")
+                    if probes[name](server.url):
+                        server.up_seconds = time.perf_counter() - t0
+                        waiting.discard(name)
+                if time.perf_counter() - t0 > timeout:
+                    raise TimeoutError(f"{sorted(waiting)} not up after {timeout:.0f} s:\n" +
+                                       "\n".join(self.servers[n].tail() for n in waiting))
+                time.sleep(0.25)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def stop(self, grace: float = 5.0) -> None:
+        """End every server's process group: SIGTERM to all, SIGKILL to what is left after
+        ``grace`` seconds (idempotent)."""
+        started = [s for s in self.servers.values() if s.process is not None]
+        for server in started:
+            server.terminate()
+        deadline = time.monotonic() + grace
+        for server in started:
+            try:
+                server.process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+            server.kill()  # children that outlive their leader go too
+
+    @staticmethod
+    def _dagster_loaded(url: str) -> bool:
+        query = ("{ workspaceOrError { ... on Workspace { locationEntries { name loadStatus "
+                 "locationOrLoadError { __typename ... on PythonError { message } } } } } }")
+        try:
+            body = json.loads(_get(f"{url}/graphql", json.dumps({"query": query}).encode()))
+        except OSError:
+            return False
+        entries = body["data"]["workspaceOrError"].get("locationEntries", [])
+        for entry in entries:
+            loaded = entry["locationOrLoadError"] or {}
+            if entry["name"] == LOCATION and loaded.get("__typename") == "PythonError":
+                raise RuntimeError(f"the code location failed to load: {loaded['message']}")
+            if entry["name"] == LOCATION and entry["loadStatus"] == "LOADED" and loaded:
+                return True
+        return False
+
+    @staticmethod
+    def _mlflow_healthy(url: str) -> bool:
+        try:
+            return _get(f"{url}/health").strip() == b"OK"
+        except OSError:
+            return False
+
+    def graphql(self, query: str, **variables) -> dict:
+        """Dagster's GraphQL API (to read what the browser did, never to do it)."""
+        body = json.loads(_get(f"{self.dagster_url}/graphql",
+                               json.dumps({"query": query, "variables": variables}).encode(),
+                               timeout=30))
+        if body.get("errors"):
+            raise RuntimeError(body["errors"])
+        return body["data"]
+
+    def run(self, run_id: str) -> dict:
+        """The Dagster run: job, status, times, tags and step times."""
+        query = """query($id: ID!) { runOrError(runId: $id) { __typename ... on Run {
+            runId jobName status creationTime startTime endTime tags { key value }
+            stepStats { stepKey status startTime endTime } } } }"""
+        return self.graphql(query, id=run_id)["runOrError"]
+
+
+@contextmanager
+def ui_stack(root: Path) -> Iterator[UIStack]:
+    """A started :class:`UIStack`, stopped on the way out, even on an error."""
+    stack = UIStack(Path(root))
+    try:
+        yield stack.start()
+    finally:
+        stack.stop()
+
+
+@contextmanager
+def chromium() -> Iterator:
+    """A headless Debian chromium driven by playwright (closed on the way out)."""
+    problem = missing_browser()
+    if problem:
+        raise RuntimeError(problem)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+# --------------------------------------------------------------------------- what a user does
+
+def launch_from_sweep(page, stack: UIStack, dataset: str, hparams: str) -> str:
+    """*Jobs → sweep → Materialize all…*, pick one partition, *Launch 1 run*; the run id."""
+    page.goto(f"{stack.dagster_url}/locations/{LOCATION}/jobs/sweep")
+    page.get_by_role("button", name="Materialize all…").click()
+    dialog = page.get_by_role("dialog").first
+    for key in (dataset, hparams):  # the dimensions in order: dataset, then hparams
+        dialog.get_by_text("Select a partition or create one").first.click()
+        page.locator("[role=dialog]").nth(1).get_by_text(key, exact=True).first.click()
+        dialog.get_by_text("Launch runs to materialize").click()  # closes the list
+    page.get_by_role("button", name="Launch 1 run").click()
+    toast = page.get_by_text("Launched run")
+    toast.wait_for(timeout=30_000)
+    page.get_by_role("link", name="View").or_(page.get_by_role("button", name="View")) \
+        .first.click()
+    page.wait_for_url("**/runs/*", timeout=30_000)
+    return page.url.rstrip("/").split("/runs/")[1].split("?")[0]
+
+
+#: How the run page labels each final status.
+_ENDED = {"SUCCESS": "Success", "FAILURE": "Failure", "CANCELED": "Canceled"}
+
+
+def wait_for_run(page, stack: UIStack, run_id: str, timeout: float = 300.0) -> dict:
+    """Watch the run's page until it ends; the run as the API reports it."""
+    page.goto(f"{stack.dagster_url}/runs/{run_id}")
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < timeout:
+        run = stack.run(run_id)
+        if run["status"] in _ENDED:
+            page.reload()  # and wait for the page to say so
+            page.get_by_text(_ENDED[run["status"]], exact=True).first.wait_for(timeout=60_000)
+            return run
+        time.sleep(1)
+    raise TimeoutError(f"run {run_id} not finished after {timeout:.0f} s")
+
+
+def open_figure(page, stack: UIStack, asset: str, key: str):
+    """The asset page's Markdown metadata ``key`` opened (*Show Markdown*); its <img>."""
+    page.goto(f"{stack.dagster_url}/assets/{asset}")
+    row = page.locator("tr", has=page.get_by_text(key, exact=True))
+    row.get_by_text("[Show Markdown]").first.click()
+    image = page.get_by_role("dialog").locator("img").first
+    image.wait_for()
+    page.wait_for_function("i => i.complete", arg=image.element_handle())
+    return image
+
+
+#: ``[decoded, naturalWidth, naturalHeight, drawn at the bottom]`` of an <img>: whether the
+#: browser decoded it, its size, and whether its bottom quarter holds a dark pixel (axis
+#: labels; a truncated PNG decodes too, but leaves its lower part empty).
+_IMAGE_STATE = """async i => {
+    const decoded = await i.decode().then(() => true, () => false);
+    if (!decoded || !i.naturalWidth) return [decoded, i.naturalWidth, i.naturalHeight, false];
+    const c = document.createElement("canvas");
+    c.width = i.naturalWidth; c.height = i.naturalHeight;
+    const g = c.getContext("2d");
+    g.drawImage(i, 0, 0);
+    const top = Math.floor(c.height * 0.75);
+    const px = g.getImageData(0, top, c.width, c.height - top).data;
+    let dark = false;
+    for (let k = 0; k < px.length && !dark; k += 4)
+        dark = px[k + 3] > 200 && px[k] + px[k + 1] + px[k + 2] < 300;
+    return [decoded, i.naturalWidth, i.naturalHeight, dark];
+}"""
+
+
+def image_state(image) -> tuple[bool, int, int, bool]:
+    """What the browser made of an <img>: decoded, natural width and height, and whether its
+    bottom quarter is drawn (see ``_IMAGE_STATE``)."""
+    return tuple(image.evaluate(_IMAGE_STATE))
+
+
+def mlflow_experiment_id(stack: UIStack, dataset: str) -> str:
+    from mlflow.tracking import MlflowClient
+
+    return MlflowClient(stack.tracking_uri).get_experiment_by_name(
+        f"pwa-pipeline/{dataset}").experiment_id
+
+
+def mlflow_runs_url(stack: UIStack, experiment_id: str) -> str:
+    """The runs view of an experiment, as the README links it."""
+    return f"{stack.mlflow_url}/#/experiments/{experiment_id}/runs{MLFLOW_TRAINING_VIEW}"
+
+
+def compare_all_runs(page) -> None:
+    """On a runs view: select every run (the header's box) and click *Compare*."""
+    page.get_by_role("checkbox").first.check()
+    page.get_by_role("button", name="Compare").click()
+    page.wait_for_url("**/compare-runs?**")
