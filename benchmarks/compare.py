@@ -27,10 +27,12 @@ from pwa_pipeline.methods import METHODS
 from pwa_pipeline.scoring.comparison import table1
 from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores
 
-#: (set, method) pairs compared: the PWA model in both settings, the baselines once, and
-#: the PWA model and linear ARX with simulation-error refinement (set ``output_error``).
+#: (set, method) pairs compared: the PWA model in both settings, the baselines once, the
+#: PWA model and linear ARX with simulation-error refinement (set ``output_error``) and in
+#: the robot's structure (set ``robot``, on the data sets it has values for).
 RUNS = ([("paper", "pwa")] + [("default", m) for m in METHODS]
-        + [("output_error", "pwa"), ("output_error", "linear_arx")])
+        + [("output_error", "pwa"), ("output_error", "linear_arx"),
+           ("robot", "pwa"), ("robot", "linear_arx")])
 #: Published free-run scores on the KUKA test record, each in its own convention:
 #: Fañanás-Anaya et al. (2025), Table VI — RMSE / range per joint, the test record run once.
 PUBLISHED = [("MA-LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.125),
@@ -50,6 +52,8 @@ def main(argv: list[str] | None = None) -> None:
             print(f"skipping {name}: {exc}")
             continue
         for hparams, method in RUNS:
+            if not HParamsFile().covers(hparams, name):
+                continue
             cfg = HParamsFile().configuration(hparams, name)
             with Timer() as t:
                 model = clone(cfg.estimators[method]).fit(data.u_train, data.y_train)
