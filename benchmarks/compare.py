@@ -4,7 +4,9 @@ Every method of the registry (pwa_pipeline.methods) is scored by the same protoc
 (pwa_pipeline.scoring.evaluation): one-step-ahead and free-run, restarted at each held-out
 experiment after a 10-sample warm-up. PWA runs with the sets ``paper``, ``default`` and
 ``output_error`` of data/hparams.toml, the baselines with ``default`` (and linear ARX also with
-``output_error``). Writes results/comparison.csv (dataset,
+``output_error``), and the PWA model and linear ARX in the robot's structure (set ``robot``:
+velocity form per joint, velocity-sign regions chosen per joint on held-out training
+experiments, refined), on the data sets that set has values for. Writes results/comparison.csv (dataset,
 hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
 layout, one block per data set and mode), results/comparison_fit.csv (fit times, sub-model
 counts, divergence flags) and results/conventions.md: every method's free run in each
@@ -65,6 +67,8 @@ def main(argv: list[str] | None = None) -> None:
             fits.append({"dataset": name, "hparams": hparams, "method": method,
                          "fit_seconds": t.seconds,
                          "n_submodels": getattr(model, "n_submodels_", None),
+                         "structures": ", ".join(model.structure_fit_.model.structures)
+                         if hasattr(model, "structure_fit_") else None,
                          "free_run_diverged": ev.diverged()})
             print(f"{name:11s} {method:10s} ({hparams:7s}) fit {t.seconds:7.2f} s  one-step NRMSE "
                   f"{ev.mean('one_step'):.4g}  free-run NRMSE {ev.mean('free_run'):.4g}"

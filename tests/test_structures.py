@@ -180,3 +180,16 @@ def test_bad_structure_choices_are_refused_with_their_reason(kwargs, fit_kwargs,
 def test_linear_arx_checks_its_structure_parameters():
     with pytest.raises(InvalidParameterError, match="'outputs' parameter of LinearARX"):
         LinearARX(outputs="each").fit(np.zeros((20, 1)), np.zeros((20, 1)))
+
+
+@pytest.mark.slow
+def test_the_robot_structure_beats_its_linear_model_in_free_run(robot):
+    """The set ``robot`` on the KUKA record (about a minute per fit; the benchmark
+    ``benchmarks/compare.py`` reports the figures)."""
+    from pwa_pipeline.config import HParamsFile
+
+    cfg = HParamsFile().configuration("robot", "kuka_robot")
+    scores = {name: evaluate(cfg.estimators[name].fit(robot.u_train, robot.y_train),
+                             robot.u_test, robot.y_test).mean("free_run")
+              for name in ("pwa", "linear_arx")}
+    assert scores["pwa"] <= 0.80 and scores["pwa"] < scores["linear_arx"]

@@ -59,6 +59,26 @@ class OutputErrorResult:
     validation_cost: float = float("nan")
 
 
+class _NormalEquations:
+    """JᵀJ and Jᵀr of the free run, from Jacobian rows gathered over 32 time steps for one
+    larger product."""
+
+    def __init__(self, p: int):
+        self.jtj, self.jtr = np.zeros((p, p)), np.zeros(p)
+        self._rows: list[np.ndarray] = []
+        self._res: list[np.ndarray] = []
+
+    def add(self, rows: np.ndarray, residuals: np.ndarray, last: bool) -> None:
+        """Add the rows dŷ/dθ (n, p) and residuals (n,) of one time step."""
+        self._rows.append(rows)
+        self._res.append(residuals)
+        if len(self._rows) == 32 or last:
+            rows_j, res = np.vstack(self._rows), np.concatenate(self._res)
+            self.jtj += rows_j.T @ rows_j
+            self.jtr += rows_j.T @ res
+            self._rows, self._res = [], []
+
+
 class _Runs:
     """The training experiments padded to one length, simulated in lockstep."""
 
@@ -98,8 +118,7 @@ class _Runs:
         rows, outs = np.arange(e)[:, None, None], np.arange(m)[None, :, None]
         lag_rows = [[q * na + lag - 1 for q in range(m)] for lag in range(1, na + 1)]
         sens = np.zeros((na + 1, e, m, p))  # ring buffer of dŷ(k)/dθ
-        jtj, jtr = np.zeros((p, p)), np.zeros(p)
-        block, residuals = [], []  # J rows gathered for one larger product
+        normal = _NormalEquations(p)
         cost = 0.0
         for k in range(w, n):
             active = self.lengths > k
@@ -124,16 +143,10 @@ class _Runs:
                 sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
             sk[~active] = 0.0
             sens[k % (na + 1)] = sk
-            block.append(sk.reshape(e * m, p))
-            residuals.append(r.ravel())
-            if len(block) == 32 or k == n - 1:
-                rows_j, res = np.vstack(block), np.concatenate(residuals)
-                jtj += rows_j.T @ rows_j
-                jtr += rows_j.T @ res
-                block, residuals = [], []
+            normal.add(sk.reshape(e * m, p), r.ravel(), last=k == n - 1)
         if not sensitivities:
             return cost / self.n_scored, None, None
-        return cost / self.n_scored, jtj, jtr
+        return cost / self.n_scored, normal.jtj, normal.jtr
 
 
 class _OutputRuns(_Runs):
@@ -165,8 +178,7 @@ class _OutputRuns(_Runs):
         ysim = self.y.copy()
         lag_rows = [[q * lags + lag - 1 for q in sim] for lag in range(1, lags + 1)]
         sens = np.zeros((lags + 1, e, len(sim), total))
-        jtj, jtr = np.zeros((total, total)), np.zeros(total)
-        block, residuals, cost = [], [], 0.0
+        normal, cost = _NormalEquations(total), 0.0
         for k in range(w, n):
             active = self.lengths > k
             phi = self.phi(ysim, k)
@@ -190,16 +202,10 @@ class _OutputRuns(_Runs):
                 sk += np.einsum("ejq,eqp->ejp", a, sens[(k - lag) % (lags + 1)])
             sk[~active] = 0.0
             sens[k % (lags + 1)] = sk
-            block.append(sk.reshape(-1, total))
-            residuals.append(r.ravel())
-            if len(block) == 32 or k == n - 1:
-                rows_j, res = np.vstack(block), np.concatenate(residuals)
-                jtj += rows_j.T @ rows_j
-                jtr += rows_j.T @ res
-                block, residuals = [], []
+            normal.add(sk.reshape(-1, total), r.ravel(), last=k == n - 1)
         if not sensitivities:
             return cost / self.n_scored, None, None
-        return cost / self.n_scored, jtj, jtr
+        return cost / self.n_scored, normal.jtj, normal.jtr
 
 
 def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list[Float2D],
