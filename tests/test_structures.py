@@ -113,6 +113,17 @@ def test_the_choice_per_output_keeps_the_linear_output_linear_and_switches_the_o
     assert pwa_b < 0.75 * lin_b
 
 
+def test_without_user_regions_the_papers_steps_run_per_output():
+    u, y = _experiments(6, 600, seed=2, outputs=_two_axes)
+    model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled").fit(u, y)
+    assert model.structure_.structures == ["clustered", "clustered"]
+    assert model.structure_.n_regions == [1, 2]  # the linear axis and the friction axis
+    assert model.resolved_params()["clustering"] == "DBSCANClustering"
+    # exact one-step predictions but where the SVM's boundary misses the sign (2 rows here)
+    exact = np.isclose(model.predict(u[0], y[0])[2:], y[0][2:], atol=1e-6).all(axis=1)
+    assert exact.mean() > 0.99
+
+
 def test_decoupled_regressors_hold_the_own_lags_and_every_input():
     M, c, names = output_regressors(1, m=2, r=2, na=1, nb=1, affine=True, form="velocity",
                                     coupling="decoupled")
