@@ -62,7 +62,7 @@ subspace.horizon = 4
 def test_the_robot_structure_is_read_for_the_pwa_model_and_its_linear_baseline():
     cfg = HParamsFile().configuration("robot", "kuka_robot")
     p = cfg.pwa.get_params()
-    assert (p["na"], p["nb"], p["affine"], p["form"], p["outputs"]) == (1, 1, True, "velocity",
+    assert (p["na"], p["nb"], p["affine"], p["form"], p["outputs"]) == (1, 2, True, "velocity",
                                                                        "decoupled")
     assert p["scheduling__switch"] == "select" and p["scheduling__variables"] == "own_increment"
     assert p["refinement__max_iter"] == 30 and p["refinement__validation_fraction"] == 0.1
