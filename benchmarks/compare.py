@@ -4,7 +4,9 @@ Every method of the registry (pwa_pipeline.methods) is scored by the same protoc
 (pwa_pipeline.scoring.evaluation): one-step-ahead and free-run, restarted at each held-out
 experiment after a 10-sample warm-up. PWA runs with the sets ``paper``, ``default`` and
 ``output_error`` of data/hparams.toml, the baselines with ``default`` (and linear ARX also with
-``output_error``). Writes results/comparison.csv (dataset,
+``output_error``), and the PWA model and linear ARX in the robot's structure (set ``robot``:
+velocity form per joint, velocity-sign regions chosen per joint on held-out training
+experiments, refined), on the data sets that set has values for. Writes results/comparison.csv (dataset,
 hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
 layout, one block per data set and mode), results/comparison_fit.csv (fit times, sub-model
 counts, divergence flags) and results/conventions.md: every method's free run in each
@@ -27,10 +29,12 @@ from pwa_pipeline.methods import METHODS
 from pwa_pipeline.scoring.comparison import table1
 from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores
 
-#: (set, method) pairs compared: the PWA model in both settings, the baselines once, and
-#: the PWA model and linear ARX with simulation-error refinement (set ``output_error``).
+#: (set, method) pairs compared: the PWA model in both settings, the baselines once, the
+#: PWA model and linear ARX with simulation-error refinement (set ``output_error``) and in
+#: the robot's structure (set ``robot``, on the data sets it has values for).
 RUNS = ([("paper", "pwa")] + [("default", m) for m in METHODS]
-        + [("output_error", "pwa"), ("output_error", "linear_arx")])
+        + [("output_error", "pwa"), ("output_error", "linear_arx"),
+           ("robot", "pwa"), ("robot", "linear_arx")])
 #: Published free-run scores on the KUKA test record, each in its own convention:
 #: Fañanás-Anaya et al. (2025), Table VI — RMSE / range per joint, the test record run once.
 PUBLISHED = [("MA-LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.125),
@@ -50,6 +54,8 @@ def main(argv: list[str] | None = None) -> None:
             print(f"skipping {name}: {exc}")
             continue
         for hparams, method in RUNS:
+            if not HParamsFile().covers(hparams, name):
+                continue
             cfg = HParamsFile().configuration(hparams, name)
             with Timer() as t:
                 model = clone(cfg.estimators[method]).fit(data.u_train, data.y_train)
@@ -61,6 +67,8 @@ def main(argv: list[str] | None = None) -> None:
             fits.append({"dataset": name, "hparams": hparams, "method": method,
                          "fit_seconds": t.seconds,
                          "n_submodels": getattr(model, "n_submodels_", None),
+                         "structures": ", ".join(model.structure_fit_.model.structures)
+                         if hasattr(model, "structure_fit_") else None,
                          "free_run_diverged": ev.diverged()})
             print(f"{name:11s} {method:10s} ({hparams:7s}) fit {t.seconds:7.2f} s  one-step NRMSE "
                   f"{ev.mean('one_step'):.4g}  free-run NRMSE {ev.mean('free_run'):.4g}"

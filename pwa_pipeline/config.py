@@ -8,7 +8,11 @@ parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). A sub-table
 ``refinement`` (e.g. ``refinement.max_iter = 30``) adds simulation-error refinement
 (:class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`) to the PWA model and, so that
-the comparison is fair, to the linear ARX baseline.
+the comparison is fair, to the linear ARX baseline. The structures of
+:mod:`~pwa_pipeline.pwa.structures` are keys too: ``form = "velocity"``,
+``outputs = "decoupled"`` (shared with the linear ARX baseline) and a sub-table
+``scheduling`` (e.g. ``scheduling.switch = "select"``) for user regions
+(:class:`~pwa_pipeline.pwa.scheduling.SignScheduling`, PWA model only).
 
 A table ``[<set>."*"]`` applies the set to every data set a user registers
 (:mod:`pwa_pipeline.datasets.user`); it gives no orders, which come from the registration
@@ -29,6 +33,7 @@ from ._validation import check_name
 from .methods import METHODS
 from .pwa.estimator import PWARX
 from .pwa.output_error import OutputErrorRefinement
+from .pwa.scheduling import SignScheduling
 from .scoring.evaluation import WARMUP
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
@@ -36,6 +41,9 @@ BASELINES = "baselines"
 #: The table key of a set's values for every user data set.
 ANY_DATASET = "*"
 ORDERS = ("na", "nb", "affine")
+#: Sub-tables that add an optional step object, and an example key of each.
+_STEP_TABLES = {"refinement": OutputErrorRefinement, "scheduling": SignScheduling}
+_EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"'}
 _PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
                  ("clustering", "min_pts"): "min_pts"}
 
@@ -112,19 +120,21 @@ def build_pwarx(table: dict) -> PWARX:
         model = PWARX.paper(**orders, **values)
     else:
         raise ValueError(f"unknown preset {preset!r}; use 'default' or 'paper'")
-    if "refinement" in table:
-        refinement = table.pop("refinement")
-        if not isinstance(refinement, dict):
-            raise ValueError("refinement must be a table, e.g. refinement.max_iter = 30 "
-                             "(an empty [<set>.<dataset>.refinement] table for the defaults)")
-        known = OutputErrorRefinement().get_params()
-        unknown = sorted(set(refinement) - set(known))
+    for key, step_class in _STEP_TABLES.items():
+        if key not in table:
+            continue
+        values = table.pop(key)
+        if not isinstance(values, dict):
+            raise ValueError(f"{key} must be a table, e.g. {key}.{_EXAMPLES[key]} (an empty "
+                             f"[<set>.<dataset>.{key}] table for the defaults)")
+        known = step_class().get_params()
+        unknown = sorted(set(values) - set(known))
         if unknown:
-            raise ValueError(f"unknown refinement parameter(s) {unknown}; it has {sorted(known)}")
-        model.set_params(refinement=OutputErrorRefinement(**refinement))
+            raise ValueError(f"unknown {key} parameter(s) {unknown}; it has {sorted(known)}")
+        model.set_params(**{key: step_class(**values)})
     model.set_params(**_flatten(table))
     model._validate_params()
-    for step in [*model.steps().values(), *filter(None, [model.refinement])]:
+    for step in [*model.steps().values(), *filter(None, [model.refinement, model.scheduling])]:
         step._validate_params()
     return model
 

@@ -22,8 +22,9 @@ class Method:
     label : str
         For people: table columns and figure titles.
     build : callable
-        ``build(pwa, baselines)`` → the unfitted estimator, from a set's PWARX (whose orders
-        the ARX baselines share) and the data set's ``[baselines.<dataset>]`` table.
+        ``build(pwa, baselines)`` → the unfitted estimator, from a set's PWARX (whose orders,
+        form, outputs and refinement the linear ARX baseline shares) and the data set's
+        ``[baselines.<dataset>]`` table.
     """
 
     name: str
@@ -34,8 +35,8 @@ class Method:
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("pwa", "PWA", lambda pwa, base: pwa),
     Method("linear_arx", "linear ARX",
-           lambda pwa, base: LinearARX(na=pwa.na, nb=pwa.nb, affine=pwa.affine,
-                                       refinement=pwa.refinement)),
+           lambda pwa, base: LinearARX(na=pwa.na, nb=pwa.nb, affine=pwa.affine, form=pwa.form,
+                                       outputs=pwa.outputs, refinement=pwa.refinement)),
     Method("subspace", "subspace",
            lambda pwa, base: SubspaceSS(**base.get("subspace", {}), warmup=base["warmup"])),
 )}

@@ -92,7 +92,7 @@ def test_evaluation_rejects_bad_input():
     u, y = rng.normal(size=(50, 1)), rng.normal(size=(50, 1))
     with pytest.raises(ValueError, match="u has 2 input.*fitted with 1"):
         evaluate(model, np.hstack([u, u]), y)
-    with pytest.raises(ValueError, match="warm-up too short: y_init has 1 row.*at least max\\(na, nb\\) = 2"):
+    with pytest.raises(ValueError, match="warm-up too short: y_init has 1 row.*at least max\\(output lags, nb\\) = 2"):
         evaluate(model, u, y, warmup=1)
     y_nan = y.copy()
     y_nan[7] = np.nan
@@ -103,3 +103,35 @@ def test_evaluation_rejects_bad_input():
         ss.simulate(rng.normal(size=(50, 2)), np.zeros((1, 2)))
     with pytest.raises(ValueError, match="order 30 exceeds horizon·m = 20"):
         SubspaceSS(order=30).fit(*_state_space_data(n=800)[:2])
+
+
+def test_subspace_simulation_refit_keeps_the_exact_response_over_several_experiments():
+    u, y, clean = _state_space_data(noise=0.0)
+    us, ys = [u[i:i + 500] for i in range(0, 3000, 500)], [y[i:i + 500] for i in range(0, 3000, 500)]
+    model = SubspaceSS(order=3, refit="simulation").fit(us, ys)
+    sim = model.simulate(u[3000:3400], y[3000:3010])
+    np.testing.assert_allclose(sim, clean[3000:3400], atol=1e-6)
+    np.testing.assert_allclose(np.sort_complex(model.poles_),
+                               np.sort_complex(np.linalg.eigvals(A)), atol=1e-6)
+
+
+def test_subspace_simulation_refit_lowers_the_free_run_error_of_a_wrong_b_and_d():
+    from pwa_pipeline.baselines.subspace import _simulation_fit
+    u, y, _ = _state_space_data(noise=0.0)
+    model = SubspaceSS(order=3).fit(u, y)
+    b, d = _simulation_fit(model.A_, model.C_, [(u[:2000], y[:2000]), (u[2000:], y[2000:])])
+    np.testing.assert_allclose(b, model.B_, atol=1e-6)
+    np.testing.assert_allclose(d, model.D_, atol=1e-6)
+
+
+def test_unstable_subspace_poles_are_pulled_inside_the_radius():
+    from pwa_pipeline.baselines.subspace import _stabilised
+    a = np.array([[1.05, 0.3], [0.0, 0.5]])
+    stable = _stabilised(a, 0.99)
+    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(stable))), [0.5, 0.99])
+    np.testing.assert_array_equal(_stabilised(A, 0.99), A)
+
+
+def test_subspace_refit_is_checked():
+    with pytest.raises(ValueError, match="'refit' parameter of SubspaceSS must be a str among"):
+        SubspaceSS(refit="yes").fit(np.zeros((50, 1)), np.zeros((50, 1)))

@@ -21,6 +21,9 @@ def test_every_set_builds_every_method_for_every_dataset():
     assert hp.path == BUNDLED_HPARAMS and {"paper", "default"} <= set(hp.sets)
     for name in hp.sets:
         for ds in DATASETS:
+            if not hp.covers(name, ds):  # the robot's structure is for the robot only
+                assert (name, ds) == ("robot", "hure_vasak")
+                continue
             cfg = hp.configuration(name, ds)
             assert list(cfg.estimators) == list(METHODS)
             assert isinstance(cfg.pwa, PWARX) and isinstance(cfg.estimators["linear_arx"], LinearARX)
@@ -51,8 +54,35 @@ subspace.horizon = 4
     assert (p["na"], p["nb"], p["clustering__eps"], p["submodels__n_search"], p["regions__C"]) \
         == (2, 1, 0.25, 0, 10.0)
     assert isinstance(p["submodels"], RefinedSubModels) and cfg.warmup == 5
-    assert cfg.estimators["subspace"].get_params() == {"horizon": 4, "order": None, "warmup": 5}
+    assert cfg.estimators["subspace"].get_params() == {"horizon": 4, "order": None, "warmup": 5,
+                                                       "refit": "none", "max_radius": 0.9995}
     assert cfg.params("pwa")["clustering__eps"] == 0.25 and cfg.params("pwa")["hparams"] == "fine"
+
+
+def test_the_robot_structure_is_read_for_the_pwa_model_and_its_linear_baseline():
+    cfg = HParamsFile().configuration("robot", "kuka_robot")
+    p = cfg.pwa.get_params()
+    assert (p["na"], p["nb"], p["affine"], p["form"], p["outputs"]) == (1, 2, True, "velocity",
+                                                                       "decoupled")
+    assert p["scheduling__switch"] == "select" and p["scheduling__variables"] == "own_increment"
+    assert p["refinement__max_iter"] == 30 and p["refinement__validation_fraction"] == 0.1
+    linear = cfg.estimators["linear_arx"].get_params()
+    assert (linear["form"], linear["outputs"], linear["refinement__max_iter"]) == (
+        "velocity", "decoupled", 30)
+    assert cfg.estimators["subspace"].refit == "simulation"
+    assert cfg.params("pwa")["scheduling"] == "SignScheduling"
+
+
+def test_user_scheduling_variables_are_read_as_tables(tmp_path):
+    path = _write(tmp_path, """
+[own.hure_vasak]
+affine = true
+scheduling.switch = "offset"
+scheduling.variables = [{ "y1(k-1)" = 1.0, "u1(k-1)" = -0.5 }]
+""")
+    scheduling = HParamsFile(path).configuration("own", "hure_vasak").pwa.scheduling
+    assert scheduling.variables == [{"y1(k-1)": 1.0, "u1(k-1)": -0.5}]
+    assert scheduling.switch == "offset"
 
 
 def test_unknown_names_are_reported():
@@ -78,6 +108,15 @@ def test_unknown_names_are_reported():
     ("[a.hure_vasak]\nna = \n", r"hp.toml is not valid TOML: .*line 2"),
     ("[\"eps0.1\".hure_vasak]\n", r"invalid hyper-parameter set name 'eps0.1'"),
     ("[a.\"../x\"]\n", r"invalid data set name '../x'"),
+    ("[a.hure_vasak]\nform = \"speed\"\n",
+     r"\[a.hure_vasak\]: The 'form' parameter of PWARX must be a str among"),
+    ("[a.hure_vasak]\nscheduling.switch = \"sometimes\"\n",
+     r"\[a.hure_vasak\]: The 'switch' parameter of SignScheduling must be a str among"),
+    ("[a.hure_vasak]\nscheduling.sign = 1\n",
+     r"unknown scheduling parameter\(s\) \['sign'\]; it has \['min_gain', 'switch'"),
+    ("[a.hure_vasak]\nscheduling = 3\n", r"scheduling must be a table, e.g. scheduling.switch"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nsubspace.refit = \"always\"\n",
+     r"'refit' parameter of SubspaceSS must be a str among"),
 ])
 def test_bad_files_are_refused_when_read(tmp_path, text, message):
     with pytest.raises(ValueError, match=message):

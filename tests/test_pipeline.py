@@ -15,7 +15,12 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.partitions import all_keys, check_keys, split_key
+from pwa_pipeline.orchestration.partitions import (
+    all_keys,
+    check_keys,
+    runnable_keys,
+    split_key,
+)
 from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
 from pwa_pipeline.orchestration.storage import PartitionedFileIOManager, atomic_write
 
@@ -74,8 +79,10 @@ def test_schedule_requests_every_partition_once():
     schedule = defs.get_repository_def().get_schedule_def("sweep_schedule")
     ctx = dg.build_schedule_context(scheduled_execution_time=pd.Timestamp("2026-11-21T02:00"))
     requests = list(schedule(ctx))
-    keys = all_keys(partitions_of(defs))
+    keys, skipped = runnable_keys(partitions_of(defs), defs.resources["settings"])
     assert sorted(r.partition_key for r in requests) == sorted(keys)
+    # the robot's structure has values for the robot only
+    assert list(skipped) == ["hure_vasak|robot"] and "kuka_robot|robot" in keys
     assert len({r.run_key for r in requests}) == len(requests) == len(keys)
     assert "hure_vasak|paper" in keys and "kuka_robot|default" in keys
 
@@ -230,6 +237,31 @@ def test_atomic_write_keeps_the_old_file_when_a_write_fails(tmp_path):
     assert [f.name for f in tmp_path.iterdir()] == ["a.parquet"]
 
 
+def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template):
+    path = tmp_path / "structured.toml"
+    path.write_text('[moving.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
+                    'outputs = "decoupled"\nscheduling.switch = "select"\n'
+                    'refinement.max_iter = 3\n')
+    custom = build_definitions(path)
+    resources = _resources(tmp_path, mlflow_template)
+    resources["settings"] = PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                             hparams_path=str(path))
+    result = dg.materialize([a for a in custom.assets if a.partitions_def is not None],
+                            partition_key="hure_vasak|moving", resources=resources)
+    assert result.success
+    model = result.output_for_node("pwa_model")
+    assert model.structured and set(model.structure_.structures) <= {"linear", "offset", "all"}
+    assert result.output_for_node("output_error_refinement") is None  # refined in pwa_model
+    linear = result.output_for_node("linear_arx_model")
+    assert (linear.form, linear.outputs) == ("velocity", "decoupled")
+    client, runs = _runs(resources, "hure_vasak")
+    pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
+    assert pwa_run.data.params["structure_y1"] == model.structure_.structures[0]
+    assert pwa_run.data.params["scheduling__switch"] == "select"
+    artifact = client.download_artifacts(pwa_run.info.run_id, "structure.json", str(tmp_path))
+    assert "parameters" in open(artifact).read()
+
+
 def test_materialise_kuka_robot(resources, robot):
     result = dg.materialize(ASSETS, partition_key="kuka_robot|default", resources=resources)
     assert result.success
@@ -277,7 +309,9 @@ def test_the_schedule_skips_data_sets_that_are_missing(monkeypatch, tmp_path):
     requests = schedule(ctx)
     keys = [r.partition_key for r in requests]
     assert keys and all(k.startswith("hure_vasak|") for k in keys)
-    assert len(keys) == len(all_keys(partitions_of(defs))) // 2
+    # every set but robot, which has values for the robot only
+    assert sorted(keys) == sorted(k for k in all_keys(partitions_of(defs))
+                                  if k.startswith("hure_vasak|") and k != "hure_vasak|robot")
 
 
 def test_registered_models_load_in_another_process_and_simulate_the_same(paper_run, tmp_path):

@@ -4,12 +4,14 @@ from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context, clone
-from sklearn.utils._param_validation import HasMethods, Interval
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
 from ..pwa.arx import ARXModelBase
 from ..pwa.regressors import build_regressors
+from ..pwa.structure_fit import fit_structure
+from ..pwa.structures import COUPLINGS, FORMS
 
 
 class LinearARX(ARXModelBase):
@@ -20,6 +22,11 @@ class LinearARX(ARXModelBase):
     na, nb : int
         Orders of eq. (3).
     affine : bool, default False
+    form : {"level", "velocity"}, default "level"
+        ``"velocity"``: each output's increment Δy(k) from na lagged increments, the level
+        y(k−1) and the inputs, integrated (:mod:`~pwa_pipeline.pwa.structures`).
+    outputs : {"joint", "decoupled"}, default "joint"
+        ``"decoupled"``: one MISO model per output, on its own lags and every input.
     refinement : estimator, optional
         An :class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`: θ refined from the
         least-squares fit to minimise the free-run error on the training experiments. None:
@@ -28,7 +35,12 @@ class LinearARX(ARXModelBase):
     Attributes
     ----------
     theta_ : ndarray of shape (d, m)
-    refinement_ : fitted refinement step (with ``refinement`` only)
+        Over the level regressor φ (eq. 3; na + 1 output lags in the velocity form), so a
+        velocity-form or decoupled model predicts as any ARX model.
+    refinement_ : fitted refinement step (with ``refinement`` and the level, joint route)
+    structure_fit_ : StructureFit (velocity form or decoupled outputs)
+        The validation experiments and the refinement of each output group
+        (:class:`~pwa_pipeline.pwa.structure_fit.StructureFit`).
     n_inputs_, n_outputs_ : int
 
     Examples
@@ -47,20 +59,32 @@ class LinearARX(ARXModelBase):
         "na": [Interval(Integral, 0, None, closed="left")],
         "nb": [Interval(Integral, 0, None, closed="left")],
         "affine": ["boolean"],
+        "form": [StrOptions(set(FORMS))],
+        "outputs": [StrOptions(set(COUPLINGS))],
         "refinement": [HasMethods(["fit"]), None],
     }
 
-    def __init__(self, na: int = 1, nb: int = 1, affine: bool = False,
-                 refinement: BaseEstimator | None = None):
+    def __init__(self, na: int = 1, nb: int = 1, affine: bool = False, form: str = "level",
+                 outputs: str = "joint", refinement: BaseEstimator | None = None):
         self.na = na
         self.nb = nb
         self.affine = affine
+        self.form = form
+        self.outputs = outputs
         self.refinement = refinement
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, u: Signals, y: Signals) -> "LinearARX":
         """Least-squares fit on one or several experiments (regressors never span two)."""
         pairs = as_experiments(u, y)
+        self.n_inputs_ = pairs[0][0].shape[1]
+        self.n_outputs_ = pairs[0][1].shape[1]
+        self.n_features_in_ = self.n_inputs_
+        if self.form != "level" or self.outputs != "joint":
+            self.structure_fit_ = fit_structure(pairs, self.na, self.nb, self.affine, self.form,
+                                                self.outputs, refinement=self.refinement)
+            self.theta_ = np.column_stack([t[0] for t in self.structure_fit_.model.thetas])
+            return self
         reg = build_regressors(pairs, self.na, self.nb, self.affine)
         if reg.phi.shape[0] < reg.phi.shape[1]:
             raise ValueError(
@@ -73,9 +97,6 @@ class LinearARX(ARXModelBase):
                 self.theta_[None], [p[0] for p in pairs], [p[1] for p in pairs], self.na,
                 self.nb, self.affine)
             self.theta_ = self.refinement_.thetas_[0]
-        self.n_inputs_ = pairs[0][0].shape[1]
-        self.n_outputs_ = pairs[0][1].shape[1]
-        self.n_features_in_ = self.n_inputs_
         return self
 
     def resolved_params(self) -> dict:

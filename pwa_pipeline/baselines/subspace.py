@@ -9,17 +9,18 @@ through the Riccati equation. Only (k·(r+m)) × (k·(r+m)) matrices are factori
 N × N ones, so 40k samples need a few hundred MB at most.
 """
 
-from numbers import Integral
+from numbers import Integral, Real
 
 import numpy as np
 from scipy.linalg import solve_discrete_are
 from sklearn.base import BaseEstimator, _fit_context
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from .._arrays import column_rms
 from .._typing import Float2D, Signals
 from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from ..pwa._blas import single_threaded_blas
 
 
 def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:
@@ -39,6 +40,15 @@ class SubspaceSS(BaseEstimator):
         Past and future block rows k of the Hankel matrices (k·m ≥ n).
     warmup : int, default 10
         Samples used to estimate the initial state when :meth:`predict` is not told.
+    refit : {"none", "simulation"}, default "none"
+        ``"simulation"``: after the subspace step, A's eigenvalues are pulled inside the
+        radius ``max_radius`` and B, D refitted by least squares on the free-run (simulation)
+        error of the training experiments, A and C kept. The free-run output is linear in B,
+        D and each experiment's initial state, so this is one least-squares problem (the
+        initial states projected out per experiment), not an iteration: the same care as the
+        ARX models' simulation-error refinement, for a fair baseline.
+    max_radius : float, default 0.9995
+        Largest eigenvalue modulus of A with ``refit="simulation"``.
 
     Attributes
     ----------
@@ -66,12 +76,17 @@ class SubspaceSS(BaseEstimator):
         "order": [Interval(Integral, 1, None, closed="left"), None],
         "horizon": [Interval(Integral, 1, None, closed="left")],
         "warmup": [Interval(Integral, 1, None, closed="left")],
+        "refit": [StrOptions({"none", "simulation"})],
+        "max_radius": [Interval(Real, 0, 1, closed="right")],
     }
 
-    def __init__(self, order: int | None = None, horizon: int = 10, warmup: int = 10):
+    def __init__(self, order: int | None = None, horizon: int = 10, warmup: int = 10,
+                 refit: str = "none", max_radius: float = 0.9995):
         self.order = order
         self.horizon = horizon
         self.warmup = warmup
+        self.refit = refit
+        self.max_radius = max_radius
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, u: Signals, y: Signals) -> "SubspaceSS":
@@ -138,6 +153,10 @@ class SubspaceSS(BaseEstimator):
         res = target - theta @ xu
         cov = res @ res.T / res.shape[1]
         self.K_ = _kalman_gain(self.A_, self.C_, cov[:n, :n], cov[n:, n:], cov[:n, n:])
+        if self.refit == "simulation":
+            self.A_ = _stabilised(self.A_, self.max_radius)
+            with single_threaded_blas():  # small products: threads only wait
+                self.B_, self.D_ = _simulation_fit(self.A_, self.C_, pairs)
         self.B_, self.C_ = self.B_ / su, sy[:, None] * self.C_
         self.D_, self.K_ = sy[:, None] * self.D_ / su, self.K_ / sy
         self.order_ = n
@@ -234,6 +253,64 @@ class SubspaceSS(BaseEstimator):
                     out[k] = self.C_ @ x + self.D_ @ ue[k]
                 x = self.A_ @ x + self.B_ @ ue[k]
         return out
+
+
+def _stabilised(a: Float2D, radius: float) -> Float2D:
+    """A with every eigenvalue of modulus above ``radius`` pulled onto it (the
+    eigenvectors kept)."""
+    lam, vec = np.linalg.eig(a)
+    big = np.abs(lam) > radius
+    if not big.any():
+        return a
+    lam[big] *= radius / np.abs(lam[big])
+    return np.real(vec @ np.diag(lam) @ np.linalg.inv(vec))
+
+
+def _simulation_fit(a: Float2D, c: Float2D, pairs: list) -> tuple[Float2D, Float2D]:
+    """B and D minimising the free-run error Σ‖y(k) − ŷ(k)‖² over the experiments, with A
+    and C fixed and each experiment's initial state free (projected out).
+
+    ŷ(k) = C Aᵏ x0 + Σ_{j<k} C A^{k−j−1} B u(j) + D u(k) is linear in (B, D, x0); the
+    sensitivities S(k) = dx(k)/dB follow S(k+1) = A S(k) + I ⊗ u(k)ᵀ. The experiments run
+    in lockstep (padded), and only the normal equations are kept, with the initial-state
+    directions Γ = [C; CA; …] removed as XᵀX − (QᵀX)ᵀ(QᵀX), Q an orthonormal basis of Γ.
+    """
+    n, m, r = a.shape[0], c.shape[0], pairs[0][0].shape[1]
+    lengths = np.array([len(ue) for ue, _ in pairs])
+    e, big = len(pairs), lengths.max()
+    u, y = np.zeros((e, big, r)), np.zeros((e, big, m))
+    for i, (ue, ye) in enumerate(pairs):
+        u[i, :len(ue)], y[i, :len(ye)] = ue, ye
+    obs, power = np.empty((big, m, n)), np.eye(n)
+    for k in range(big):
+        obs[k], power = c @ power, a @ power
+    q = np.zeros((e, big, m, n))
+    for length in np.unique(lengths):
+        basis = np.linalg.qr(obs[:length].reshape(-1, n))[0].reshape(length, m, n)
+        q[lengths == length, :length] = basis
+    p, diag = n * r + m * r, np.arange(max(n, m))
+    xtx, xty = np.zeros((p, p)), np.zeros(p)
+    qx, qy = np.zeros((e, n, p)), np.zeros((e, n))
+    sens = np.zeros((e, n, n, r))
+    for k in range(big):
+        live = (lengths > k)[:, None, None]
+        rows = np.zeros((e, m, p))
+        rows[:, :, :n * r] = np.einsum("ij,ejab->eiab", c, sens).reshape(e, m, n * r)
+        d_part = np.zeros((e, m, m, r))
+        d_part[:, diag[:m], diag[:m], :] = u[:, k, None, :]
+        rows[:, :, n * r:] = d_part.reshape(e, m, m * r)
+        rows *= live
+        flat = rows.reshape(-1, p)
+        xtx += flat.T @ flat
+        xty += flat.T @ y[:, k].ravel()
+        qx += np.einsum("emn,emp->enp", q[:, k], rows)
+        qy += np.einsum("emn,em->en", q[:, k], y[:, k])
+        sens = np.einsum("ij,ejab->eiab", a, sens)
+        sens[:, diag[:n], diag[:n], :] += u[:, k, None, :]
+    xtx -= np.einsum("enp,enq->pq", qx, qx)
+    xty -= np.einsum("enp,en->p", qx, qy)
+    theta = np.linalg.lstsq(xtx, xty, rcond=None)[0]
+    return theta[:n * r].reshape(n, r), theta[n * r:].reshape(m, r)
 
 
 def _order_from_gap(sv: np.ndarray, max_order: int) -> int:

@@ -85,8 +85,8 @@ def _phi_names(pwa: PWARX, data: Dataset) -> list[str]:
 def _truth(model: PWARX, data: Dataset) -> GroundTruth | None:
     """The data set's ground truth when it has one and the model has its structure."""
     truth = data.truth
-    if truth is None or (model.na, model.nb, model.affine) != (truth.na, truth.nb,
-                                                               truth.affine):
+    if truth is None or model.structured or (model.na, model.nb, model.affine) != (
+            truth.na, truth.nb, truth.affine):
         return None
     return truth
 
@@ -99,6 +99,9 @@ def _truth_metadata(model: PWARX, data: Dataset) -> dict:
     truth = _truth(model, data)
     if truth is None:
         t = data.truth
+        if model.structured:
+            return {"ground_truth": "not comparable: the model has a structure of its own "
+                                    "(form, outputs or scheduling)"}
         return {"ground_truth": f"not comparable: the model's (na, nb, affine) = "
                                 f"{(model.na, model.nb, model.affine)}, the system's "
                                 f"{(t.na, t.nb, t.affine)}"}
@@ -244,9 +247,10 @@ def _identification_assets(partitions_def) -> list:
                                 clusters: BaseEstimator, sub_models: BaseEstimator,
                                 svm_regions: BaseEstimator) -> BaseEstimator | None:
         """θ_i refined to minimise the free-run error on the training experiments, regions
-        kept (the fitted ``refinement`` step); None when the set configures no refinement."""
+        kept (the fitted ``refinement`` step); None when the set configures no refinement, or
+        a structure of its own (``pwa_model`` then fits and refines it whole)."""
         pwa = configuration.pwa
-        if pwa.refinement is None:
+        if pwa.refinement is None or pwa.structured:
             context.add_output_metadata({"refined": False, "seconds": 0.0})
             return None
         model = clone(pwa).assemble(regressors, local_models=local_models, clustering=clusters,
@@ -267,7 +271,11 @@ def _identification_assets(partitions_def) -> list:
                   clusters: BaseEstimator, sub_models: BaseEstimator,
                   svm_regions: BaseEstimator,
                   output_error_refinement: BaseEstimator | None) -> PWARX:
-        """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores."""
+        """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores.
+        A set with a structure of its own (form, outputs, scheduling: the structured route of
+        :mod:`pwa_pipeline.pwa.structure_fit`) is fitted here whole."""
+        if configuration.pwa.structured:
+            return _structured_model(context, configuration, raw_benchmark)
         model = clone(configuration.pwa).assemble(
             regressors, local_models=local_models, clustering=clusters, submodels=sub_models,
             regions=svm_regions, refinement=output_error_refinement)
@@ -290,6 +298,29 @@ def _identification_assets(partitions_def) -> list:
 
     return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
             svm_regions, output_error_refinement, pwa_model]
+
+
+def _structured_model(context: dg.AssetExecutionContext, configuration: Configuration,
+                      data: Dataset) -> PWARX:
+    """Fit the structured PWARX model on the training experiments, with the metadata that
+    says which training experiments (indices from 0) were held out to choose its structure
+    and refinement iterate, and each candidate's free-run error on them."""
+    t0 = time.perf_counter()
+    model = clone(configuration.pwa).fit(data.u_train, data.y_train)
+    fit = model.structure_fit_
+    table = pd.DataFrame({"output": data.y_names, "structure": model.structure_.structures,
+                          "regions": model.structure_.n_regions})
+    for kind in sorted({k for costs in fit.validation_cost.values() for k in costs}):
+        table[f"held-out MSE {kind}"] = [fit.validation_cost[j].get(kind, float("nan"))
+                                         for j in range(len(data.y_names))]
+    context.log.info(f"structured PWA model: {', '.join(model.structure_.structures)} in "
+                     f"{time.perf_counter() - t0:.1f} s")
+    context.add_output_metadata(rounded({
+        "n_submodels": model.n_submodels_, "fit_seconds": time.perf_counter() - t0,
+        "validation_experiments": ", ".join(map(str, fit.validation_experiments)),
+        "structure per output": markdown(table.set_index("output")),
+        "resolved parameters": markdown(params_table(model.resolved_params()))}))
+    return model
 
 
 def _baseline_model_asset(method: Method, partitions_def):
@@ -325,7 +356,13 @@ def _scores_asset(method: Method, partitions_def):
         fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")
         dataset, hparams = split_key(context.partition_key)
         extra_metrics, artifacts = {"fit_seconds": fit_seconds}, {}
-        if isinstance(model, PWARX):
+        if isinstance(model, PWARX) and model.structured:
+            extra_metrics.update(n_submodels=model.n_submodels_)
+            artifacts["structure.json"] = {
+                "outputs": data.y_names, "structure": model.structure_.structures,
+                "regressors": [o.names for o in model.structure_.outputs],
+                "parameters": [o.p.tolist() for o in model.structure_.outputs]}
+        elif isinstance(model, PWARX):
             extra_metrics.update(n_submodels=model.n_submodels_,
                                  noise_share=model.clustering_.noise_share_,
                                  eps=model.clustering_.eps_,

@@ -8,14 +8,22 @@ from .._typing import Float2D, Signals
 from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
 from ..scoring.metrics import r2_score
 from .regressors import lagged_matrix, n_initial
+from .structures import output_lags
 
 
 class ARXModelBase(BaseEstimator):
     """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
 
-    Subclasses set ``na``, ``nb``, ``affine`` as parameters, the fitted ``n_inputs_`` and
-    ``n_outputs_``, and implement :meth:`_predict_phi`.
+    Subclasses set ``na``, ``nb``, ``affine`` and ``form`` as parameters, the fitted
+    ``n_inputs_`` and ``n_outputs_``, and implement :meth:`_predict_phi`. φ holds
+    :attr:`output_lags_` output lags: na, or na + 1 in the velocity form
+    (:mod:`~.structures`).
     """
+
+    @property
+    def output_lags_(self) -> int:
+        """Output lags of φ: na, or na + 1 with ``form="velocity"``."""
+        return output_lags(self.na, self.form)
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         """y(k) for each row φ(k); shape (n, m)."""
@@ -23,8 +31,8 @@ class ARXModelBase(BaseEstimator):
 
     @property
     def n_initial_(self) -> int:
-        """Samples needed before the first prediction: max(na, nb)."""
-        return n_initial(self.na, self.nb)
+        """Samples needed before the first prediction: max(output lags, nb)."""
+        return n_initial(self.output_lags_, self.nb)
 
     def _experiments(self, u: Signals, y: Signals, y_name: str):
         check_is_fitted(self)
@@ -45,7 +53,8 @@ class ARXModelBase(BaseEstimator):
         y : array-like of shape (N, m), or a list of such arrays
             Measured outputs; only their past values enter φ(k).
         n_init : int, optional
-            Rows returned as given (a warm-up window); at least and by default max(na, nb).
+            Rows returned as given (a warm-up window); at least and by default
+            max(output lags, nb).
 
         Returns
         -------
@@ -59,7 +68,8 @@ class ARXModelBase(BaseEstimator):
         for ue, ye in pairs:
             yhat = ye.copy()
             if ye.shape[0] > n0:
-                yhat[n0:] = self._predict_phi(lagged_matrix(ue, ye, self.na, self.nb, self.affine))
+                phi = lagged_matrix(ue, ye, self.output_lags_, self.nb, self.affine)
+                yhat[n0:] = self._predict_phi(phi)
                 yhat[:keep] = ye[:keep]
             out.append(yhat)
         return out if _is_experiment_list(y) else out[0]
@@ -70,7 +80,8 @@ class ARXModelBase(BaseEstimator):
         Parameters
         ----------
         u : array-like of shape (N, r), or a list of such arrays
-        y_init : array-like of shape (n_init, m) with n_init ≥ max(na, nb), or a list
+        y_init : array-like of shape (n_init, m) with n_init ≥ max(output lags, nb), or a
+            list
             Initial outputs (a warm-up window); simulation starts at sample n_init.
 
         Returns
@@ -83,7 +94,7 @@ class ARXModelBase(BaseEstimator):
         ------
         ValueError
             If the input width differs from the fitted one, ``y_init`` has fewer than
-            max(na, nb) rows or more rows than u, or any value is non-finite.
+            max(output lags, nb) rows or more rows than u, or any value is non-finite.
         """
         check_is_fitted(self)
         u_list = list(u) if _is_experiment_list(u) else [u]
@@ -101,7 +112,7 @@ class ARXModelBase(BaseEstimator):
             if ye.shape[0] < n0:
                 raise ValueError(
                     f"warm-up too short: y_init has {ye.shape[0]} row(s), the model needs at "
-                    f"least max(na, nb) = {n0}"
+                    f"least max(output lags, nb) = {n0}"
                 )
             if ye.shape[0] > ue.shape[0]:
                 raise ValueError(
@@ -111,7 +122,7 @@ class ARXModelBase(BaseEstimator):
         return out if _is_experiment_list(u) else out[0]
 
     def _free_run(self, u: Float2D, y_init: Float2D) -> Float2D:
-        na, nb = self.na, self.nb
+        na, nb = self.output_lags_, self.nb
         n_init, n = y_init.shape[0], u.shape[0]
         y = np.empty((n, self.n_outputs_))
         y[:n_init] = y_init

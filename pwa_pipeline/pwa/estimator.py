@@ -5,7 +5,7 @@ from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context, clone
-from sklearn.utils._param_validation import HasMethods, Interval
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
@@ -15,6 +15,8 @@ from .local_models import LocalLeastSquares
 from .memory import check_fit_memory
 from .regions import SVMRegions
 from .regressors import Regressors, build_regressors
+from .structure_fit import fit_structure
+from .structures import COUPLINGS, FORMS
 from .submodels import ClusterCentres, RefinedSubModels
 
 #: The step parameters of :class:`PWARX`, in the order the fit runs them.
@@ -60,6 +62,21 @@ class PWARX(ARXModelBase):
         After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
         minimise the free-run error on the training experiments, the regions kept. None (the
         paper's route and the default): no refinement.
+    form : {"level", "velocity"}, default "level"
+        ``"velocity"``: each output's increment Δy(k) from na lagged increments, the level
+        y(k−1) and the inputs, integrated in simulation (:mod:`~.structures`).
+    outputs : {"joint", "decoupled"}, default "joint"
+        ``"decoupled"``: one MISO model per output, on its own lags and every input, with
+        its own regions.
+    scheduling : SignScheduling, optional
+        Regions given by the user (:class:`~.scheduling.SignScheduling`, e.g. the sign of
+        each output's increment), in place of steps 2–6; sub-models by least squares per
+        region, optionally a structure chosen per output on held-out training experiments.
+
+    With ``form="velocity"``, ``outputs="decoupled"`` or ``scheduling``, the fit takes the
+    structured route of :mod:`~.structure_fit` (the paper's steps run per output group on ψ
+    when ``scheduling`` is None); the model is then ``structure_`` and ``thetas_``,
+    ``regions_``, ``labels_`` and the fitted steps are not set.
 
     Attributes
     ----------
@@ -75,6 +92,10 @@ class PWARX(ARXModelBase):
     n_inputs_, n_outputs_ : int
     timings_ : dict
         Seconds spent in each step.
+    structure_ : StructuredModel (structured route only)
+        Per output its regressor, regions and sub-models (:mod:`~.structures`).
+    structure_fit_ : StructureFit (structured route only)
+        The held-out experiments, each candidate's validation error, the refinements.
 
     Examples
     --------
@@ -99,6 +120,9 @@ class PWARX(ARXModelBase):
         "submodels": [HasMethods(["fit"]), None],
         "regions": [HasMethods(["fit", "predict"]), None],
         "refinement": [HasMethods(["fit"]), None],
+        "form": [StrOptions(set(FORMS))],
+        "outputs": [StrOptions(set(COUPLINGS))],
+        "scheduling": [HasMethods(["weights"]), None],
     }
 
     def __init__(
@@ -111,6 +135,9 @@ class PWARX(ARXModelBase):
         submodels: BaseEstimator | None = None,
         regions: BaseEstimator | None = None,
         refinement: BaseEstimator | None = None,
+        form: str = "level",
+        outputs: str = "joint",
+        scheduling: BaseEstimator | None = None,
     ):
         self.na = na
         self.nb = nb
@@ -120,6 +147,9 @@ class PWARX(ARXModelBase):
         self.submodels = submodels
         self.regions = regions
         self.refinement = refinement
+        self.form = form
+        self.outputs = outputs
+        self.scheduling = scheduling
 
     @classmethod
     def default(cls, na: int = 1, nb: int = 1, affine: bool = False) -> "PWARX":
@@ -179,6 +209,8 @@ class PWARX(ARXModelBase):
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
         experiments = as_experiments(u, y)
+        if self.structured:
+            return self._fit_structured(experiments)
         reg = build_regressors(experiments, self.na, self.nb, self.affine)
         timings["regressors"] = time.perf_counter() - t0
         fitted = {}
@@ -192,6 +224,36 @@ class PWARX(ARXModelBase):
             self.assemble(reg, **fitted, refinement=self.fit_refinement(experiments))
             timings["refinement"] = time.perf_counter() - t0
         self.timings_ = timings
+        return self
+
+    @property
+    def structured(self) -> bool:
+        """Whether the fit takes the structured route (velocity form, decoupled outputs or
+        user regions)."""
+        return self.form != "level" or self.outputs != "joint" or self.scheduling is not None
+
+    def _fit_structured(self, experiments: list[tuple[Float2D, Float2D]]) -> "PWARX":
+        t0 = time.perf_counter()
+        for step in filter(None, [self.scheduling, self.refinement]):
+            step._validate_params()
+
+        def cluster(reg: Regressors):
+            fitted: dict[str, BaseEstimator] = {}
+            for name in STEPS:
+                fitted[name] = self.fit_step(name, reg, **fitted)
+            subs = fitted["submodels"]
+            return subs.thetas_, fitted["regions"], subs.n_submodels_
+
+        self.structure_fit_ = fit_structure(
+            experiments, self.na, self.nb, self.affine, self.form, self.outputs,
+            scheduling=self.scheduling, refinement=self.refinement,
+            cluster=cluster if self.scheduling is None else None)
+        self.structure_ = self.structure_fit_.model
+        self.n_inputs_ = experiments[0][0].shape[1]
+        self.n_outputs_ = experiments[0][1].shape[1]
+        self.n_features_in_ = self.n_inputs_
+        self.n_submodels_ = max(self.structure_.n_regions)
+        self.timings_ = {"structure": time.perf_counter() - t0}
         return self
 
     def fit_refinement(self, experiments: list[tuple[Float2D, Float2D]]) -> BaseEstimator:
@@ -266,13 +328,23 @@ class PWARX(ARXModelBase):
 
     def resolved_params(self) -> dict:
         """Every parameter as ``get_params(deep=True)`` names it, with the values the fit
-        chose filled in (n_ρ, ε, MinPts); fitted models only."""
+        chose filled in (n_ρ, ε, MinPts; on the structured route each output's structure,
+        ``structure_y1`` …); fitted models only."""
         out = {"na": self.na, "nb": self.nb, "affine": self.affine}
-        for name in STEPS:
-            step = getattr(self, name + "_")
+        if self.structured:
+            out.update(form=self.form, outputs=self.outputs)
+            if self.scheduling is not None:
+                out["scheduling"] = type(self.scheduling).__name__
+                out.update({f"scheduling__{k}": v
+                            for k, v in self.scheduling.get_params().items()})
+            out.update({f"structure_y{j + 1}": s
+                        for j, s in enumerate(self.structure_.structures)})
+        for name in ([] if self.structured and self.scheduling is not None else STEPS):
+            # the structured route fits the steps once per output group and keeps none
+            step = self.steps()[name] if self.structured else getattr(self, name + "_")
             out[name] = type(step).__name__
             params = step.resolved_params() if hasattr(step, "resolved_params") \
-                else step.get_params()
+                and not self.structured else step.get_params()
             out.update({f"{name}__{k}": v for k, v in params.items()})
         if self.refinement is not None:
             out["refinement"] = type(self.refinement).__name__
@@ -280,5 +352,7 @@ class PWARX(ARXModelBase):
         return out
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
+        if self.structured:
+            return self.structure_.predict_phi(phi)
         region = self.regions_.predict(phi)
         return np.einsum("nd,ndm->nm", phi, self.thetas_[region])

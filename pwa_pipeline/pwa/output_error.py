@@ -26,6 +26,7 @@ from sklearn.base import BaseEstimator, _fit_context
 from sklearn.utils._param_validation import Interval
 
 from .._typing import Float2D
+from ._blas import single_threaded_blas
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,26 @@ class OutputErrorResult:
     stop: str
     validation_start: float = float("nan")
     validation_cost: float = float("nan")
+
+
+class _NormalEquations:
+    """JᵀJ and Jᵀr of the free run, from Jacobian rows gathered over 32 time steps for one
+    larger product."""
+
+    def __init__(self, p: int):
+        self.jtj, self.jtr = np.zeros((p, p)), np.zeros(p)
+        self._rows: list[np.ndarray] = []
+        self._res: list[np.ndarray] = []
+
+    def add(self, rows: np.ndarray, residuals: np.ndarray, last: bool) -> None:
+        """Add the rows dŷ/dθ (n, p) and residuals (n,) of one time step."""
+        self._rows.append(rows)
+        self._res.append(residuals)
+        if len(self._rows) == 32 or last:
+            rows_j, res = np.vstack(self._rows), np.concatenate(self._res)
+            self.jtj += rows_j.T @ rows_j
+            self.jtr += rows_j.T @ res
+            self._rows, self._res = [], []
 
 
 class _Runs:
@@ -97,8 +118,7 @@ class _Runs:
         rows, outs = np.arange(e)[:, None, None], np.arange(m)[None, :, None]
         lag_rows = [[q * na + lag - 1 for q in range(m)] for lag in range(1, na + 1)]
         sens = np.zeros((na + 1, e, m, p))  # ring buffer of dŷ(k)/dθ
-        jtj, jtr = np.zeros((p, p)), np.zeros(p)
-        block, residuals = [], []  # J rows gathered for one larger product
+        normal = _NormalEquations(p)
         cost = 0.0
         for k in range(w, n):
             active = self.lengths > k
@@ -123,16 +143,166 @@ class _Runs:
                 sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
             sk[~active] = 0.0
             sens[k % (na + 1)] = sk
-            block.append(sk.reshape(e * m, p))
-            residuals.append(r.ravel())
-            if len(block) == 32 or k == n - 1:
-                rows_j, res = np.vstack(block), np.concatenate(residuals)
-                jtj += rows_j.T @ rows_j
-                jtr += rows_j.T @ res
-                block, residuals = [], []
+            normal.add(sk.reshape(e * m, p), r.ravel(), last=k == n - 1)
         if not sensitivities:
             return cost / self.n_scored, None, None
-        return cost / self.n_scored, jtj, jtr
+        return cost / self.n_scored, normal.jtj, normal.jtr
+
+
+class _OutputRuns(_Runs):
+    """The experiments simulated with per-output models
+    (:class:`~.structures.OutputModel`): the outputs ``simulated`` run free, the others
+    keep their measured values (with decoupled models they do not enter the simulated ones).
+
+    The parameters are the concatenated p_j of the simulated outputs.
+    """
+
+    def __init__(self, u, y, lags: int, nb: int, affine: bool, warmup: int,
+                 models: list, simulated: list[int]):
+        super().__init__(u, y, lags, nb, affine, warmup)
+        self.models, self.simulated = models, list(simulated)
+        self.g = [models[j].G() for j in self.simulated]
+        self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
+        self.n_scored = self.n_scored // self.y.shape[2] * len(self.simulated)
+
+    def simulate(self, p: np.ndarray, sensitivities: bool):
+        """As :meth:`_Runs.simulate`, with the concatenated p_j."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._run_outputs(p, sensitivities)
+
+    def _run_outputs(self, p: np.ndarray, sensitivities: bool):
+        e, n = self.y.shape[:2]
+        sim, w, lags, total = self.simulated, self.warmup, self.na, int(self.offsets[-1])
+        thetas = [self.models[j].c + g @ p[a:b] for j, g, a, b in
+                  zip(sim, self.g, self.offsets[:-1], self.offsets[1:], strict=True)]
+        ysim = self.y.copy()
+        lag_rows = [[q * lags + lag - 1 for q in sim] for lag in range(1, lags + 1)]
+        sens = np.zeros((lags + 1, e, len(sim), total))
+        normal, cost = _NormalEquations(total), 0.0
+        for k in range(w, n):
+            active = self.lengths > k
+            phi = self.phi(ysim, k)
+            regions = [self.models[j].regions(phi) for j in sim]
+            theta_k = np.stack([t[r] for t, r in zip(thetas, regions, strict=True)], axis=1)
+            yk = np.einsum("ed,ejd->ej", phi, theta_k)
+            target = self.y[:, k][:, sim]
+            ysim[:, k, sim] = np.where(active[:, None], yk, target)
+            r = np.where(active[:, None], yk - target, 0.0)
+            cost += float(np.sum(r * r))
+            if not np.isfinite(cost):
+                return np.inf, None, None
+            if not sensitivities:
+                continue
+            sk = np.zeros((e, len(sim), total))
+            for jj, (g, reg) in enumerate(zip(self.g, regions, strict=True)):
+                a, b = self.offsets[jj], self.offsets[jj + 1]
+                sk[:, jj, a:b] = np.einsum("ed,edp->ep", phi, g[reg])
+            for lag in range(1, min(lags, k - w) + 1):
+                a = theta_k[:, :, lag_rows[lag - 1]]                       # (e, j, q)
+                sk += np.einsum("ejq,eqp->ejp", a, sens[(k - lag) % (lags + 1)])
+            sk[~active] = 0.0
+            sens[k % (lags + 1)] = sk
+            normal.add(sk.reshape(-1, total), r.ravel(), last=k == n - 1)
+        if not sensitivities:
+            return cost / self.n_scored, None, None
+        return cost / self.n_scored, normal.jtj, normal.jtr
+
+
+def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list[Float2D],
+                   lags: int, nb: int, affine: bool, warmup: int,
+                   validation: tuple[list[Float2D], list[Float2D]] | None = None,
+                   max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
+                   patience: int = 3) -> OutputErrorResult:
+    """Refine the p_j of the per-output models ``models[j]``, j in ``simulated``, on their
+    free-run error (the module doc, with the models of :mod:`~.structures`); the regions
+    stay fixed as functions of φ.
+
+    Returns
+    -------
+    OutputErrorResult
+        ``thetas`` holds the concatenated p_j of the simulated outputs.
+    """
+    runs = _OutputRuns(u, y, lags, nb, affine, warmup, models, simulated)
+    held = None if validation is None else _OutputRuns(*validation, lags, nb, affine, warmup,
+                                                       models, simulated)
+    start = np.concatenate([models[j].p for j in simulated])
+    return levenberg_marquardt(
+        start, runs.simulate, None if held is None else (lambda p: held.simulate(p, False)[0]),
+        max_iter=max_iter, max_seconds=max_seconds, tol=tol, patience=patience)
+
+
+def levenberg_marquardt(x0: np.ndarray, train: Callable, held: Callable | None = None,
+                        max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
+                        patience: int = 3) -> OutputErrorResult:
+    """Levenberg–Marquardt on the normal equations of a free-run cost, with the iterate
+    chosen on held-out experiments.
+
+    Parameters
+    ----------
+    x0 : ndarray
+        Starting parameters (any shape; the steps keep it).
+    train : callable
+        ``train(x, sensitivities)`` → (cost, JᵀJ, Jᵀr) on the fitting experiments, JᵀJ and
+        Jᵀr None unless ``sensitivities`` (as :meth:`_Runs.simulate`).
+    held : callable, optional
+        ``held(x)`` → the cost on held-out experiments: the result is the iterate with the
+        lowest, and the search stops after ``patience`` accepted steps without a new lowest.
+    max_iter, max_seconds, tol, patience
+        As :func:`refine_output_error`.
+
+    Raises
+    ------
+    ValueError
+        If the start's cost is not finite (its free run diverges).
+    """
+    with single_threaded_blas():  # small products per time step: threads only wait
+        return _levenberg_marquardt(x0, train, held, max_iter, max_seconds, tol, patience)
+
+
+def _levenberg_marquardt(x0, train, held, max_iter, max_seconds, tol, patience):
+    t0 = time.perf_counter()
+    theta = np.array(x0, dtype=float)
+    cost, jtj, jtr = train(theta, True)
+    if not np.isfinite(cost):
+        raise ValueError("the starting model's free run diverges on the training data; "
+                         "output-error refinement needs a start whose free run stays finite")
+    start, lam, stop, it = cost, 1.0, f"max_iter = {max_iter} reached", 0
+    val_start = np.nan if held is None else held(theta)
+    best, best_val, since_best = theta, val_start, 0
+    for it in range(1, max_iter + 1):
+        scale = np.maximum(np.diag(jtj), 1e-12 * max(np.diag(jtj).max(), 1e-300))
+        step = np.linalg.solve(jtj + lam * np.diag(scale), -jtr).reshape(theta.shape)
+        trial = theta + step
+        trial_cost, trial_jtj, trial_jtr = train(trial, True)
+        if trial_cost < cost:
+            gain = (cost - trial_cost) / cost
+            theta, cost, jtj, jtr = trial, trial_cost, trial_jtj, trial_jtr
+            lam = max(lam / 3, 1e-9)
+            if held is None:
+                best = theta
+            else:
+                val = held(theta)
+                since_best = 0 if val < best_val else since_best + 1
+                best, best_val = (theta, val) if val < best_val else (best, best_val)
+                if since_best >= patience:
+                    stop = f"validation error not lower for {patience} steps"
+                    break
+            if gain < tol:
+                stop = f"relative decrease {gain:.2g} < tol"
+                break
+        else:
+            lam *= 10
+            if lam > 1e8:
+                stop = "no step lowers the cost"
+                break
+        if time.perf_counter() - t0 > max_seconds:
+            stop = f"max_seconds = {max_seconds:g} passed"
+            break
+    if best is not theta:
+        cost = train(best, False)[0]
+    return OutputErrorResult(thetas=best, cost_start=start, cost=cost, n_iter=it,
+                             seconds=time.perf_counter() - t0, stop=stop,
+                             validation_start=val_start, validation_cost=best_val)
 
 
 def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int,
@@ -178,51 +348,23 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         If the starting model's free run diverges on the training data (refinement needs a
         start whose free run stays finite).
     """
-    t0 = time.perf_counter()
     runs = _Runs(u, y, na, nb, affine, max(na, nb) if warmup is None else warmup)
-    theta = np.array(thetas, dtype=float)
-    cost, jtj, jtr = runs.simulate(theta, region_of, sensitivities=True)
-    if not np.isfinite(cost):
-        raise ValueError("the starting model's free run diverges on the training data; "
-                         "output-error refinement needs a start whose free run stays finite")
-    start, lam, stop, it = cost, 1.0, f"max_iter = {max_iter} reached", 0
     held = None if validation is None else _Runs(*validation, na, nb, affine, runs.warmup)
-    val_start = np.nan if held is None else held.simulate(theta, region_of, False)[0]
-    best, best_val, since_best = theta, val_start, 0
-    for it in range(1, max_iter + 1):
-        scale = np.maximum(np.diag(jtj), 1e-12 * max(np.diag(jtj).max(), 1e-300))
-        step = np.linalg.solve(jtj + lam * np.diag(scale), -jtr).reshape(theta.shape)
-        trial = theta + step
-        trial_cost, trial_jtj, trial_jtr = runs.simulate(trial, region_of, sensitivities=True)
-        if trial_cost < cost:
-            gain = (cost - trial_cost) / cost
-            theta, cost, jtj, jtr = trial, trial_cost, trial_jtj, trial_jtr
-            lam = max(lam / 3, 1e-9)
-            if held is None:
-                best = theta
-            else:
-                val = held.simulate(theta, region_of, False)[0]
-                since_best = 0 if val < best_val else since_best + 1
-                best, best_val = (theta, val) if val < best_val else (best, best_val)
-                if since_best >= patience:
-                    stop = f"validation error not lower for {patience} steps"
-                    break
-            if gain < tol:
-                stop = f"relative decrease {gain:.2g} < tol"
-                break
-        else:
-            lam *= 10
-            if lam > 1e8:
-                stop = "no step lowers the cost"
-                break
-        if time.perf_counter() - t0 > max_seconds:
-            stop = f"max_seconds = {max_seconds:g} passed"
-            break
-    if best is not theta:
-        cost = runs.simulate(best, region_of, False)[0]
-    return OutputErrorResult(thetas=best, cost_start=start, cost=cost, n_iter=it,
-                             seconds=time.perf_counter() - t0, stop=stop,
-                             validation_start=val_start, validation_cost=best_val)
+    return levenberg_marquardt(
+        thetas, lambda t, sens: runs.simulate(t, region_of, sens),
+        None if held is None else (lambda t: held.simulate(t, region_of, False)[0]),
+        max_iter=max_iter, max_seconds=max_seconds, tol=tol, patience=patience)
+
+
+#: Share of the training experiments held out for validation unless a step is told otherwise.
+VALIDATION_FRACTION = 0.1
+
+
+def held_out(n: int, fraction: float) -> int:
+    """How many of ``n`` training experiments (the last ones) are held out for validation:
+    ``round(fraction·n)``, at least one and at most n − 1; 0 when ``fraction`` is 0 or
+    there is a single experiment."""
+    return min(max(1, round(fraction * n)), n - 1) if fraction > 0 and n >= 2 else 0
 
 
 class OutputErrorRefinement(BaseEstimator):
@@ -276,7 +418,7 @@ class OutputErrorRefinement(BaseEstimator):
     }
 
     def __init__(self, max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
-                 warmup: int | None = 10, validation_fraction: float = 0.1,
+                 warmup: int | None = 10, validation_fraction: float = VALIDATION_FRACTION,
                  patience: int = 3):
         self.max_iter = max_iter
         self.max_seconds = max_seconds
@@ -292,8 +434,7 @@ class OutputErrorRefinement(BaseEstimator):
         :func:`refine_output_error`."""
         warmup = max(na, nb) if self.warmup is None else max(self.warmup, na, nb)
         n = len(u)
-        n_val = min(max(1, round(self.validation_fraction * n)), n - 1) \
-            if self.validation_fraction > 0 and n >= 2 else 0
+        n_val = held_out(n, self.validation_fraction)
         self.validation_experiments_ = list(range(n - n_val, n))
         fit, held = slice(0, n - n_val), slice(n - n_val, n)
         result = refine_output_error(

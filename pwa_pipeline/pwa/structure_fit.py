@@ -1,0 +1,200 @@
+"""Fitting the structures of :mod:`~.structures`: least squares per region, per-output
+choice on held-out training experiments, and simulation-error refinement.
+
+The route, for the estimators' ``form``, ``outputs`` and ``scheduling`` options:
+
+1. With a refinement or a per-output choice (``SignScheduling(switch="select")``), the last
+   training experiments are held out (the refinement's ``validation_fraction``, else
+   :data:`~.output_error.VALIDATION_FRACTION`); everything is fitted on the others.
+2. Per group of outputs (each output alone when decoupled, all together when joint), each
+   candidate structure is fitted: least squares in the user's regions (or one region), or
+   the paper's steps 2–6 on the group's regressors ψ (clusters).
+3. With a refinement, each candidate's parameters are refined on the free-run error of its
+   group (:func:`~.output_error.refine_outputs`), the iterate chosen on the held-out
+   experiments.
+4. Per group, the candidate with the lowest free-run error on the held-out experiments is
+   kept, a richer one only when it is lower by ``min_gain`` (relative) than the simpler one
+   kept so far. The test record plays no part.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from .._typing import Float2D
+from ..scoring.evaluation import WARMUP
+from .output_error import VALIDATION_FRACTION, _OutputRuns, held_out, refine_outputs
+from .regressors import Regressors, build_regressors
+from .scheduling import SignRegions
+from .structures import OutputModel, StructuredModel, output_lags, output_regressors, phi_names
+
+
+class ProjectedRegions:
+    """Region map φ → ``predictor.predict(M φ)``: a fitted region step of the paper's
+    route, trained on an output group's regressors ψ = Mφ."""
+
+    def __init__(self, M: Float2D, predictor: BaseEstimator):
+        self.M, self.predictor = M, predictor
+
+    def __call__(self, phi: Float2D) -> np.ndarray:
+        """The region of each φ row."""
+        return self.predictor.predict(phi @ self.M.T)
+
+
+@dataclass(frozen=True)
+class StructureFit:
+    """A fitted structure and how it was chosen.
+
+    Attributes
+    ----------
+    model : StructuredModel
+    validation_experiments : list of int
+        Indices (in the training list) of the held-out experiments.
+    validation_cost : dict
+        Per output, each candidate's mean squared free-run error on them (empty without).
+    refinement : list of dict
+        Per group, the kept candidate's refinement (seconds, iterations, stop, costs).
+    """
+
+    model: StructuredModel
+    validation_experiments: list[int]
+    validation_cost: dict
+    refinement: list[dict]
+
+
+def _candidates(scheduling: BaseEstimator | None, cluster: Callable | None, affine: bool,
+                coupling: str) -> list[str]:
+    if scheduling is None:
+        return ["linear"] if cluster is None else ["clustered"]
+    if scheduling.switch == "offset" and not affine:
+        raise ValueError("scheduling switch='offset' switches the constant term only and "
+                         "needs affine=True")
+    if scheduling.switch != "select":
+        return [scheduling.switch]
+    if coupling != "decoupled":
+        raise ValueError("scheduling switch='select' chooses a structure per output and needs "
+                         "outputs='decoupled' (with joint outputs the outputs' free runs "
+                         "depend on each other)")
+    return ["linear"] + (["offset"] if affine else []) + ["all"]
+
+
+def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str,
+           coupling: str, scheduling, cluster) -> dict[int, OutputModel]:
+    m, r, na, nb, affine = shape
+    lags = output_lags(na, form)
+    names = phi_names(m, r, lags, nb, affine)
+    parts = {j: output_regressors(j, m, r, na, nb, affine, form, coupling) for j in group}
+    if kind == "clustered":
+        M = parts[group[0]][0]  # the same ψ for every output of the group
+        target = reg.target[:, group] - reg.phi @ np.array([parts[j][1] for j in group]).T
+        thetas, regions, s = cluster(Regressors(phi=reg.phi @ M.T, target=target,
+                                                experiment=reg.experiment, time=reg.time,
+                                                n_inputs=reg.n_inputs))
+        return {j: OutputModel(M, parts[j][1], np.ones(M.shape[0], bool), s,
+                               ProjectedRegions(M, regions), kind, parts[j][2],
+                               p=thetas[:, :, jj].ravel())
+                for jj, j in enumerate(group)}
+    out = {}
+    for j in group:
+        M, c, psi_names = parts[j]
+        if kind == "linear":
+            om = OutputModel(M, c, np.zeros(len(psi_names), bool), 1, None, kind, psi_names)
+        else:
+            sign = SignRegions(scheduling.weights(j, names, lags))
+            switching = np.array([n == "1" for n in psi_names]) if kind == "offset" \
+                else np.ones(len(psi_names), bool)
+            om = OutputModel(M, c, switching, sign.n_regions, sign, kind, psi_names)
+        out[j] = om.fit(reg.phi, reg.target[:, j])
+    return out
+
+
+def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, affine: bool,
+                  form: str, coupling: str, scheduling: BaseEstimator | None = None,
+                  refinement: BaseEstimator | None = None,
+                  cluster: Callable | None = None) -> StructureFit:
+    """Fit a structured model (see the module doc).
+
+    Parameters
+    ----------
+    experiments : list of (u, y)
+    na, nb : int
+        Orders: in the velocity form, na increments (and the level y(k−1)).
+    affine : bool
+    form : {"level", "velocity"}
+    coupling : {"joint", "decoupled"}
+    scheduling : SignScheduling, optional
+        User regions; without it one region (``cluster`` None) or clusters.
+    refinement : OutputErrorRefinement, optional
+    cluster : callable, optional
+        ``cluster(reg)`` → (θ of shape (s, d, group size), fitted region step with
+        ``predict(ψ)``, s): the paper's steps 2–6 on a group's regressors.
+
+    Raises
+    ------
+    ValueError
+        An incompatible choice (``"offset"`` without the constant, ``"select"`` with joint
+        outputs, a scheduling variable naming no regressor), too few samples, or a
+        starting model whose free run diverges (with a single candidate).
+    """
+    n, m, r = len(experiments), experiments[0][1].shape[1], experiments[0][0].shape[1]
+    lags = output_lags(na, form)
+    kinds = _candidates(scheduling, cluster, affine, coupling)
+    min_gain = 0.0 if scheduling is None else scheduling.min_gain
+    fraction = VALIDATION_FRACTION if refinement is None else refinement.validation_fraction
+    n_val = held_out(n, fraction) if refinement is not None or len(kinds) > 1 else 0
+    fit, held = experiments[:n - n_val], experiments[n - n_val:]
+    reg = build_regressors(fit, lags, nb, affine)
+    if reg.phi.shape[0] < reg.phi.shape[1]:
+        raise ValueError(f"too few samples: {reg.phi.shape[0]} regressor rows for "
+                         f"{reg.phi.shape[1]} regressor entries")
+    warmup = max(lags, nb, WARMUP if refinement is None or refinement.warmup is None
+                 else refinement.warmup)
+    held_uy = ([e[0] for e in held], [e[1] for e in held]) if held else None
+    groups = [[j] for j in range(m)] if coupling == "decoupled" else [list(range(m))]
+    chosen: dict[int, OutputModel] = {}
+    costs: dict[int, dict[str, float]] = {j: {} for j in range(m)}
+    refined = []
+    for group in groups:
+        best = None
+        for kind in kinds:
+            models = _build(kind, group, reg, (m, r, na, nb, affine), form, coupling,
+                            scheduling, cluster)
+            info: dict = {}
+            if refinement is not None:
+                try:
+                    res = refine_outputs(
+                        models, group, [e[0] for e in fit], [e[1] for e in fit], lags, nb,
+                        affine, warmup, validation=held_uy, max_iter=refinement.max_iter,
+                        max_seconds=refinement.max_seconds, tol=refinement.tol,
+                        patience=refinement.patience)
+                except ValueError:
+                    if len(kinds) == 1:
+                        raise
+                    continue  # a candidate whose least-squares free run diverges
+                offsets = np.cumsum([0] + [models[j].n_params for j in group])
+                for jj, j in enumerate(group):
+                    models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+                cost = res.validation_cost
+                info = {"outputs": group, "structure": kind, "seconds": res.seconds,
+                        "n_iter": res.n_iter, "stop": res.stop, "cost_start": res.cost_start,
+                        "cost": res.cost}
+            elif held_uy is not None:
+                runs = _OutputRuns(*held_uy, lags, nb, affine, warmup, models, group)
+                cost = runs.simulate(np.concatenate([models[j].p for j in group]), False)[0]
+            else:
+                cost = np.nan
+            for j in group:
+                costs[j][kind] = float(cost)
+            if best is None or cost < best[0] * (1 - min_gain):
+                best = (cost, models, info)
+        if best is None:
+            raise ValueError(f"every candidate structure of output(s) {group} diverges in "
+                             f"free run on the training data")
+        chosen.update(best[1])
+        if best[2]:
+            refined.append(best[2])
+    return StructureFit(model=StructuredModel([chosen[j] for j in range(m)], lags),
+                        validation_experiments=list(range(n - n_val, n)),
+                        validation_cost=costs if n_val else {}, refinement=refined)

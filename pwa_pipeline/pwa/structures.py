@@ -1,0 +1,197 @@
+"""Model structures for machines: velocity form, one model per output, user regions.
+
+Every structure is written over the standard regressor φ(k) of eq. (2)–(3) (levels, L lags
+per output, nb per input, the constant), so that prediction and simulation stay those of
+:class:`~.arx.ARXModelBase`. Output j has its own regressor ψ_j(k) = M_j φ(k), target
+y_j(k) − c_jᵀφ(k), regions λ_j(φ) and sub-models θ_{j,i}:
+
+    ŷ_j(k) = c_jᵀ φ(k) + θ_{j,λ_j(φ(k))}ᵀ M_j φ(k).
+
+- ``form="level"``: ψ holds the output lags y(k−1) … y(k−na) as eq. (3), c_j = 0.
+- ``form="velocity"`` (increment form): ψ holds the increments Δy(k−1) … Δy(k−na),
+  Δy(k) = y(k) − y(k−1), and the level y(k−1); the target is Δy_j(k), c_j picks y_j(k−1)
+  (the model integrates its increments). φ then needs L = na + 1 output lags.
+- ``outputs="joint"``: ψ_j holds every output's lags (the MIMO model of eq. 1);
+  ``outputs="decoupled"``: output j's own lags only (one MISO model per output), so each
+  output's free run depends on the inputs and itself alone.
+- Every ψ_j holds every input's lags u(k−1) … u(k−nb), and 1 when ``affine``.
+
+The sub-models' parameters are a vector p_j with θ_{j,i} = A_i p_j: all entries switching
+(``"all"``, or clusters), only the constant (``"offset"``) or none (one linear model). The
+effective parameter row over φ is Θ_{j,i} = c_j + M_jᵀ A_i p_j.
+"""
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._typing import Float2D
+
+#: Regressor forms and output couplings of the structured estimators.
+FORMS = ("level", "velocity")
+COUPLINGS = ("joint", "decoupled")
+
+
+def output_lags(na: int, form: str) -> int:
+    """L, the output lags φ needs: na, or na + 1 in the velocity form."""
+    return na + int(form == "velocity")
+
+
+def phi_names(m: int, r: int, lags: int, nb: int, affine: bool) -> list[str]:
+    """φ's entry names with outputs ``y1…`` and inputs ``u1…`` (eq. 3 order)."""
+    names = [f"y{q + 1}(k-{j})" for q in range(m) for j in range(1, lags + 1)]
+    names += [f"u{q + 1}(k-{j})" for q in range(r) for j in range(1, nb + 1)]
+    return names + (["1"] if affine else [])
+
+
+def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, form: str,
+                      coupling: str) -> tuple[Float2D, np.ndarray, list[str]]:
+    """M_j, c_j and ψ_j's entry names for output j (see the module doc).
+
+    Returns
+    -------
+    M : ndarray of shape (d_j, D)
+    c : ndarray of shape (D,)
+    names : list of str
+    """
+    lags = output_lags(na, form)
+    dim = (m * lags + r * nb + int(affine))
+    own = [j] if coupling == "decoupled" else list(range(m))
+    rows, names = [], []
+
+    def unit(i: int) -> np.ndarray:
+        e = np.zeros(dim)
+        e[i] = 1.0
+        return e
+
+    def y(q: int, lag: int) -> int:
+        return q * lags + lag - 1
+
+    for q in own:
+        for lag in range(1, na + 1):
+            if form == "velocity":
+                rows.append(unit(y(q, lag)) - unit(y(q, lag + 1)))
+                names.append(f"Δy{q + 1}(k-{lag})")
+            else:
+                rows.append(unit(y(q, lag)))
+                names.append(f"y{q + 1}(k-{lag})")
+    if form == "velocity":
+        rows += [unit(y(q, 1)) for q in own]
+        names += [f"y{q + 1}(k-1)" for q in own]
+    for q in range(r):
+        for lag in range(1, nb + 1):
+            rows.append(unit(m * lags + q * nb + lag - 1))
+            names.append(f"u{q + 1}(k-{lag})")
+    if affine:
+        rows.append(unit(dim - 1))
+        names.append("1")
+    c = unit(y(j, 1)) if form == "velocity" else np.zeros(dim)
+    return np.array(rows).reshape(len(rows), dim), c, names
+
+
+@dataclass
+class OutputModel:
+    """The sub-models of one output (see the module doc).
+
+    Attributes
+    ----------
+    M : ndarray of shape (d, D)
+    c : ndarray of shape (D,)
+    switching : ndarray of bool, shape (d,)
+        The entries of ψ whose parameters differ between regions.
+    n_regions : int
+    region_of : callable or None
+        φ rows (n, D) → region (n,); None with one region.
+    structure : str
+        ``"linear"``, ``"offset"``, ``"all"`` or ``"clustered"``.
+    names : list of str
+        ψ's entry names.
+    p : ndarray of shape (P,)
+        Shared parameters first, then each region's switching ones.
+    """
+
+    M: Float2D
+    c: np.ndarray
+    switching: np.ndarray
+    n_regions: int
+    region_of: Callable | None
+    structure: str
+    names: list[str]
+    p: np.ndarray = field(default=None)
+
+    @property
+    def n_params(self) -> int:
+        """P = shared entries + regions × switching entries."""
+        n_sw = int(self.switching.sum())
+        return self.switching.size - n_sw + self.n_regions * n_sw
+
+    def G(self) -> np.ndarray:
+        """M_jᵀ A_i for each region: shape (s, D, P)."""
+        d, sw = self.switching.size, self.switching
+        n_shared, n_sw = d - int(sw.sum()), int(sw.sum())
+        a = np.zeros((self.n_regions, d, self.n_params))
+        a[:, np.flatnonzero(~sw), np.arange(n_shared)] = 1.0
+        for i in range(self.n_regions):
+            a[i, np.flatnonzero(sw), n_shared + i * n_sw + np.arange(n_sw)] = 1.0
+        return np.einsum("dD,sdp->sDp", self.M, a)
+
+    def thetas(self, p: np.ndarray | None = None) -> Float2D:
+        """Θ_{j,i} = c_j + M_jᵀ A_i p over φ for each region: shape (s, D)."""
+        return self.c + self.G() @ (self.p if p is None else p)
+
+    def regions(self, phi: Float2D) -> np.ndarray:
+        """The region of each φ row."""
+        return np.zeros(len(phi), dtype=int) if self.region_of is None else self.region_of(phi)
+
+    def fit(self, phi: Float2D, y: np.ndarray) -> "OutputModel":
+        """Least squares of ψ's sub-models on measured φ rows and the output y (n,).
+
+        A region no row falls in keeps the minimum-norm (zero) switching parameters."""
+        g, lam = self.G(), self.regions(phi)
+        x = np.zeros((len(phi), self.n_params))
+        for i in range(self.n_regions):
+            rows = lam == i
+            x[rows] = phi[rows] @ g[i]
+        scale = np.sqrt(np.mean(x * x, axis=0))
+        scale[scale == 0] = 1.0
+        self.p = np.linalg.lstsq(x / scale, y - phi @ self.c, rcond=None)[0] / scale
+        return self
+
+
+@dataclass
+class StructuredModel:
+    """One :class:`OutputModel` per output over a common φ.
+
+    Attributes
+    ----------
+    outputs : list of OutputModel
+    lags : int
+        L, the output lags of φ.
+    """
+
+    outputs: list[OutputModel]
+    lags: int
+
+    def __post_init__(self):
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Recompute ``thetas``, the effective rows Θ_{j,i} over φ (one (s_j, D) array per
+        output), after the parameters changed."""
+        self.thetas = [o.thetas() for o in self.outputs]
+
+    def predict_phi(self, phi: Float2D) -> Float2D:
+        """ŷ(k) for each φ row: shape (n, m)."""
+        return np.column_stack([np.einsum("nd,nd->n", phi, t[o.regions(phi)])
+                                for o, t in zip(self.outputs, self.thetas, strict=True)])
+
+    @property
+    def n_regions(self) -> list[int]:
+        """Regions of each output."""
+        return [o.n_regions for o in self.outputs]
+
+    @property
+    def structures(self) -> list[str]:
+        """The structure of each output."""
+        return [o.structure for o in self.outputs]
