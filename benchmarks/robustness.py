@@ -25,7 +25,9 @@ system and its records; for the paper cases the records.
 
 Per run: whether the fit raised; the number of sub-models (exact = the true number); the
 largest absolute parameter error after pairing sub-models with the true modes
-(:func:`~pwa_pipeline.scoring.metrics.match_submodels`; only when the count is exact);
+(:func:`~pwa_pipeline.scoring.metrics.match_submodels`; only when the count is exact), and
+beside it that of least squares on the true modes' rows (the oracle: what the record allows
+a least-squares fit that knows the modes, errors in the variables included);
 region accuracy on a fresh noise-free record (:func:`~pwa_pipeline.scoring.truth.ground_truth_scores`);
 free-run NRMSE on a fresh noisy record of the PWARX, of linear ARX and of the true system
 (true θ and true regions); fit seconds.
@@ -53,6 +55,8 @@ from benchmarks._common import RESULTS, write_json
 from pwa_pipeline import PWARX, LinearARX, evaluate, make_hure_vasak
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, add_output_noise, hure_vasak_mode
 from pwa_pipeline.pwa.arx import ARXModelBase
+from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.pwa.submodels import refit
 from pwa_pipeline.scoring.metrics import match_submodels
 from pwa_pipeline.scoring.truth import ground_truth_scores
 
@@ -279,12 +283,16 @@ def one_run(name: str, seed: int) -> dict:
     row["fit_seconds"] = time.perf_counter() - t0
     truth = ground_truth_scores(model, system.thetas, clean.u, clean.y_clean, clean.modes)
     error = np.nanmax(match_submodels(model.thetas_, system.thetas)[1])
+    reg = build_regressors([(train.u, train.y)], system.na, system.nb, False)
+    oracle = refit(reg.phi, reg.target, train.modes[max(system.na, system.nb):], s)
     linear = LinearARX(system.na, system.nb).fit(train.u, train.y)
     free = {label: evaluate(mdl, fresh.u, fresh.y, warmup=10).mean("free_run")
             for label, mdl in [("pwarx", model), ("linear_arx", linear),
                                ("true", TrueModel(system).fit())]}
     return {**row, "n_submodels": model.n_submodels_, "exact": model.n_submodels_ == s,
             "max_param_error": float(error) if model.n_submodels_ == s else np.nan,
+            "oracle_param_error": float(np.nanmax(np.abs(oracle - system.thetas))),
+            "n_split": getattr(model.submodels_, "n_split_", np.nan),
             "region_accuracy": truth["region_accuracy"],
             **{f"free_run_nrmse_{k}": v for k, v in free.items()}}
 
@@ -298,6 +306,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
             "exact mode count": f"{int(ok['exact'].sum())}/{len(g)}",
             "median largest param error": ok["max_param_error"].median(),
             "worst largest param error": ok["max_param_error"].max(),
+            "oracle LS error": ok["oracle_param_error"].median(),
             "median region accuracy": ok["region_accuracy"].median(),
             "worst region accuracy": ok["region_accuracy"].min(),
             "median free-run NRMSE": ok["free_run_nrmse_pwarx"].median(),

@@ -1,11 +1,12 @@
-"""Step 5 on small hand-built cases: merging, refinement, cluster centres."""
+"""Step 5 on small hand-built cases: merging, splitting, refinement, cluster centres."""
 
 import numpy as np
 import pytest
 
+from pwa_pipeline import PWARX
 from pwa_pipeline.config import HParamsFile
-from pwa_pipeline.pwa import SVMRegions
-from pwa_pipeline.pwa.submodels import merge_indistinguishable, refine, separable
+from pwa_pipeline.pwa import LocalLeastSquares, SVMRegions
+from pwa_pipeline.pwa.submodels import merge_indistinguishable, refine, separable, split_gain
 
 SIGMA = 0.05
 
@@ -83,12 +84,15 @@ def test_paper_sub_models_are_the_cluster_means(sim_30db):
 
 
 def test_default_sub_models_are_refitted_on_their_rows(sim_30db, default_30db):
+    """Step 5's θ_i are least squares on their rows; the model's are step 6's, refitted
+    with the regions (ResidualRegions)."""
     model = default_30db
     phi = np.column_stack([sim_30db.y[:-1], sim_30db.u[:-1]])
     for i in range(model.n_submodels_):
         rows = model.labels_ == i
         ls = np.linalg.lstsq(phi[rows], sim_30db.y[1:][rows], rcond=None)[0]
-        np.testing.assert_allclose(model.thetas_[i], ls, atol=1e-10)
+        np.testing.assert_allclose(model.submodels_.thetas_[i], ls, atol=1e-10)
+    assert model.thetas_ is model.regions_.thetas_
 
 
 def test_merging_many_clusters_tests_few_pairs(monkeypatch):
@@ -107,3 +111,40 @@ def test_merging_many_clusters_tests_few_pairs(monkeypatch):
     assert len(set(merged)) == 2 and n == 28
     assert len({(a, b) for a, b in zip(merged, mode, strict=True)}) == 2  # the true modes
     assert len(calls) <= 60  # the previous scan made one per pair per merge: ~4,000
+
+
+def _close_modes(n=1500, seed=0, gap=0.15, sigma=0.05):
+    """y(k) = a·y(k−1) + u(k−1), a = 0.5 where y(k−1) ≤ 0.2, 0.5 + gap above: the modes'
+    predictions differ by 1–3 noise standard deviations, their rows split by a hyperplane."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, (n, 1))
+    y = np.zeros((n, 1))
+    mode = np.zeros(n, int)
+    thetas = np.array([[[0.5], [1.0]], [[0.5 + gap], [1.0]]])
+    for k in range(1, n):
+        mode[k] = int(y[k - 1, 0] > 0.2)
+        y[k] = np.r_[y[k - 1], u[k - 1]] @ thetas[mode[k]]
+    return u, y + sigma * rng.normal(size=y.shape), thetas, mode
+
+
+def test_modes_a_few_noise_sigmas_apart_but_separable_stay_apart():
+    """DBSCAN merges the two; the split search (split_gain) parts them again."""
+    u, y, thetas, _ = _close_modes()
+    model = PWARX(na=1, nb=1).fit(u, y)
+    assert model.n_submodels_ == 2 and model.submodels_.n_split_ >= 1
+    np.testing.assert_allclose(np.sort(model.thetas_, axis=0), thetas, atol=0.03)
+    merged = PWARX.default(1, 1).set_params(submodels__split_tol=None).fit(u, y)
+    assert merged.n_submodels_ == 1
+
+
+def test_split_gain_tells_two_modes_from_one():
+    u, y, _, mode = _close_modes()
+    phi, target, mode = np.column_stack([y[:-1], u[:-1]]), y[1:], mode[1:]
+    local = LocalLeastSquares().fit(phi, target)
+    gain, halves = split_gain(phi, target, local.theta_, 8, 20, SVMRegions())
+    assert gain > 2
+    agree = np.mean(halves == mode)
+    assert max(agree, 1 - agree) > 0.88  # the halves are the two modes, up to the boundary
+    one = mode == 0
+    gain_one, _ = split_gain(phi[one], target[one], local.theta_[one], 8, 20, SVMRegions())
+    assert gain_one < 0.5
