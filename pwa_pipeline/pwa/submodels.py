@@ -243,8 +243,13 @@ def _argmin_labels(sq: np.ndarray, sigma2: np.ndarray | None) -> np.ndarray:
     return np.argmin(_cost(sq, sigma2), axis=0)
 
 
+#: Sub-models tried per split search (:meth:`RefinedSubModels._best_split`).
+SPLIT_CANDIDATES = 2
+
+
 def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size: int,
-               n_iter: int, regions) -> tuple[float, np.ndarray | None]:
+               n_iter: int, regions, merge_tol: float = 1.0, max_rows: int = 2000,
+               seed: int = 0) -> tuple[float, np.ndarray | None]:
     """Whether the rows of one sub-model hold two modes that the regions separate.
 
     Two starts, refined by residual and by region (:func:`refine` with ``regions``) so that
@@ -257,22 +262,29 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     (d·m + d + 1)·ln n: twice BIC's penalty for the second sub-model and its hyperplane
     (a split point chosen from the data earns more than a regular parameter). One mode split
     in two gains little (below 0.3 on the section 5 system at 30 dB); two modes 1–3 noise
-    standard deviations apart, merged at 20 dB, gain 2–11.
+    standard deviations apart, merged at 20 dB, gain 2–11. A split whose two sub-models
+    predict alike (the statistic of :func:`merge_indistinguishable` below ``merge_tol``)
+    would be merged again and gains nothing. Above ``max_rows`` rows the split is searched
+    on a seeded random ``max_rows`` of them and extended to all by the regions fitted to it.
 
     Returns
     -------
     gain : float
-        −inf when the refinement keeps one sub-model.
+        −inf when no split keeps two sub-models that predict apart.
     labels : ndarray of shape (n,) or None
         0/1 of each row in the split.
     """
-    n, d = phi.shape
+    n_all, d = phi.shape
     m = target.shape[1]
-    if n < 2 * min_size:
+    if n_all < 2 * min_size:
         return -np.inf, None
-    one = refit(phi, target, np.zeros(n, int), 1)[0]
-    sq = (target - phi @ one) ** 2
-    emb = local_theta.reshape(n, -1)
+    rows = np.arange(n_all) if n_all <= max_rows else np.sort(
+        np.random.default_rng(seed).choice(n_all, max_rows, replace=False))
+    x, t = phi[rows], target[rows]
+    n = rows.size
+    one = refit(x, t, np.zeros(n, int), 1)[0]
+    sq = (t - x @ one) ** 2
+    emb = local_theta[rows].reshape(n, -1)
     scale = emb.std(axis=0)
     emb = emb / np.where(scale > 0, scale, 1.0)
     starts = [KMeans(2, n_init=4, random_state=0).fit_predict(emb),
@@ -281,14 +293,20 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     rss1 = np.maximum(sq.sum(axis=0), tiny)
     best = (-np.inf, None)
     for start in starts:
-        thetas, labels = refine(phi, target, start, min_size, n_iter, regions)[:2]
+        thetas, labels = refine(x, t, start, min_size, n_iter, regions)[:2]
         if thetas.shape[0] < 2:
             continue
-        rss2 = ((target - np.einsum("nd,ndm->nm", phi, thetas[labels])) ** 2).sum(axis=0)
-        gain = 0.5 * n * float(np.log(rss1 / np.maximum(rss2, tiny)).sum())
-        if gain > best[0]:
+        own = (t - np.einsum("nd,ndm->nm", x, thetas[labels])) ** 2
+        apart = _cost((x @ (thetas[0] - thetas[1])) ** 2, robust_noise_var(own)).mean()
+        gain = 0.5 * n * float(np.log(rss1 / np.maximum(own.sum(axis=0), tiny)).sum())
+        if apart >= merge_tol and gain > best[0]:
             best = (gain, labels)
-    return best[0] / ((d * m + d + 1) * np.log(n)), best[1]
+    if best[1] is None:
+        return -np.inf, None
+    labels = best[1]
+    if n < n_all:
+        labels = clone(regions).fit(x, labels, 2).predict(phi)
+    return best[0] / ((d * m + d + 1) * np.log(n)), labels
 
 
 class ClusterCentres(BaseEstimator):
@@ -474,15 +492,27 @@ class RefinedSubModels(BaseEstimator):
 
     def _best_split(self, phi, target, labels, local_theta, min_size, regions):
         """``labels`` with the sub-model of largest :func:`split_gain` above ``split_tol``
-        split in two, or None."""
+        split in two, or None.
+
+        The :data:`SPLIT_CANDIDATES` sub-models whose rows fit worst are tried (largest mean
+        Σ_p r_p² / σ̂_p² over their rows, σ̂_p² the :func:`robust_noise_var` of every row
+        under its own sub-model: two modes in one sub-model, or a small mode inside a large
+        one, inflate it), so that the search costs little on records with many sub-models;
+        each split is refined with at most 5 sweeps.
+        """
+        s = int(labels.max()) + 1
+        thetas = refit(phi, target, labels, s)
+        own = (target - np.einsum("nd,ndm->nm", phi, thetas[labels])) ** 2
+        cost = _cost(own, robust_noise_var(own))
+        excess = np.bincount(labels, cost, s) / np.maximum(np.bincount(labels, minlength=s), 1)
         best = (self.split_tol, None)
-        for i in range(int(labels.max()) + 1):
+        for i in np.argsort(-excess)[:SPLIT_CANDIDATES]:
             rows = np.flatnonzero(labels == i)
             gain, halves = split_gain(phi[rows], target[rows], local_theta[rows], min_size,
-                                      self.n_refine, regions)
+                                      min(self.n_refine, 5), regions, self.merge_tol)
             if gain > best[0]:
                 new = labels.copy()
-                new[rows[halves == 1]] = labels.max() + 1
+                new[rows[halves == 1]] = s
                 best = (gain, new)
         return best[1]
 
