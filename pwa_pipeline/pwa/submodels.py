@@ -16,7 +16,7 @@ from sklearn.utils._param_validation import Interval
 
 from .._arrays import relabel_by_size
 from .._typing import Float2D
-from ._blas import single_threaded_blas
+from ._blas import _controller, single_threaded_blas
 
 
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -287,7 +287,10 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     emb = local_theta[rows].reshape(n, -1)
     scale = emb.std(axis=0)
     emb = emb / np.where(scale > 0, scale, 1.0)
-    starts = [KMeans(2, n_init=4, random_state=0).fit_predict(emb),
+    with _controller().limit(limits=1, user_api="openmp"):
+        # no OpenMP worker threads: GNU OpenMP deadlocks in a child forked after they start
+        kmeans = KMeans(2, n_init=4, random_state=0).fit_predict(emb)
+    starts = [kmeans,
               (_cost(sq, robust_noise_var(sq)) > chi2.ppf(0.9, m)).astype(int)]
     tiny = np.finfo(float).tiny
     rss1 = np.maximum(sq.sum(axis=0), tiny)
