@@ -50,7 +50,7 @@ def test_pwarx_refinement_keeps_regions_and_lowers_the_training_free_run_error()
     plain = PWARX(na=1, nb=1).fit(data.u, data.y)
     refined = PWARX(na=1, nb=1, refinement=OutputErrorRefinement(max_iter=5)).fit(
         data.u, data.y)
-    np.testing.assert_array_equal(refined.submodels_.thetas_, plain.thetas_)
+    np.testing.assert_array_equal(refined.base_thetas(), plain.thetas_)  # step 6's θ_i
     np.testing.assert_array_equal(refined.regions_.coef_, plain.regions_.coef_)
     assert refined.refinement_.cost_ < refined.refinement_.cost_start_
     assert np.abs(refined.thetas_ - plain.thetas_).max() > 0
@@ -87,7 +87,9 @@ def test_the_pipeline_refines_pwa_and_linear_arx_when_the_set_asks(tmp_path, mlf
                             partition_key="hure_vasak|oe", resources=resources)
     step = result.output_for_node("output_error_refinement")
     model = result.output_for_node("pwa_model")
-    assert step.n_iter_ == 3 and step.cost_ < step.cost_start_
+    # the start (step 6's θ_i, refitted with the regions) may already be the best iterate on
+    # the held-out experiments: the refinement then keeps it
+    assert step.n_iter_ == 3 and step.cost_ <= step.cost_start_
     np.testing.assert_array_equal(model.thetas_, step.thetas_)
     assert np.abs(model.thetas_ - result.output_for_node("sub_models").thetas_).max() > 0
     linear = result.output_for_node("linear_arx_model")

@@ -2,6 +2,7 @@
 the Vθ embedding (eq. 8–10), clustering (DBSCAN), sub-models (step 5), regions (step 6), and
 the :class:`PWARX` estimator built from those step objects."""
 
+from .boundaries import ResidualRegions
 from .clustering import DBSCANClustering
 from .estimator import PWARX, STEPS
 from .local_models import LocalLeastSquares
@@ -10,4 +11,4 @@ from .regions import SVMRegions
 from .submodels import ClusterCentres, RefinedSubModels
 
 __all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
-           "LocalLeastSquares", "RefinedSubModels", "SVMRegions"]
+           "LocalLeastSquares", "RefinedSubModels", "ResidualRegions", "SVMRegions"]

@@ -1,5 +1,6 @@
 """The PWARX estimator: MIMO piecewise-affine ARX identification by extended DBSCAN."""
 
+import inspect
 import time
 from numbers import Integral
 
@@ -10,6 +11,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
 from .arx import ARXModelBase
+from .boundaries import ResidualRegions
 from .clustering import DBSCANClustering
 from .local_models import LocalLeastSquares
 from .memory import check_fit_memory
@@ -42,7 +44,9 @@ class PWARX(ARXModelBase):
     mixed local sets left out and at most 3,000 local models clustered, ε from the k-distance
     curve (:class:`~.clustering.DBSCANClustering`), and sub-models refitted, merged,
     re-assigned by residual and region, with a search for missed modes
-    (:class:`~.submodels.RefinedSubModels`). :meth:`PWARX.paper` is the paper's setting.
+    (:class:`~.submodels.RefinedSubModels`), and region boundaries refined on the
+    residuals (:class:`~.boundaries.ResidualRegions`). :meth:`PWARX.paper` is the paper's
+    setting.
 
     Parameters
     ----------
@@ -57,7 +61,10 @@ class PWARX(ARXModelBase):
     submodels : estimator, optional
         Step 5. None: ``RefinedSubModels()``; the paper's is ``ClusterCentres()``.
     regions : estimator, optional
-        Step 6. None: ``SVMRegions()``.
+        Step 6. None: ``ResidualRegions()`` (the SVM's regions with boundaries moved to
+        where the sub-models' residuals switch); the paper's is ``SVMRegions()``. A region
+        step whose ``fit`` takes ``target`` and ``thetas`` is given the outputs and step 5's
+        sub-models.
     refinement : estimator, optional
         After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
         minimise the free-run error on the training experiments, the regions kept. None (the
@@ -84,8 +91,10 @@ class PWARX(ARXModelBase):
         ``regions_.predict(phi)`` gives the region of each regressor row.
     refinement_ : fitted refinement step (with ``refinement`` only)
     thetas_ : ndarray of shape (s, d, m)
-        Sub-model parameter matrices θ_i (eq. 4), refined when ``refinement`` is given
-        (``submodels_.thetas_`` keeps step 5's).
+        Sub-model parameter matrices θ_i (eq. 4): refitted with the regions by the default's
+        step 6 (:class:`~.boundaries.ResidualRegions`), refined when ``refinement`` is given
+        (``submodels_.thetas_`` keeps step 5's, :meth:`base_thetas` those before the
+        refinement).
     n_submodels_ : int
     labels_ : ndarray of shape (n,)
         Sub-model of each training regressor row (−1: DBSCAN noise, paper setting only).
@@ -157,7 +166,7 @@ class PWARX(ARXModelBase):
         ``get_params(deep=True)`` lists each step's parameters); it fits like ``PWARX()``."""
         return cls(na=na, nb=nb, affine=affine, local_models=LocalLeastSquares(),
                    clustering=DBSCANClustering(), submodels=RefinedSubModels(),
-                   regions=SVMRegions())
+                   regions=ResidualRegions())
 
     @classmethod
     def paper(cls, na: int, nb: int, *, n_rho: int, eps: float, min_pts: int,
@@ -241,8 +250,9 @@ class PWARX(ARXModelBase):
             fitted: dict[str, BaseEstimator] = {}
             for name in STEPS:
                 fitted[name] = self.fit_step(name, reg, **fitted)
-            subs = fitted["submodels"]
-            return subs.thetas_, fitted["regions"], subs.n_submodels_
+            subs, regions = fitted["submodels"], fitted["regions"]
+            # the θ_i that go with the regions: step 6's where it refits them (base_thetas)
+            return getattr(regions, "thetas_", subs.thetas_), regions, subs.n_submodels_
 
         self.structure_fit_ = fit_structure(
             experiments, self.na, self.nb, self.affine, self.form, self.outputs,
@@ -269,8 +279,13 @@ class PWARX(ARXModelBase):
         The fitted refinement step, for :meth:`assemble`.
         """
         return clone(self.refinement).fit(
-            self.submodels_.thetas_, [e[0] for e in experiments], [e[1] for e in experiments],
+            self.base_thetas(), [e[0] for e in experiments], [e[1] for e in experiments],
             self.na, self.nb, self.affine, region_of=self.regions_.predict)
+
+    def base_thetas(self) -> np.ndarray:
+        """The θ_i before any refinement: the region step's when it refits them with the
+        regions (:class:`~.boundaries.ResidualRegions` has ``thetas_``), else step 5's."""
+        return getattr(self.regions_, "thetas_", self.submodels_.thetas_)
 
     def fit_step(self, name: str, reg: Regressors, **fitted: BaseEstimator) -> BaseEstimator:
         """Fit a clone of the step ``name`` (one of :data:`STEPS`) on the regressors.
@@ -304,8 +319,11 @@ class PWARX(ARXModelBase):
                             regions=steps["regions"])
         if name == "regions":
             subs = fitted["submodels"]
+            # a region step that places boundaries by the residuals gets the sub-models
+            residuals = ({"target": reg.target, "thetas": subs.thetas_}
+                         if "thetas" in inspect.signature(step.fit).parameters else {})
             return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
-                            sample_weight=subs.weights_)
+                            sample_weight=subs.weights_, **residuals)
         raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
 
     def assemble(self, reg: Regressors, local_models: BaseEstimator,
@@ -318,7 +336,7 @@ class PWARX(ARXModelBase):
         self.n_features_in_ = self.n_inputs_
         self.local_models_, self.clustering_ = local_models, clustering
         self.submodels_, self.regions_ = submodels, regions
-        self.thetas_ = submodels.thetas_ if refinement is None else refinement.thetas_
+        self.thetas_ = self.base_thetas() if refinement is None else refinement.thetas_
         if refinement is not None:
             self.refinement_ = refinement
         self.n_submodels_ = submodels.n_submodels_

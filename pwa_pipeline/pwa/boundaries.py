@@ -1,0 +1,257 @@
+"""Region boundaries placed where the sub-models' residuals switch (the default's step 6).
+
+The region SVM of :class:`~pwa_pipeline.pwa.regions.SVMRegions` learns from hard labels and
+a soft margin; near a boundary, where noise blurs which sub-model produced a row, its
+hyperplanes sit a little off (98.4–99.6 % of fresh samples right with the true θ_i on the
+section 5 system), and on switching systems that error dominates the free-run error.
+:class:`ResidualRegions` starts from the SVM's hyperplanes and moves them to maximise the
+likelihood of the outputs under the sub-models, the regions acting as a softmax gate of a
+mixture of experts (:func:`refine_boundaries`): the boundary settles where the residuals of
+the two sub-models switch. A few EM steps then refit each sub-model on its rows weighted by
+their posterior probability (:func:`mixture_of_experts`), so that rows near a boundary,
+which a hard label gives wholly to one side, weigh on each sub-model as the data say.
+"""
+
+from numbers import Integral, Real
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.special import log_softmax, logsumexp
+from sklearn.utils._param_validation import Interval
+
+from .._typing import Float2D
+from .regions import SVMRegions
+from .submodels import robust_noise_var
+
+
+def _log_likelihood(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
+    """−½ Σ_p r_ikp² / σ̂_p² of every row k under every sub-model i, shape (n, s); σ̂_p² is
+    :func:`~pwa_pipeline.pwa.submodels.robust_noise_var` of each row's best residual."""
+    sq = (target[None] - phi @ thetas) ** 2  # (s, n, m)
+    sigma2 = robust_noise_var(sq[np.argmin(sq.sum(axis=2), axis=0), np.arange(phi.shape[0])])
+    return -0.5 * (sq / sigma2).sum(axis=2).T
+
+
+def gate_log_likelihood(z: Float2D, log_lik: np.ndarray, ridge: float):
+    """Objective and gradient of :func:`refine_boundaries` for L-BFGS.
+
+    Returns a function of the flattened gate parameters V (s, d + 1) giving
+    −(1/n) Σ_k log Σ_i softmax_i(V z_k) exp(ℓ_ik) + (ridge/2)‖V without the last column‖²
+    and its gradient. ``z`` has a trailing column of ones; ``log_lik`` is ℓ (n, s).
+    """
+    n, s = log_lik.shape
+
+    def objective(v: np.ndarray) -> tuple[float, np.ndarray]:
+        V = v.reshape(s, -1)
+        log_gate = log_softmax(z @ V.T, axis=1)
+        joint = log_gate + log_lik
+        total = logsumexp(joint, axis=1, keepdims=True)
+        responsibility = np.exp(joint - total)
+        grad = (np.exp(log_gate) - responsibility).T @ z / n
+        grad[:, :-1] += ridge * V[:, :-1]
+        value = -total.sum() / n + 0.5 * ridge * float((V[:, :-1] ** 2).sum())
+        return value, grad.ravel()
+
+    return objective
+
+
+def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: Float2D,
+                      intercept: np.ndarray, ridge: float = 1e-5, max_iter: int = 200
+                      ) -> tuple[Float2D, np.ndarray, int]:
+    """Move the hyperplanes of φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j) to where the
+    sub-models' residuals switch.
+
+    The regions are read as a gate p_i(φ) = softmax_i(w_i·φ + b_i) of a mixture of the
+    sub-models, each with Gaussian residuals of the noise variance σ̂_p²
+    (:func:`~pwa_pipeline.pwa.submodels.robust_noise_var` of each row's best residual), and
+    (w, b) maximise the likelihood Σ_k log Σ_i p_i(φ_k) exp(−½ Σ_p r_ikp² / σ̂_p²) (the
+    gating of a mixture of experts), by L-BFGS from the given hyperplanes, on z-scored φ
+    with a small ridge on the slopes. The softmax is sharpened only as far as the data
+    support, so a row whose residuals do not tell the sub-models apart pulls on no
+    boundary, and rows where noise moved φ across a boundary pull it by their likelihood,
+    not by a hinge. Regions with intercept −inf (never chosen) stay so.
+
+    Parameters
+    ----------
+    phi : ndarray of shape (n, d)
+    target : ndarray of shape (n, m)
+    thetas : ndarray of shape (s, d, m)
+    coef, intercept : ndarrays of shape (s, d) and (s,)
+        The starting hyperplanes, e.g. an :class:`~pwa_pipeline.pwa.regions.SVMRegions`'s.
+    ridge : float, default 1e-5
+        Penalty on the squared slopes in z-scored units.
+    max_iter : int, default 200
+        L-BFGS iterations.
+
+    Returns
+    -------
+    coef, intercept : the refined hyperplanes, in φ's units
+    n_iter : int
+        L-BFGS iterations run.
+    """
+    live = np.flatnonzero(np.isfinite(intercept))
+    coef, intercept = coef.copy(), intercept.copy()
+    if live.size <= 1:
+        return coef, intercept, 0
+    log_lik = _log_likelihood(phi, target, thetas[live])
+    mean, std = phi.mean(axis=0), phi.std(axis=0)
+    cols = std > 0
+    z = np.column_stack([(phi[:, cols] - mean[cols]) / std[cols], np.ones(phi.shape[0])])
+    v0 = np.column_stack([coef[np.ix_(live, np.flatnonzero(cols))] * std[cols],
+                          intercept[live] + coef[live][:, cols] @ mean[cols]])
+    result = minimize(gate_log_likelihood(z, log_lik, ridge), v0.ravel(), jac=True,
+                      method="L-BFGS-B", options={"maxiter": max_iter})
+    V = result.x.reshape(live.size, -1)
+    w = V[:, :-1] / std[cols]
+    coef[np.ix_(live, np.flatnonzero(cols))] = w
+    intercept[live] = V[:, -1] - w @ mean[cols]
+    return coef, intercept, int(result.nit)
+
+
+def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: Float2D,
+                       intercept: np.ndarray, n_em: int = 3, ridge: float = 1e-5,
+                       max_iter: int = 200) -> tuple[np.ndarray, Float2D, np.ndarray, int]:
+    """Regions and sub-models re-estimated together, as a mixture of experts gated by the
+    regions, by ``n_em`` EM steps.
+
+    Each step places the boundaries (:func:`refine_boundaries`), takes the posterior
+    probability of each row under each sub-model, q_ik ∝ p_i(φ_k) exp(−½ Σ_p r_ikp² / σ̂_p²),
+    and refits every θ_i by least squares weighted by q_ik; the boundaries are placed once
+    more at the end. A sub-model whose rows weigh less than d + 1 keeps its θ_i.
+
+    Returns
+    -------
+    thetas, coef, intercept
+        The refitted sub-models and hyperplanes.
+    n_iter : int
+        L-BFGS iterations over all boundary placements.
+    """
+    thetas = thetas.copy()
+    n_iter = 0
+    d = phi.shape[1]
+    for step in range(n_em + 1):
+        coef, intercept, it = refine_boundaries(phi, target, thetas, coef, intercept, ridge,
+                                                max_iter)
+        n_iter += it
+        live = np.flatnonzero(np.isfinite(intercept))
+        if step == n_em or live.size <= 1:
+            break
+        joint = _log_likelihood(phi, target, thetas[live]) + log_softmax(
+            phi @ coef[live].T + intercept[live], axis=1)
+        post = np.exp(joint - logsumexp(joint, axis=1, keepdims=True))
+        for j, i in enumerate(live):
+            if post[:, j].sum() > d + 1:
+                w = np.sqrt(post[:, j])[:, None]
+                thetas[i] = np.linalg.lstsq(phi * w, target * w, rcond=None)[0]
+    return thetas, coef, intercept, n_iter
+
+
+class ResidualRegions(SVMRegions):
+    """The library default's step 6: the regions of :class:`~.regions.SVMRegions`, then
+    their boundaries moved to where the sub-models' residuals switch
+    (:func:`refine_boundaries`).
+
+    Given the outputs and the sub-models (``target`` and ``thetas`` at fit, which the
+    estimator passes), the SVM's hyperplanes start the refinement, and the sub-models are
+    refitted with the regions by ``n_em`` EM steps (:func:`mixture_of_experts`); the
+    estimator then uses those sub-models (``thetas_``). Without them (as inside the
+    sub-model refinement's sweeps, :func:`~.submodels.refine`) it is the SVM alone.
+    Predicts as the SVM does, φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j).
+
+    Parameters
+    ----------
+    C, max_rows, random_state, tol
+        Those of :class:`~.regions.SVMRegions`.
+    gate_ridge : float, default 1e-5
+        ``ridge`` of :func:`refine_boundaries`.
+    gate_max_rows : int, optional, default 20000
+        Refine on at most this many rows (a seeded random choice). None: every row.
+    gate_max_iter : int, default 200
+        L-BFGS iterations of each boundary placement.
+    n_em : int, default 3
+        EM steps refitting the sub-models (0: boundaries only, the sub-models kept).
+
+    Attributes
+    ----------
+    coef_, intercept_, n_regions_
+        As :class:`~.regions.SVMRegions`'s, after the refinement.
+    svm_coef_, svm_intercept_ : ndarrays
+        The SVM's hyperplanes before it.
+    thetas_ : ndarray of shape (s, d, m)
+        The sub-models refitted with the regions (fits given ``thetas`` only).
+    n_gate_iter_ : int
+        L-BFGS iterations run (0: not refined).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> phi = rng.normal(size=(2000, 1))
+    >>> thetas = np.array([[[1.0]], [[-1.0]]])
+    >>> mode = (phi[:, 0] > 0.3).astype(int)
+    >>> y = phi * thetas[mode, 0] + 0.05 * rng.normal(size=(2000, 1))
+    >>> shifted = (phi[:, 0] > 0.6).astype(int)  # labels whose boundary is off by 0.3
+    >>> regions = ResidualRegions().fit(phi, shifted, 2, target=y, thetas=thetas)
+    >>> (w0, w1), (b0, b1) = regions.coef_[:, 0], regions.intercept_
+    >>> bool(abs((b0 - b1) / (w1 - w0) - 0.3) < 0.03)  # the boundary back at 0.3
+    True
+    """
+
+    _parameter_constraints: dict = {
+        **SVMRegions._parameter_constraints,
+        "gate_ridge": [Interval(Real, 0, None, closed="left")],
+        "gate_max_rows": [Interval(Integral, 2, None, closed="left"), None],
+        "gate_max_iter": [Interval(Integral, 0, None, closed="left")],
+        "n_em": [Interval(Integral, 0, None, closed="left")],
+    }
+
+    def __init__(self, C: float = 1.0, max_rows: int | None = 5000, random_state: int = 0,
+                 tol: float = 1e-4, gate_ridge: float = 1e-5,
+                 gate_max_rows: int | None = 20000, gate_max_iter: int = 200, n_em: int = 3):
+        super().__init__(C=C, max_rows=max_rows, random_state=random_state, tol=tol)
+        self.gate_ridge = gate_ridge
+        self.gate_max_rows = gate_max_rows
+        self.gate_max_iter = gate_max_iter
+        self.n_em = n_em
+
+    def fit(self, phi: Float2D, labels: np.ndarray, n_regions: int | None = None,
+            sample_weight: np.ndarray | None = None, target: Float2D | None = None,
+            thetas: np.ndarray | None = None) -> "ResidualRegions":
+        """Fit the SVM's hyperplanes on the labelled rows, then (with ``target`` and
+        ``thetas``) refine them and the sub-models on the residuals.
+
+        Parameters
+        ----------
+        phi, labels, n_regions, sample_weight
+            As :meth:`SVMRegions.fit <.regions.SVMRegions.fit>`.
+        target : ndarray of shape (n, m), optional
+            y(k) of each row.
+        thetas : ndarray of shape (s, d, m), optional
+            The sub-models, one per region.
+
+        Raises
+        ------
+        ValueError
+            If only one of ``target`` and ``thetas`` is given, or ``thetas`` does not have
+            one sub-model per region and φ's and y's widths.
+        """
+        super().fit(phi, labels, n_regions, sample_weight)
+        self.svm_coef_, self.svm_intercept_ = self.coef_, self.intercept_
+        self.n_gate_iter_ = 0
+        if (target is None) != (thetas is None):
+            raise ValueError("refining the regions needs both target and thetas, got only "
+                             + ("target" if thetas is None else "thetas"))
+        if target is None:
+            return self
+        target, thetas = np.asarray(target, float), np.asarray(thetas, float)
+        if thetas.shape != (self.n_regions_, phi.shape[1], target.shape[1]):
+            raise ValueError(f"thetas must have shape (regions, d, m) = ({self.n_regions_}, "
+                             f"{phi.shape[1]}, {target.shape[1]}), got {thetas.shape}")
+        rows = np.arange(phi.shape[0])
+        if self.gate_max_rows is not None and rows.size > self.gate_max_rows:
+            rows = np.sort(np.random.default_rng(self.random_state).choice(
+                rows.size, self.gate_max_rows, replace=False))
+        self.thetas_, self.coef_, self.intercept_, self.n_gate_iter_ = mixture_of_experts(
+            phi[rows], target[rows], thetas, self.svm_coef_, self.svm_intercept_, self.n_em,
+            self.gate_ridge, self.gate_max_iter)
+        return self
