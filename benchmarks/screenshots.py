@@ -161,7 +161,7 @@ def markdown(r: dict) -> str:
     return f"""# A first UI session on fresh stores
 
 `python -m benchmarks.screenshots`, {r['when']}, {r['cpus']} CPUs, load average (1/5/15 min)
-{load(r['load_before'])} before and {load(r['load_after'])} after (a shared machine).
+{load(r['load_before'])} before and {load(r['load_after'])} after (the run itself keeps both CPUs busy).
 
 | | seconds |
 |---|---|
