@@ -252,6 +252,14 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
     model = result.output_for_node("pwa_model")
     assert model.structured and set(model.structure_.structures) <= {"linear", "offset", "all"}
     assert result.output_for_node("output_error_refinement") is None  # refined in pwa_model
+    for asset in ("local_models", "clusters", "sub_models", "svm_regions"):  # not computed
+        assert result.output_for_node(asset) is None, asset
+        meta = result.asset_materializations_for_node(asset)[0].metadata
+        assert meta["skipped"].value.startswith("not fitted: the set has a structure")
+    checks = {e.check_name: e for e in result.get_asset_check_evaluations()}
+    assert {"noise_share_below_limit", "finite_parameters", "at_least_one_sub_model"} <= set(checks)
+    assert all(checks[c].passed and "not_applicable" in checks[c].metadata
+               for c in ("noise_share_below_limit", "finite_parameters"))
     linear = result.output_for_node("linear_arx_model")
     assert (linear.form, linear.outputs) == ("velocity", "decoupled")
     client, runs = _runs(resources, "hure_vasak")

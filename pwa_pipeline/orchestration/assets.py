@@ -34,6 +34,7 @@ from .checks import (
     SUB_MODEL_CHECKS,
     cluster_results,
     comparison_results,
+    not_applicable,
     sub_model_results,
 )
 from .figures import (
@@ -108,6 +109,20 @@ def _truth_metadata(model: PWARX, data: Dataset) -> dict:
     return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
 
 
+#: Why the step assets hold nothing for a set with a structure of its own.
+STRUCTURED_SKIP = ("not fitted: the set has a structure of its own (form, outputs or scheduling), "
+                   "whose steps pwa_model fits per output group")
+
+
+def _skipped(context: dg.AssetExecutionContext, configuration: Configuration) -> dict | None:
+    """The metadata of a step asset skipped for this partition (a structured set), said in
+    the log too; None when the step is fitted."""
+    if not configuration.pwa.structured:
+        return None
+    context.log.info(f"{context.asset_key.to_user_string()}: {STRUCTURED_SKIP}")
+    return {"skipped": STRUCTURED_SKIP, "seconds": 0.0}
+
+
 def _latest_metadata(context: dg.AssetExecutionContext, asset: str, key: str) -> float:
     """``key`` of the latest materialisation of ``asset`` for this partition (NaN if none)."""
     result = context.instance.fetch_materializations(
@@ -158,9 +173,13 @@ def _identification_assets(partitions_def) -> list:
 
     @dg.asset(**part, kinds={"scikit-learn"})
     def local_models(context: dg.AssetExecutionContext, settings: PipelineSettings,
-                     configuration: Configuration, regressors: Regressors) -> BaseEstimator:
+                     configuration: Configuration, regressors: Regressors) -> BaseEstimator | None:
         """θ_k of every local set of n_ρ neighbours (eq. 6–7), the fitted ``local_models``
-        step; cached across sets whose later steps alone differ."""
+        step; cached across sets whose later steps alone differ. None for a structured set
+        (this and the next steps are then fitted per output group inside ``pwa_model``)."""
+        if (skipped := _skipped(context, configuration)) is not None:
+            context.add_output_metadata(skipped)
+            return None
         step = configuration.pwa.steps()["local_models"]
         t0 = time.perf_counter()
         key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
@@ -191,9 +210,14 @@ def _identification_assets(partitions_def) -> list:
 
     @dg.asset(**part, kinds={"scikit-learn"}, check_specs=CLUSTER_CHECKS)
     def clusters(context: dg.AssetExecutionContext, configuration: Configuration,
-                 regressors: Regressors, local_models: BaseEstimator):
+                 regressors: Regressors, local_models: BaseEstimator | None):
         """Extended DBSCAN on the Vθ distance of the local models (eq. 8–10), the fitted
-        ``clustering`` step."""
+        ``clustering`` step; None for a structured set, whose check then passes as not
+        applicable."""
+        if (skipped := _skipped(context, configuration)) is not None:
+            yield dg.Output(None, metadata=skipped)
+            yield from not_applicable(CLUSTER_CHECKS, str(context.partition_key), STRUCTURED_SKIP)
+            return
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("clustering", regressors, local_models=local_models)
         context.log.info(f"clusters: {step.n_clusters_} with eps = {step.eps_:.4g}, MinPts = "
@@ -210,9 +234,15 @@ def _identification_assets(partitions_def) -> list:
     @dg.asset(**part, kinds={"numpy"}, check_specs=SUB_MODEL_CHECKS)
     def sub_models(context: dg.AssetExecutionContext, configuration: Configuration,
                    raw_benchmark: Dataset,
-                   regressors: Regressors, local_models: BaseEstimator,
-                   clusters: BaseEstimator):
-        """One parameter matrix θ_i per cluster (step 5), the fitted ``submodels`` step."""
+                   regressors: Regressors, local_models: BaseEstimator | None,
+                   clusters: BaseEstimator | None):
+        """One parameter matrix θ_i per cluster (step 5), the fitted ``submodels`` step; None
+        for a structured set, whose checks then pass as not applicable."""
+        if (skipped := _skipped(context, configuration)) is not None:
+            yield dg.Output(None, metadata=skipped)
+            yield from not_applicable(SUB_MODEL_CHECKS, str(context.partition_key),
+                                      STRUCTURED_SKIP)
+            return
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("submodels", regressors, local_models=local_models,
                                           clustering=clusters)
@@ -229,9 +259,12 @@ def _identification_assets(partitions_def) -> list:
     @dg.asset(**part, kinds={"scikit-learn"})
     def svm_regions(context: dg.AssetExecutionContext, configuration: Configuration,
                     raw_benchmark: Dataset, regressors: Regressors,
-                    sub_models: BaseEstimator) -> BaseEstimator:
+                    sub_models: BaseEstimator | None) -> BaseEstimator | None:
         """Regions H_i from a multi-class linear SVM on φ (step 6), the fitted ``regions``
-        step."""
+        step; None for a structured set."""
+        if (skipped := _skipped(context, configuration)) is not None:
+            context.add_output_metadata(skipped)
+            return None
         t0 = time.perf_counter()
         step = configuration.pwa.fit_step("regions", regressors, submodels=sub_models)
         table = regions_table(step, _phi_names(configuration.pwa, raw_benchmark))
@@ -243,9 +276,10 @@ def _identification_assets(partitions_def) -> list:
     @dg.asset(**part, kinds={"scipy"})
     def output_error_refinement(context: dg.AssetExecutionContext,
                                 configuration: Configuration, raw_benchmark: Dataset,
-                                regressors: Regressors, local_models: BaseEstimator,
-                                clusters: BaseEstimator, sub_models: BaseEstimator,
-                                svm_regions: BaseEstimator) -> BaseEstimator | None:
+                                regressors: Regressors, local_models: BaseEstimator | None,
+                                clusters: BaseEstimator | None,
+                                sub_models: BaseEstimator | None,
+                                svm_regions: BaseEstimator | None) -> BaseEstimator | None:
         """θ_i refined to minimise the free-run error on the training experiments, regions
         kept (the fitted ``refinement`` step); None when the set configures no refinement, or
         a structure of its own (``pwa_model`` then fits and refines it whole)."""
@@ -267,9 +301,9 @@ def _identification_assets(partitions_def) -> list:
 
     @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
     def pwa_model(context: dg.AssetExecutionContext, configuration: Configuration,
-                  raw_benchmark: Dataset, regressors: Regressors, local_models: BaseEstimator,
-                  clusters: BaseEstimator, sub_models: BaseEstimator,
-                  svm_regions: BaseEstimator,
+                  raw_benchmark: Dataset, regressors: Regressors,
+                  local_models: BaseEstimator | None, clusters: BaseEstimator | None,
+                  sub_models: BaseEstimator | None, svm_regions: BaseEstimator | None,
                   output_error_refinement: BaseEstimator | None) -> PWARX:
         """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores.
         A set with a structure of its own (form, outputs, scheduling: the structured route of

@@ -53,6 +53,15 @@ def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
                           "limit": NOISE_LIMIT}))]
 
 
+def not_applicable(specs: list[dg.AssetCheckSpec], partition: str,
+                   reason: str) -> list[dg.AssetCheckResult]:
+    """Results for checks whose rule does not apply to the partition (its asset holds no
+    fitted step): passed, with the reason in their metadata."""
+    return [dg.AssetCheckResult(check_name=spec.name, passed=True,
+                                metadata={"partition": partition, "not_applicable": reason})
+            for spec in specs]
+
+
 def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetCheckResult]:
     """PWA free-run mean NRMSE no worse than the linear ARX's (within
     :data:`FREE_RUN_RTOL`); a warning, not an error."""
