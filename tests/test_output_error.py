@@ -112,9 +112,10 @@ def test_validation_experiments_choose_the_iterate_and_are_not_fitted():
     assert fitted.simulate(step.thetas_, None, False)[0] == pytest.approx(step.cost_)
 
 
-def _weighted_objective(route: str, weight: float):
-    """J_w of a refinement problem and a point away from its start: the level route (a
-    PWARX with regions) or the structured one (velocity form, sign regions)."""
+def _weighted_objective(route: str):
+    """The errors of a refinement problem, its start, a point away from it and the start
+    model's one-step error: the level route (a PWARX with regions, two outputs) or the
+    structured one (velocity form, sign regions)."""
     from pwa_pipeline.pwa.output_error import _Errors, _OneStep, _OutputRuns
     from pwa_pipeline.pwa.scheduling import SignScheduling
 
@@ -136,12 +137,21 @@ def _weighted_objective(route: str, weight: float):
         x0 = np.concatenate([o.p for o in outputs.values()])
         errors = _Errors(runs.simulate, runs.n_scored,
                          _OneStep.of_outputs(u, y, 2, 1, True, outputs, [0, 1]))
-    return errors, x0, x0 + 0.01 * rng.normal(size=x0.shape)
+    # the model's own one-step predictions on the measured regressors, for J1(θ0)
+    from pwa_pipeline.pwa.regressors import build_regressors
+    reg = build_regressors(list(zip(u, y, strict=True)), 2, 1, route != "level")
+    if route == "level":
+        predicted = np.einsum("nd,ndm->nm", reg.phi, x0[model.regions_.predict(reg.phi)])
+    else:
+        predicted = model.structure_.predict_phi(reg.phi)
+    one_step = np.mean((predicted - reg.target) ** 2)
+    return errors, x0, x0 + 0.01 * rng.normal(size=x0.shape), one_step
 
 
 @pytest.mark.parametrize("route", ["level", "structured"])
 def test_the_weighted_objectives_gradient_matches_finite_differences(route):
-    errors, x0, x = _weighted_objective(route, 0.5)
+    errors, x0, x, one_step = _weighted_objective(route)
+    assert errors.one_step(x0, False)[0] == pytest.approx(one_step, rel=1e-9)
     objective = errors.weighted(0.5, x0)
     cost, _, jtr = objective(x, True)
     # J_w = J + w·J(θ0)/J1(θ0)·J1, each a mean of squares: its gradient is 2·(the Jᵀr returned)
