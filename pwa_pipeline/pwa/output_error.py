@@ -19,10 +19,14 @@ With a one-step weight w > 0 the refinement minimises instead
 
 J₁ the one-step (equation) error of eq. (3) on the measured regressors φ — the least-squares
 objective — with λ(k) the region of the measured φ_e(k), both costs as means per sample and
-output. The ratio at the start θ₀ makes w dimensionless: w = 1 weighs doubling the one-step
-error as doubling the free-run one. w = 0 is the free-run refinement alone; as w grows, the
-minimiser tends to the least-squares solution (the start, when the start is least squares).
-The iterate is then chosen on J_w of the held-out experiments (their own ratio at θ₀).
+output. The ratio at the start θ₀ makes w dimensionless: with w = 1, raising the one-step
+error by its starting value costs as much as raising the free-run error by its starting value.
+Since J₁(θ) = J₁(θ_LS) + (θ − θ_LS)ᵀ XᵀX (θ − θ_LS) / n for the least-squares solution θ_LS
+(X the stacked regressors), the term is a regularisation towards least squares in the metric
+of the one-step error: directions that barely change the one-step prediction stay free.
+w = 0 is the free-run refinement alone; as w grows, the minimiser tends to θ_LS (the start,
+when the start is least squares). The iterate is then chosen on J_w of the held-out
+experiments (their own ratio at θ₀).
 
 The minimiser is Levenberg–Marquardt on the normal equations. The Jacobian of the free run
 is propagated forward in time (sensitivities dŷ(k)/dθ through the output lags of φ̂, the
@@ -522,8 +526,9 @@ class OutputErrorRefinement(BaseEstimator):
         Accepted steps without a lower validation error before stopping.
     one_step_weight : float, default 0
         w of the module doc's J_w: the one-step error's weight beside the free-run error,
-        relative to both at the start (w = 1: doubling either costs the same). 0 refines the
-        free run alone; a large w keeps the one-step fit of the start (least squares).
+        each relative to its value at the start. 0 refines the free run alone; a large w
+        keeps the one-step fit of the start (least squares). Choose it on held-out training
+        experiments (``benchmarks/robot_structure.py --weights`` does so for the robot).
 
     Attributes
     ----------
