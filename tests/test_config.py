@@ -62,13 +62,14 @@ subspace.horizon = 4
 def test_the_robot_structure_is_read_for_the_pwa_model_and_its_linear_baseline():
     cfg = HParamsFile().configuration("robot", "kuka_robot")
     p = cfg.pwa.get_params()
-    assert (p["na"], p["nb"], p["affine"], p["form"], p["outputs"]) == (1, 2, True, "velocity",
+    assert (p["na"], p["nb"], p["affine"], p["form"], p["outputs"]) == (2, 2, True, "velocity",
                                                                        "decoupled")
     assert p["scheduling__switch"] == "select" and p["scheduling__variables"] == "own_increment"
-    assert p["refinement__max_iter"] == 30 and p["refinement__validation_fraction"] == 0.1
+    assert p["refinement__max_iter"] == 60 and p["refinement__validation_fraction"] == 0.1
+    assert p["refinement__one_step_weight"] == 0.001 and p["refinement__patience"] == 8
     linear = cfg.estimators["linear_arx"].get_params()
-    assert (linear["form"], linear["outputs"], linear["refinement__max_iter"]) == (
-        "velocity", "decoupled", 30)
+    assert (linear["form"], linear["outputs"], linear["refinement__max_iter"],
+            linear["refinement__one_step_weight"]) == ("velocity", "decoupled", 60, 0.001)
     assert cfg.estimators["subspace"].refit == "simulation"
     assert cfg.params("pwa")["scheduling"] == "SignScheduling"
 

@@ -110,3 +110,127 @@ def test_validation_experiments_choose_the_iterate_and_are_not_fitted():
     assert step.validation_cost_ < step.validation_cost_start_
     fitted = _Runs(us[:4], ys[:4], 1, 1, False, 1)  # the cost is over the other four only
     assert fitted.simulate(step.thetas_, None, False)[0] == pytest.approx(step.cost_)
+
+
+def _weighted_objective(route: str):
+    """The errors of a refinement problem, its start, a point away from it and the start
+    model's one-step error: the level route (a PWARX with regions, two outputs) or the
+    structured one (velocity form, sign regions)."""
+    from pwa_pipeline.pwa.output_error import _Errors, _OneStep, _OutputRuns
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+
+    data = make_hure_vasak(n_samples=600, seed=2)
+    u, y = [data.u[:300], data.u[300:]], [data.y[:300], data.y[300:]]
+    rng = np.random.default_rng(0)
+    if route == "level":
+        model = PWARX(na=2, nb=1).fit(data.u, data.y)
+        runs = _Runs(u, y, 2, 1, False, 2)
+        x0 = model.thetas_
+        errors = _Errors(lambda t, s: runs.simulate(t, model.regions_.predict, s),
+                         runs.n_scored,
+                         _OneStep.of_thetas(u, y, 2, 1, False, model.regions_.predict, x0.shape))
+    else:
+        model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                      scheduling=SignScheduling(switch="all")).fit(u, y)
+        outputs = dict(enumerate(model.structure_.outputs))
+        runs = _OutputRuns(u, y, 2, 1, True, 2, outputs, [0, 1])
+        x0 = np.concatenate([o.p for o in outputs.values()])
+        errors = _Errors(runs.simulate, runs.n_scored,
+                         _OneStep.of_outputs(u, y, 2, 1, True, outputs, [0, 1]))
+    # the model's own one-step predictions on the measured regressors, for J1(θ0)
+    from pwa_pipeline.pwa.regressors import build_regressors
+    reg = build_regressors(list(zip(u, y, strict=True)), 2, 1, route != "level")
+    if route == "level":
+        predicted = np.einsum("nd,ndm->nm", reg.phi, x0[model.regions_.predict(reg.phi)])
+    else:
+        predicted = model.structure_.predict_phi(reg.phi)
+    one_step = np.mean((predicted - reg.target) ** 2)
+    return errors, x0, x0 + 0.01 * rng.normal(size=x0.shape), one_step
+
+
+@pytest.mark.parametrize("route", ["level", "structured"])
+def test_the_weighted_objectives_gradient_matches_finite_differences(route):
+    errors, x0, x, one_step = _weighted_objective(route)
+    assert errors.one_step(x0, False)[0] == pytest.approx(one_step, rel=1e-9)
+    objective = errors.weighted(0.5, x0)
+    cost, _, jtr = objective(x, True)
+    # J_w = J + w·J(θ0)/J1(θ0)·J1, each a mean of squares: its gradient is 2·(the Jᵀr returned)
+    ratio = 0.5 * errors.free(x0, False)[0] / errors.one_step(x0, False)[0]
+    assert cost == pytest.approx(errors.free(x, False)[0] + ratio * errors.one_step(x, False)[0])
+    fd = np.zeros(x.size)
+    for i in range(x.size):
+        moved = x.ravel().copy()
+        moved[i] += 1e-7
+        fd[i] = (objective(moved.reshape(x.shape), False)[0] - cost) / 1e-7
+    np.testing.assert_allclose(fd, 2 * jtr, atol=1e-4 * np.abs(jtr).max())
+
+
+def test_the_one_step_error_is_eq_3s_least_squares_residual():
+    u, y = _output_noise_system(seed=5)
+    ls = LinearARX(1, 1).fit(u, y)
+    step = OutputErrorRefinement(max_iter=3, validation_fraction=0).fit(
+        ls.theta_[None], [u], [y], 1, 1, False)
+    residual = y[1:, 0] - np.column_stack([y[:-1, 0], u[:-1, 0]]) @ ls.theta_[:, 0]
+    assert step.one_step_cost_start_ == pytest.approx(np.mean(residual ** 2))
+    assert step.one_step_cost_ > step.one_step_cost_start_  # least squares is its minimum
+
+
+def test_the_one_step_weight_trades_free_run_error_for_one_step_error():
+    """Under output noise least squares (the minimum of the one-step error) is biased and the
+    free-run refinement is not: 0 is the free-run refinement itself, a large weight keeps the
+    least-squares parameters, and weights between trade one error for the other."""
+    from pwa_pipeline.pwa.output_error import levenberg_marquardt
+
+    u, y = _output_noise_system(seed=5)
+    ls = LinearARX(1, 1).fit(u, y).theta_[None]
+    fits = {w: OutputErrorRefinement(max_iter=50, validation_fraction=0, one_step_weight=w)
+            .fit(ls, [u], [y], 1, 1, False) for w in (0.0, 0.05, 1e6)}
+    runs = _Runs([u], [y], 1, 1, False, 10)
+    plain = levenberg_marquardt(ls, lambda t, s: runs.simulate(t, None, s), max_iter=50)
+    np.testing.assert_array_equal(fits[0.0].thetas_, plain.thetas)
+    np.testing.assert_allclose(fits[0.0].thetas_.ravel(), [0.9, 0.5], atol=0.02)
+    np.testing.assert_allclose(fits[1e6].thetas_, ls, atol=1e-4)
+    assert abs(ls[0, 0, 0] - 0.9) > 0.1
+    mid = fits[0.05]
+    assert fits[0.0].cost_ < mid.cost_ < fits[1e6].cost_
+    assert fits[1e6].one_step_cost_ < mid.one_step_cost_ < fits[0.0].one_step_cost_
+
+
+def test_the_structured_route_passes_the_one_step_weight():
+    """Velocity form under output noise: a large weight keeps each output's least squares on
+    the fitting experiments (the first four; the fifth is held out)."""
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+
+    rng = np.random.default_rng(4)
+    us = [rng.normal(size=(400, 1)) for _ in range(5)]
+    ys = []
+    for ue in us:
+        clean = np.zeros(400)
+        for k in range(2, 400):
+            clean[k] = clean[k - 1] + 0.7 * (clean[k - 1] - clean[k - 2]) + 0.5 * ue[k - 1, 0]
+        ys.append((clean + 0.5 * rng.normal(size=400))[:, None])
+    kw = {"na": 1, "nb": 1, "affine": True, "form": "velocity", "outputs": "decoupled"}
+
+    def refined(w):
+        step = OutputErrorRefinement(max_iter=30, one_step_weight=w, validation_fraction=0.2)
+        model = PWARX(**kw, scheduling=SignScheduling(switch="offset"), refinement=step)
+        return model.fit(us, ys).structure_fit_
+
+    far, kept = refined(0.0), refined(1e6)
+    offset_ls = PWARX(**kw, scheduling=SignScheduling(switch="offset")).fit(us[:4], ys[:4])
+    np.testing.assert_allclose(kept.model.outputs[0].p, offset_ls.structure_.outputs[0].p,
+                               atol=1e-4)
+    assert np.abs(far.model.outputs[0].p - offset_ls.structure_.outputs[0].p).max() > 0.05
+    assert kept.refinement[0]["one_step"] == pytest.approx(kept.refinement[0]["one_step_start"],
+                                                           rel=1e-6)
+    assert far.refinement[0]["one_step"] > far.refinement[0]["one_step_start"]
+
+
+def test_a_negative_one_step_weight_is_refused():
+    from sklearn.utils._param_validation import InvalidParameterError
+
+    u, y = _output_noise_system(seed=1, n=200)
+    step = OutputErrorRefinement(one_step_weight=-1.0)
+    for kw in ({}, {"form": "velocity", "outputs": "decoupled"}):
+        with pytest.raises(InvalidParameterError, match="'one_step_weight' parameter"):
+            LinearARX(1, 1, refinement=step, **kw).fit(u, y)

@@ -10,15 +10,34 @@ experiments,
 where φ̂ holds the simulated past outputs and λ(k) is the region (step 6) of φ̂_e(k), kept
 fixed as a function of φ: the hyperplanes do not move, the regions visited follow the run.
 
+The free run may buy its accuracy with the one-step prediction (on the robot, a joint's
+own-increment coefficient moved from 1.0 to −0.9 and the one-step error grew seventy-fold).
+With a one-step weight w > 0 the refinement minimises instead
+
+    J_w(θ) = J(θ) + w · J(θ₀) / J₁(θ₀) · J₁(θ),
+    J₁(θ) = Σ_e Σ_k ‖ y_e(k) − θ_{λ(k)}ᵀ φ_e(k) ‖²,
+
+J₁ the one-step (equation) error of eq. (3) on the measured regressors φ — the least-squares
+objective — with λ(k) the region of the measured φ_e(k), both costs as means per sample and
+output. The ratio at the start θ₀ makes w dimensionless: with w = 1, raising the one-step
+error by its starting value costs as much as raising the free-run error by its starting value.
+Since J₁(θ) = J₁(θ_LS) + (θ − θ_LS)ᵀ XᵀX (θ − θ_LS) / n for the least-squares solution θ_LS
+(X the stacked regressors), the term is a regularisation towards least squares in the metric
+of the one-step error: directions that barely change the one-step prediction stay free.
+w = 0 is the free-run refinement alone; as w grows, the minimiser tends to θ_LS (the start,
+when the start is least squares). The iterate is then chosen on J_w of the held-out
+experiments (their own ratio at θ₀).
+
 The minimiser is Levenberg–Marquardt on the normal equations. The Jacobian of the free run
 is propagated forward in time (sensitivities dŷ(k)/dθ through the output lags of φ̂, the
 region treated as locally constant), for all experiments at once, and only JᵀJ (P × P) and
-Jᵀr are kept, never J itself (N·m × P: 830 MB for three sub-models on the robot).
+Jᵀr are kept, never J itself (N·m × P: 830 MB for three sub-models on the robot). J₁'s
+residuals are linear in θ, so its JᵀJ is computed once.
 """
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from numbers import Integral, Real
 
 import numpy as np
@@ -27,6 +46,7 @@ from sklearn.utils._param_validation import Interval
 
 from .._typing import Float2D
 from ._blas import single_threaded_blas
+from .regressors import build_regressors
 
 
 @dataclass(frozen=True)
@@ -46,7 +66,10 @@ class OutputErrorResult:
         Why it stopped.
     validation_start, validation_cost : float
         The same on the validation experiments (NaN without them); ``thetas`` is then the
-        iterate with the lowest validation cost.
+        iterate with the lowest validation cost (of J_w, with a one-step weight).
+    one_step_start, one_step_cost : float
+        Mean squared one-step error J₁ per sample and output on the fitting experiments,
+        before and after.
     """
 
     thetas: np.ndarray
@@ -57,6 +80,8 @@ class OutputErrorResult:
     stop: str
     validation_start: float = float("nan")
     validation_cost: float = float("nan")
+    one_step_start: float = float("nan")
+    one_step_cost: float = float("nan")
 
 
 class _NormalEquations:
@@ -208,27 +233,126 @@ class _OutputRuns(_Runs):
         return cost / self.n_scored, normal.jtj, normal.jtr
 
 
+class _OneStep:
+    """The one-step error J₁ (module doc) as blocks of residuals X_b x[idx_b] − t_b, linear
+    in the parameters x (flattened), the regions taken from the measured φ."""
+
+    def __init__(self, blocks: list[tuple[Float2D, np.ndarray, np.ndarray]], size: int):
+        self.blocks = blocks
+        self.n_scored = sum(len(t) for _, t, _ in blocks)
+        self.jtj = np.zeros((size, size))
+        for x, _, idx in blocks:
+            self.jtj[np.ix_(idx, idx)] += x.T @ x
+
+    @classmethod
+    def of_thetas(cls, u: list[Float2D], y: list[Float2D], na: int, nb: int, affine: bool,
+                  region_of: Callable | None, shape: tuple[int, int, int]) -> "_OneStep":
+        """J₁ of parameter matrices θ of ``shape`` (s, d, m), flattened as in
+        :meth:`_Runs.simulate` (region, regressor, output)."""
+        s, d, m = shape
+        reg = build_regressors(list(zip(u, y, strict=True)), na, nb, affine)
+        region = np.zeros(len(reg.phi), int) if region_of is None else region_of(reg.phi)
+        return cls([(reg.phi[region == i], reg.target[region == i, j],
+                     i * d * m + np.arange(d) * m + j) for i in range(s) for j in range(m)],
+                   s * d * m)
+
+    @classmethod
+    def of_outputs(cls, u: list[Float2D], y: list[Float2D], lags: int, nb: int, affine: bool,
+                   models: list, simulated: list[int]) -> "_OneStep":
+        """J₁ of the per-output models ``models[j]``, j in ``simulated``, over their
+        concatenated p_j (as :class:`_OutputRuns`)."""
+        reg = build_regressors(list(zip(u, y, strict=True)), lags, nb, affine)
+        sizes = [models[j].n_params for j in simulated]
+        starts = np.cumsum([0] + sizes)
+        return cls([(models[j].design(reg.phi), reg.target[:, j] - reg.phi @ models[j].c,
+                     a + np.arange(size))
+                    for j, a, size in zip(simulated, starts[:-1], sizes, strict=True)],
+                   int(starts[-1]))
+
+    def __call__(self, x: np.ndarray, sensitivities: bool):
+        """J₁ per sample and output, and JᵀJ and Jᵀr (raw sums) when ``sensitivities``."""
+        x = np.ravel(x)
+        cost, jtr = 0.0, np.zeros(x.size)
+        for xb, t, idx in self.blocks:
+            r = xb @ x[idx] - t
+            cost += float(r @ r)
+            jtr[idx] += xb.T @ r
+        if not sensitivities:
+            return cost / self.n_scored, None, None
+        return cost / self.n_scored, self.jtj, jtr
+
+
+@dataclass(frozen=True)
+class _Errors:
+    """The free-run error J (``free(x, sensitivities)`` as :meth:`_Runs.simulate`, over
+    ``n_free`` scored values) and the one-step error J₁ of one set of experiments."""
+
+    free: Callable
+    n_free: int
+    one_step: _OneStep
+
+    def weighted(self, weight: float, x0: np.ndarray) -> Callable:
+        """J_w of the module doc as ``(x, sensitivities)`` → (cost, JᵀJ, Jᵀr); the free-run
+        error itself when ``weight`` is 0."""
+        if weight == 0:
+            return self.free
+        ratio = weight * self.free(x0, False)[0] / max(self.one_step(x0, False)[0],
+                                                       np.finfo(float).tiny)
+
+        def objective(x: np.ndarray, sensitivities: bool):
+            cost, jtj, jtr = self.free(x, sensitivities)
+            one, one_jtj, one_jtr = self.one_step(x, sensitivities)
+            total = cost + ratio * one
+            if jtj is None:
+                return total, None, None
+            k = ratio / self.one_step.n_scored
+            return total, jtj / self.n_free + k * one_jtj, jtr / self.n_free + k * one_jtr
+
+        return objective
+
+
+def _refine(x0: np.ndarray, train: _Errors, held: _Errors | None, weight: float,
+            **options) -> OutputErrorResult:
+    """Levenberg–Marquardt on J_w, the iterate chosen on J_w of ``held``; the result's
+    costs are the free-run and one-step errors apart."""
+    objective = train.weighted(weight, x0)
+    held_w = None if held is None else held.weighted(weight, x0)
+    res = levenberg_marquardt(x0, objective, None if held_w is None else
+                              (lambda x: held_w(x, False)[0]), **options)
+    parts = {"one_step_start": train.one_step(x0, False)[0],
+             "one_step_cost": train.one_step(res.thetas, False)[0]}
+    if weight:
+        parts |= {"cost_start": train.free(x0, False)[0],
+                  "cost": train.free(res.thetas, False)[0]}
+        if held is not None:
+            parts |= {"validation_start": held.free(x0, False)[0],
+                      "validation_cost": held.free(res.thetas, False)[0]}
+    return replace(res, **parts)
+
+
 def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list[Float2D],
                    lags: int, nb: int, affine: bool, warmup: int,
                    validation: tuple[list[Float2D], list[Float2D]] | None = None,
                    max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
-                   patience: int = 3) -> OutputErrorResult:
+                   patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
     """Refine the p_j of the per-output models ``models[j]``, j in ``simulated``, on their
-    free-run error (the module doc, with the models of :mod:`~.structures`); the regions
-    stay fixed as functions of φ.
+    free-run error, or J_w with ``one_step_weight`` (the module doc, with the models of
+    :mod:`~.structures`); the regions stay fixed as functions of φ.
 
     Returns
     -------
     OutputErrorResult
         ``thetas`` holds the concatenated p_j of the simulated outputs.
     """
-    runs = _OutputRuns(u, y, lags, nb, affine, warmup, models, simulated)
-    held = None if validation is None else _OutputRuns(*validation, lags, nb, affine, warmup,
-                                                       models, simulated)
+    def errors(u: list[Float2D], y: list[Float2D]) -> _Errors:
+        runs = _OutputRuns(u, y, lags, nb, affine, warmup, models, simulated)
+        return _Errors(runs.simulate, runs.n_scored,
+                       _OneStep.of_outputs(u, y, lags, nb, affine, models, simulated))
+
     start = np.concatenate([models[j].p for j in simulated])
-    return levenberg_marquardt(
-        start, runs.simulate, None if held is None else (lambda p: held.simulate(p, False)[0]),
-        max_iter=max_iter, max_seconds=max_seconds, tol=tol, patience=patience)
+    return _refine(start, errors(u, y), None if validation is None else errors(*validation),
+                   one_step_weight, max_iter=max_iter, max_seconds=max_seconds, tol=tol,
+                   patience=patience)
 
 
 def levenberg_marquardt(x0: np.ndarray, train: Callable, held: Callable | None = None,
@@ -310,8 +434,9 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
                         warmup: int | None = None, max_iter: int = 20,
                         max_seconds: float = 240.0, tol: float = 1e-4,
                         validation: tuple[list[Float2D], list[Float2D]] | None = None,
-                        patience: int = 3) -> OutputErrorResult:
-    """Minimise the free-run error over the training experiments (see the module doc).
+                        patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
+    """Minimise the free-run error over the training experiments, or J_w with a one-step
+    weight (see the module doc).
 
     Parameters
     ----------
@@ -336,6 +461,8 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         lowest free-run error on them, and the search stops after ``patience`` accepted
         steps without a new lowest.
     patience : int
+    one_step_weight : float
+        w of J_w (module doc); 0: the free-run error alone.
 
     Returns
     -------
@@ -348,12 +475,17 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         If the starting model's free run diverges on the training data (refinement needs a
         start whose free run stays finite).
     """
-    runs = _Runs(u, y, na, nb, affine, max(na, nb) if warmup is None else warmup)
-    held = None if validation is None else _Runs(*validation, na, nb, affine, runs.warmup)
-    return levenberg_marquardt(
-        thetas, lambda t, sens: runs.simulate(t, region_of, sens),
-        None if held is None else (lambda t: held.simulate(t, region_of, False)[0]),
-        max_iter=max_iter, max_seconds=max_seconds, tol=tol, patience=patience)
+    warmup = max(na, nb) if warmup is None else warmup
+
+    def errors(u: list[Float2D], y: list[Float2D]) -> _Errors:
+        runs = _Runs(u, y, na, nb, affine, warmup)
+        return _Errors(lambda t, sens: runs.simulate(t.reshape(thetas.shape), region_of, sens),
+                       runs.n_scored,
+                       _OneStep.of_thetas(u, y, na, nb, affine, region_of, thetas.shape))
+
+    return _refine(np.asarray(thetas, dtype=float), errors(u, y),
+                   None if validation is None else errors(*validation), one_step_weight,
+                   max_iter=max_iter, max_seconds=max_seconds, tol=tol, patience=patience)
 
 
 #: Share of the training experiments held out for validation unless a step is told otherwise.
@@ -392,6 +524,11 @@ class OutputErrorRefinement(BaseEstimator):
         seen. 0, or a single training experiment: no validation, the last iterate is kept.
     patience : int, default 3
         Accepted steps without a lower validation error before stopping.
+    one_step_weight : float, default 0
+        w of the module doc's J_w: the one-step error's weight beside the free-run error,
+        each relative to its value at the start. 0 refines the free run alone; a large w
+        keeps the one-step fit of the start (least squares). Choose it on held-out training
+        experiments (``benchmarks/robot_structure.py --weights`` does so for the robot).
 
     Attributes
     ----------
@@ -403,6 +540,9 @@ class OutputErrorRefinement(BaseEstimator):
         Indices (in the training list) of the experiments held out for validation.
     validation_cost_start_, validation_cost_ : float
         The same on them (NaN without validation).
+    one_step_cost_start_, one_step_cost_ : float
+        Mean squared one-step error per sample and output on the fitting experiments, before
+        and after.
     n_iter_ : int
     stop_ : str
     seconds_ : float
@@ -415,23 +555,26 @@ class OutputErrorRefinement(BaseEstimator):
         "warmup": [Interval(Integral, 1, None, closed="left"), None],
         "validation_fraction": [Interval(Real, 0, 1, closed="left")],
         "patience": [Interval(Integral, 1, None, closed="left")],
+        "one_step_weight": [Interval(Real, 0, None, closed="left")],
     }
 
     def __init__(self, max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
                  warmup: int | None = 10, validation_fraction: float = VALIDATION_FRACTION,
-                 patience: int = 3):
+                 patience: int = 3, one_step_weight: float = 0.0):
         self.max_iter = max_iter
         self.max_seconds = max_seconds
         self.tol = tol
         self.warmup = warmup
         self.validation_fraction = validation_fraction
         self.patience = patience
+        self.one_step_weight = one_step_weight
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int, nb: int,
             affine: bool, region_of: Callable | None = None) -> "OutputErrorRefinement":
         """Refine ``thetas`` on the experiments ``(u, y)``; arguments as
         :func:`refine_output_error`."""
+        self._validate_params()  # also when an estimator fits it nested (sklearn skips then)
         warmup = max(na, nb) if self.warmup is None else max(self.warmup, na, nb)
         n = len(u)
         n_val = held_out(n, self.validation_fraction)
@@ -440,10 +583,13 @@ class OutputErrorRefinement(BaseEstimator):
         result = refine_output_error(
             thetas, u[fit], y[fit], na, nb, affine, region_of=region_of, warmup=warmup,
             max_iter=self.max_iter, max_seconds=self.max_seconds, tol=self.tol,
-            validation=(u[held], y[held]) if n_val else None, patience=self.patience)
+            validation=(u[held], y[held]) if n_val else None, patience=self.patience,
+            one_step_weight=self.one_step_weight)
         self.thetas_ = result.thetas
         self.cost_start_, self.cost_ = result.cost_start, result.cost
         self.validation_cost_start_ = result.validation_start
         self.validation_cost_ = result.validation_cost
+        self.one_step_cost_start_ = result.one_step_start
+        self.one_step_cost_ = result.one_step_cost
         self.n_iter_, self.stop_, self.seconds_ = result.n_iter, result.stop, result.seconds
         return self

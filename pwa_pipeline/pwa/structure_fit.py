@@ -10,7 +10,8 @@ The route, for the estimators' ``form``, ``outputs`` and ``scheduling`` options:
    candidate structure is fitted: least squares in the user's regions (or one region), or
    the paper's steps 2–6 on the group's regressors ψ (clusters).
 3. With a refinement, each candidate's parameters are refined on the free-run error of its
-   group (:func:`~.output_error.refine_outputs`), the iterate chosen on the held-out
+   group (:func:`~.output_error.refine_outputs`), with the one-step error beside it when the
+   refinement's ``one_step_weight`` is positive, the iterate chosen on the held-out
    experiments.
 4. Per group, the candidate with the lowest free-run error on the held-out experiments is
    kept, a richer one only when it is lower by ``min_gain`` (relative) than the simpler one
@@ -138,6 +139,8 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
         outputs, a scheduling variable naming no regressor), too few samples, or a
         starting model whose free run diverges (with a single candidate).
     """
+    for step in filter(None, [scheduling, refinement]):
+        step._validate_params()
     n, m, r = len(experiments), experiments[0][1].shape[1], experiments[0][0].shape[1]
     lags = output_lags(na, form)
     kinds = _candidates(scheduling, cluster, affine, coupling)
@@ -168,7 +171,8 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                         models, group, [e[0] for e in fit], [e[1] for e in fit], lags, nb,
                         affine, warmup, validation=held_uy, max_iter=refinement.max_iter,
                         max_seconds=refinement.max_seconds, tol=refinement.tol,
-                        patience=refinement.patience)
+                        patience=refinement.patience,
+                        one_step_weight=refinement.one_step_weight)
                 except ValueError:
                     if len(kinds) == 1:
                         raise
@@ -179,7 +183,8 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                 cost = res.validation_cost
                 info = {"outputs": group, "structure": kind, "seconds": res.seconds,
                         "n_iter": res.n_iter, "stop": res.stop, "cost_start": res.cost_start,
-                        "cost": res.cost}
+                        "cost": res.cost, "one_step_start": res.one_step_start,
+                        "one_step": res.one_step_cost}
             elif held_uy is not None:
                 runs = _OutputRuns(*held_uy, lags, nb, affine, warmup, models, group)
                 cost = runs.simulate(np.concatenate([models[j].p for j in group]), False)[0]

@@ -144,15 +144,21 @@ class OutputModel:
         """The region of each φ row."""
         return np.zeros(len(phi), dtype=int) if self.region_of is None else self.region_of(phi)
 
-    def fit(self, phi: Float2D, y: np.ndarray) -> "OutputModel":
-        """Least squares of ψ's sub-models on measured φ rows and the output y (n,).
-
-        A region no row falls in keeps the minimum-norm (zero) switching parameters."""
+    def design(self, phi: Float2D) -> Float2D:
+        """The rows φ(k)ᵀ M_jᵀ A_{λ_j(φ(k))} of the one-step prediction ŷ_j = c_jᵀφ + X p
+        on φ rows (n, D): shape (n, P), the regions taken from φ."""
         g, lam = self.G(), self.regions(phi)
         x = np.zeros((len(phi), self.n_params))
         for i in range(self.n_regions):
             rows = lam == i
             x[rows] = phi[rows] @ g[i]
+        return x
+
+    def fit(self, phi: Float2D, y: np.ndarray) -> "OutputModel":
+        """Least squares of ψ's sub-models on measured φ rows and the output y (n,).
+
+        A region no row falls in keeps the minimum-norm (zero) switching parameters."""
+        x = self.design(phi)
         scale = np.sqrt(np.mean(x * x, axis=0))
         scale[scale == 0] = 1.0
         self.p = np.linalg.lstsq(x / scale, y - phi @ self.c, rcond=None)[0] / scale
