@@ -243,8 +243,6 @@ class PWARX(ARXModelBase):
 
     def _fit_structured(self, experiments: list[tuple[Float2D, Float2D]]) -> "PWARX":
         t0 = time.perf_counter()
-        for step in filter(None, [self.scheduling, self.refinement]):
-            step._validate_params()
 
         def cluster(reg: Regressors):
             fitted: dict[str, BaseEstimator] = {}
