@@ -282,7 +282,7 @@ SPLIT_CANDIDATES = 2
 
 def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size: int,
                n_iter: int, regions, merge_tol: float = 1.0, max_rows: int = 2000,
-               seed: int = 0) -> tuple[float, np.ndarray | None]:
+               seed: int = 0, at_least: float = -np.inf) -> tuple[float, np.ndarray | None]:
     """Whether the rows of one sub-model hold two modes that the regions separate.
 
     Two starts, refined by residual and by region (:func:`refine` with ``regions``) so that
@@ -298,14 +298,16 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     standard deviations apart, merged at 20 dB, gain 2–11. A split whose two sub-models
     predict alike (the statistic of :func:`merge_indistinguishable` below ``merge_tol``)
     would be merged again and gains nothing. Above ``max_rows`` rows the split is searched
-    on a seeded random ``max_rows`` of them and extended to all by the regions fitted to it.
+    on a seeded random ``max_rows`` of them and extended to all by the regions fitted to it,
+    when the gain exceeds ``at_least`` (a split the caller would reject is not extended).
 
     Returns
     -------
     gain : float
         −inf when no split keeps two sub-models that predict apart.
     labels : ndarray of shape (n,) or None
-        0/1 of each row in the split.
+        0/1 of each row in the split; None when the gain is −inf, or at most ``at_least``
+        on more than ``max_rows`` rows.
     """
     n_all, d = phi.shape
     m = target.shape[1]
@@ -339,10 +341,10 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
             best = (gain, labels)
     if best[1] is None:
         return -np.inf, None
-    labels = best[1]
+    gain, labels = best[0] / ((d * m + d + 1) * np.log(n)), best[1]
     if n < n_all:
-        labels = clone(regions).fit(x, labels, 2).predict(phi)
-    return best[0] / ((d * m + d + 1) * np.log(n)), labels
+        labels = clone(regions).fit(x, labels, 2).predict(phi) if gain > at_least else None
+    return gain, labels
 
 
 class ClusterCentres(BaseEstimator):
@@ -491,7 +493,7 @@ class RefinedSubModels(BaseEstimator):
             labels = refine(phi, target, labels, min_size, self.n_refine)[1]
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
-        best = None
+        best, searched = None, {}
         while True:
             thetas, labels, margin, sweeps = refine(phi, target, labels, min_size,
                                                     self.n_refine, regions)
@@ -501,7 +503,8 @@ class RefinedSubModels(BaseEstimator):
                 labels, n_merged = merged, n_merged + more
                 continue
             if self.split_tol is not None and n_split < self.n_split:
-                split = self._best_split(phi, target, labels, local.theta_, min_size, regions)
+                split = self._best_split(phi, target, labels, local.theta_, min_size, regions,
+                                         searched)
                 if split is not None:
                     labels, n_split = split, n_split + 1
                     continue
@@ -526,7 +529,7 @@ class RefinedSubModels(BaseEstimator):
         self.n_split_ = n_split
         return self
 
-    def _best_split(self, phi, target, labels, local_theta, min_size, regions):
+    def _best_split(self, phi, target, labels, local_theta, min_size, regions, searched):
         """``labels`` with the sub-model of largest :func:`split_gain` above ``split_tol``
         split in two, or None.
 
@@ -534,7 +537,10 @@ class RefinedSubModels(BaseEstimator):
         Σ_p r_p² / σ̂_p² over their rows, σ̂_p² the :func:`robust_noise_var` of every row
         under its own sub-model: two modes in one sub-model, or a small mode inside a large
         one, inflate it), so that the search costs little on records with many sub-models;
-        each split is refined with at most 5 sweeps.
+        each split is refined with at most 5 sweeps. ``searched`` (a dict kept over one fit)
+        holds each row set's gain and split: the split of a sub-model whose rows come back
+        unchanged (after a missed-mode search whose clusters merged away, or a split merged
+        again) is not searched twice.
         """
         s = int(labels.max()) + 1
         thetas = refit(phi, target, labels, s)
@@ -544,8 +550,12 @@ class RefinedSubModels(BaseEstimator):
         best = (self.split_tol, None)
         for i in np.argsort(-excess)[:SPLIT_CANDIDATES]:
             rows = np.flatnonzero(labels == i)
-            gain, halves = split_gain(phi[rows], target[rows], local_theta[rows], min_size,
-                                      min(self.n_refine, 5), regions, self.merge_tol)
+            key = hashlib.blake2b(rows.tobytes()).digest()
+            if key not in searched:  # split_gain depends only on the rows
+                searched[key] = split_gain(phi[rows], target[rows], local_theta[rows],
+                                           min_size, min(self.n_refine, 5), regions,
+                                           self.merge_tol, at_least=self.split_tol)
+            gain, halves = searched[key]
             if gain > best[0]:
                 new = labels.copy()
                 new[rows[halves == 1]] = s
