@@ -281,10 +281,32 @@ def test_a_row_set_is_split_searched_once_per_fit(monkeypatch):
     gain = submodels.split_gain
     monkeypatch.setattr(submodels, "split_gain",
                         lambda phi, *a, **k: calls.append(len(phi)) or gain(phi, *a, **k))
-    est, searched = RefinedSubModels(), {}
-    first = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched)
-    again = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched)
+    est, searched, split_once = RefinedSubModels(), {}, set()
+    first = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                            split_once)
+    again = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                            set())
     assert calls == [len(phi)] and len(searched) == 1
     np.testing.assert_array_equal(first, again)
     agree = np.mean(first == mode[1:])
     assert max(agree, 1 - agree) > 0.88  # the split found is the two modes
+    # the same rows back after their split (the refinement undid it): not split again
+    assert len(split_once) == 1
+    assert est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                           split_once) is None
+
+
+def test_a_threshold_on_one_regressor_starts_a_split():
+    """_axis_start finds the split at a threshold of one column of φ (y = θ_iᵀφ, mode 1
+    where φ_1 > 0.2, predictions 4 σ apart)."""
+    from pwa_pipeline.pwa.submodels import _axis_start
+
+    rng = np.random.default_rng(0)
+    n = 1000
+    phi = np.column_stack([rng.uniform(-1, 1, (n, 3)), np.ones(n)])
+    mode = (phi[:, 1] > 0.2).astype(int)
+    thetas = np.array([[[0.5], [1.0], [-0.5], [0.0]], [[0.5], [1.0], [-0.5], [4 * SIGMA]]])
+    y = np.einsum("nd,ndm->nm", phi, thetas[mode]) + SIGMA * rng.normal(size=(n, 1))
+    start = _axis_start(phi, y, 8)
+    assert np.mean(start == mode) > 0.97
+    assert _axis_start(phi[:12], y[:12], 8) is None  # no side can keep 8 rows
