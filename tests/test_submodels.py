@@ -234,8 +234,8 @@ def test_a_slightly_curved_mode_is_not_split():
 
 
 def _wide(gap: float, n: int = 2400, d: int = 12, seed: int = 0):
-    """y = θ_iᵀφ + e on φ = [10 uniform columns, 1] (σ = 0.05), mode 1 where φ_0 > 0.2, its θ
-    three entries ``gap`` above mode 0's: a search on 2,000 × 12 of φ, above SCREEN_SIZE."""
+    """y = θ_iᵀφ + e on φ = [10 uniform columns, 1] (σ = 0.05), mode 1 where φ_0 > 0.2, its
+    θ three entries ``gap`` above mode 0's: a search on 2,000 × 12 of φ, above SCREEN_SIZE."""
     rng = np.random.default_rng(seed)
     phi = np.column_stack([rng.uniform(-1, 1, (n, d - 1)), np.ones(n)])
     mode = (phi[:, 0] > 0.2).astype(int)

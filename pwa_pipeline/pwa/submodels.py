@@ -457,8 +457,9 @@ class RefinedSubModels(BaseEstimator):
        are merged and step 2 repeats.
     3. A sub-model whose rows hold two modes that a hyperplane separates is split
        (:func:`split_gain` above ``split_tol``; the largest gain first), and step 2 repeats;
-       at most ``n_split`` splits, and rows whose split step 2 undid are not split again. Moderate noise (20–25 dB) blurs local models so that
-       DBSCAN can put two modes a few noise standard deviations apart into one cluster.
+       at most ``n_split`` splits, and rows whose split step 2 undid are not split again.
+       Moderate noise (20–25 dB) blurs local models so that DBSCAN can put two modes a few
+       noise standard deviations apart into one cluster.
     4. A mode whose local sets were too few to form a cluster shows as rows no sub-model
        explains (:func:`unexplained_cost` above the χ²(m) 99.9 % quantile): local models are
        estimated again among those rows alone (where local sets are purer) with the same
