@@ -310,3 +310,27 @@ def test_a_threshold_on_one_regressor_starts_a_split():
     start = _axis_start(phi, y, 8)
     assert np.mean(start == mode) > 0.97
     assert _axis_start(phi[:12], y[:12], 8) is None  # no side can keep 8 rows
+
+
+def test_a_subsampled_split_is_extended_to_every_row_only_above_the_bar():
+    u, y, _, mode = _close_modes()
+    phi, target = np.column_stack([y[:-1], u[:-1]]), y[1:]
+    local = LocalLeastSquares().fit(phi, target)
+    gain, halves = split_gain(phi, target, local.theta_, 8, 5, SVMRegions(), max_rows=1000)
+    assert gain > 2 and halves.shape == (len(phi),)
+    agree = np.mean(halves == mode[1:])
+    assert max(agree, 1 - agree) > 0.88
+    above = split_gain(phi, target, local.theta_, 8, 5, SVMRegions(), max_rows=1000,
+                       at_least=gain)
+    assert above == (gain, None)  # the caller rejects it: not extended
+
+
+def test_modes_three_noise_deviations_apart_are_split_from_the_threshold_start():
+    """Local models blur the two modes of _two_modes(3): neither k-means of them nor the
+    unexplained rows start a split that holds; the threshold start on φ_0 does."""
+    phi, y, mode, _ = _two_modes(gap=3.0)
+    local = LocalLeastSquares().fit(phi, y)
+    gain, halves = split_gain(phi, y, local.theta_, 8, 5, SVMRegions())
+    assert gain > 2
+    agree = np.mean(halves == mode)
+    assert max(agree, 1 - agree) > 0.9
