@@ -286,9 +286,9 @@ SPLIT_CANDIDATES = 2
 #: (2,000 × 24 searched) the screen takes a quarter of the search's time and gains 0.72
 #: (the search: 0.72 too). On the tuning seeds of every case (with the first two starts),
 #: of 66 searches that split (gain above 1), those gaining 1–2 screened at 0.88–1.04 × their
-#: gain, and none screened below 1.06;
-#: below the size the SVM converges in a few passes at any tolerance and a screen would
-#: cost as much as the search, so no simulated case is screened.
+#: gain, and none screened below 1.06. Below the size the SVM converges in a few passes at
+#: any tolerance and a screen would cost as much as the search: no simulated case of
+#: ``benchmarks.robustness`` is screened.
 SCREEN_TOL, SCREEN, SCREEN_SIZE = 0.1, 0.8, 20_000
 
 
