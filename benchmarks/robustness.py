@@ -136,6 +136,7 @@ class TrueModel(ARXModelBase):
         return self.system.nb
 
     affine = False
+    form = "level"
 
     def fit(self):
         self.n_inputs_, self.n_outputs_ = self.system.n_inputs, self.system.n_outputs

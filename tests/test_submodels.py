@@ -208,3 +208,129 @@ def test_a_four_percent_mode_merged_into_its_neighbour_is_found():
     np.testing.assert_allclose(np.sort(found.thetas_[:, 0, 0]), [-0.4, 0.3, 0.5], atol=0.01)
     missed = RefinedSubModels(split_tol=None).fit(phi, target, local, absorbed, SVMRegions())
     assert missed.n_submodels_ == 2
+
+
+def _curved_mode(seed: int = 1, n: int = 200):
+    """One mode y = 0.5x + 0.06x² + e, σ = 0.05, φ = [x, 1]: not affine, yet no PWA split."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1, 1, n)
+    phi = np.column_stack([x, np.ones(n)])
+    y = (0.5 * x + 0.06 * x**2 + 0.05 * rng.normal(size=n))[:, None]
+    return phi, y, LocalLeastSquares().fit(phi, y)
+
+
+def test_a_slightly_curved_mode_is_not_split():
+    """Two lines fit the curve better (a log-likelihood ratio of about 15) and predict
+    apart by more than merge_tol, but by less than the penalty of a second sub-model and its
+    hyperplane ((d·m + d + 1)·ln n ≈ 26): split_gain stays below split_tol = 1."""
+    phi, y, local = _curved_mode()
+    gain, halves = split_gain(phi, y, local.theta_, 8, 20, SVMRegions())
+    assert 0.3 < gain < 1 and halves is not None  # finite: the halves predict apart
+    clustering = DBSCANClustering().fit(local, y)
+    model = RefinedSubModels().fit(phi, y, local, clustering, SVMRegions())
+    assert model.n_submodels_ == 1 and model.n_split_ == 0
+    lower_bar = RefinedSubModels(split_tol=0.1).fit(phi, y, local, clustering, SVMRegions())
+    assert lower_bar.n_submodels_ == 2 and lower_bar.n_split_ == 1
+
+
+def _wide(gap: float, n: int = 2400, d: int = 12, seed: int = 0):
+    """y = θ_iᵀφ + e on φ = [10 uniform columns, 1] (σ = 0.05), mode 1 where φ_0 > 0.2, its
+    θ three entries ``gap`` above mode 0's: a search on 2,000 × 12 of φ, above SCREEN_SIZE."""
+    rng = np.random.default_rng(seed)
+    phi = np.column_stack([rng.uniform(-1, 1, (n, d - 1)), np.ones(n)])
+    mode = (phi[:, 0] > 0.2).astype(int)
+    thetas = np.repeat(rng.uniform(-1, 1, (1, d, 1)), 2, axis=0)
+    thetas[1, 1:4, 0] += gap
+    y = np.einsum("nd,ndm->nm", phi, thetas[mode]) + SIGMA * rng.normal(size=(n, 1))
+    return phi, y, mode, LocalLeastSquares().fit(phi, y)
+
+
+def test_a_large_split_search_is_screened_with_a_loose_svm(monkeypatch):
+    """A large search runs first with the SVM at tolerance SCREEN_TOL; one mode ends there,
+    two modes go on to the full search, whose gain and split are those of an unscreened
+    search."""
+    from pwa_pipeline.pwa import submodels
+
+    tols = []
+    search = submodels._split_search
+    monkeypatch.setattr(submodels, "_split_search",
+                        lambda *a, **k: tols.append(k["regions"].tol) or search(*a, **k))
+    phi, y, _, local = _wide(gap=0.0)
+    assert phi[:2000].size > submodels.SCREEN_SIZE
+    gain, halves = split_gain(phi, y, local.theta_, 24, 5, SVMRegions(), at_least=1.0)
+    assert gain < 1 and halves is None and tols == [submodels.SCREEN_TOL]
+    phi, y, mode, local = _wide(gap=0.1)
+    tols.clear()
+    gain, halves = split_gain(phi, y, local.theta_, 24, 5, SVMRegions(), at_least=1.0)
+    assert gain > 2 and tols == [submodels.SCREEN_TOL, 1e-4]
+    agree = np.mean(halves == mode)
+    assert max(agree, 1 - agree) > 0.95
+    unscreened = split_gain(phi, y, local.theta_, 24, 5, SVMRegions())
+    assert unscreened[0] == gain and np.array_equal(unscreened[1], halves)
+
+
+def test_a_row_set_is_split_searched_once_per_fit(monkeypatch):
+    """Rows that come back unchanged (a missed-mode search whose clusters merged away, as on
+    the robot) reuse their split search."""
+    from pwa_pipeline.pwa import submodels
+
+    u, y, _, mode = _close_modes()
+    phi, target, labels = np.column_stack([y[:-1], u[:-1]]), y[1:], np.zeros(len(y) - 1, int)
+    local = LocalLeastSquares().fit(phi, target)
+    calls = []
+    gain = submodels.split_gain
+    monkeypatch.setattr(submodels, "split_gain",
+                        lambda phi, *a, **k: calls.append(len(phi)) or gain(phi, *a, **k))
+    est, searched, split_once = RefinedSubModels(), {}, set()
+    first = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                            split_once)
+    again = est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                            set())
+    assert calls == [len(phi)] and len(searched) == 1
+    np.testing.assert_array_equal(first, again)
+    agree = np.mean(first == mode[1:])
+    assert max(agree, 1 - agree) > 0.88  # the split found is the two modes
+    # the same rows back after their split (the refinement undid it): not split again
+    assert len(split_once) == 1
+    assert est._best_split(phi, target, labels, local.theta_, 8, SVMRegions(), searched,
+                           split_once) is None
+
+
+def test_a_threshold_on_one_regressor_starts_a_split():
+    """_axis_start finds the split at a threshold of one column of φ (y = θ_iᵀφ, mode 1
+    where φ_1 > 0.2, predictions 4 σ apart)."""
+    from pwa_pipeline.pwa.submodels import _axis_start
+
+    rng = np.random.default_rng(0)
+    n = 1000
+    phi = np.column_stack([rng.uniform(-1, 1, (n, 3)), np.ones(n)])
+    mode = (phi[:, 1] > 0.2).astype(int)
+    thetas = np.array([[[0.5], [1.0], [-0.5], [0.0]], [[0.5], [1.0], [-0.5], [4 * SIGMA]]])
+    y = np.einsum("nd,ndm->nm", phi, thetas[mode]) + SIGMA * rng.normal(size=(n, 1))
+    start = _axis_start(phi, y, 8)
+    assert np.mean(start == mode) > 0.97
+    assert _axis_start(phi[:12], y[:12], 8) is None  # no side can keep 8 rows
+
+
+def test_a_subsampled_split_is_extended_to_every_row_only_above_the_bar():
+    u, y, _, mode = _close_modes()
+    phi, target = np.column_stack([y[:-1], u[:-1]]), y[1:]
+    local = LocalLeastSquares().fit(phi, target)
+    gain, halves = split_gain(phi, target, local.theta_, 8, 5, SVMRegions(), max_rows=1000)
+    assert gain > 2 and halves.shape == (len(phi),)
+    agree = np.mean(halves == mode[1:])
+    assert max(agree, 1 - agree) > 0.88
+    above = split_gain(phi, target, local.theta_, 8, 5, SVMRegions(), max_rows=1000,
+                       at_least=gain)
+    assert above == (gain, None)  # the caller rejects it: not extended
+
+
+def test_modes_three_noise_deviations_apart_are_split_from_the_threshold_start():
+    """Local models blur the two modes of _two_modes(3): neither k-means of them nor the
+    unexplained rows start a split that holds; the threshold start on φ_0 does."""
+    phi, y, mode, _ = _two_modes(gap=3.0)
+    local = LocalLeastSquares().fit(phi, y)
+    gain, halves = split_gain(phi, y, local.theta_, 8, 5, SVMRegions())
+    assert gain > 2
+    agree = np.mean(halves == mode)
+    assert max(agree, 1 - agree) > 0.9

@@ -1,0 +1,124 @@
+"""Fit time of the default (issue 10's target: at most 2× the fit time before issue 10), this
+code against earlier commits, in one run.
+
+Fits: the section 5 system at 20 dB and 30 dB (records of ``benchmarks.robustness``,
+evaluation seeds 5000…) and the robot's training record (``PWARX.default`` of the
+``default`` set, as ``benchmarks.speed`` times it). Each fit runs in a fresh subprocess, once
+with this checkout's package and once with each ``--against`` commit's (unpacked with
+``git archive``), ``--repeats`` times, the versions interleaved so that they share the
+machine's load; the 1-minute load average is recorded at the start and the end. Reported per
+fit and version: median seconds, the sub-model step's median seconds, the number of
+sub-models, and the ratio to the first ``--against`` commit.
+
+Writes results/robustness_time.json and .md. Usage::
+
+    python -m benchmarks.robustness_time [--against bc9084d,15191f1] [--repeats 3]
+        [--seeds 2]
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+from benchmarks._common import RESULTS, write_json
+from benchmarks.speed import previous_tree
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def worker(fit: str, out: str) -> None:
+    """One fit (``case:seed`` or ``robot``) in this process; its seconds to ``out``."""
+    import time
+
+    if fit == "robot":
+        from sklearn.base import clone
+
+        from pwa_pipeline import load_kuka
+        from pwa_pipeline.config import HParamsFile
+
+        robot = load_kuka()
+        est = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
+        u, y = robot.u_train, robot.y_train
+    else:
+        from benchmarks.robustness import CASES, paper_system
+        from pwa_pipeline import PWARX
+
+        name, seed = fit.split(":")
+        case = CASES[name]
+        record = paper_system().record(case.n, int(seed), case.snr_db, case.hold)
+        est, u, y = PWARX(na=1, nb=1), record.u, record.y
+    t0 = time.perf_counter()
+    model = est.fit(u, y)
+    Path(out).write_text(json.dumps({
+        "seconds": time.perf_counter() - t0, "n_submodels": int(model.n_submodels_),
+        "submodels_seconds": model.timings_["submodels"]}))
+
+
+def run(fit: str, tree: Path, tmp: Path) -> dict:
+    out = tmp / "out.json"
+    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{ROOT}"}
+    env.setdefault("PWA_KUKA_DATA", str(ROOT.parent / "shared" / "data" / "kuka-kr300"))
+    # run from tmp: with -m, the working directory would come first on sys.path
+    subprocess.run([sys.executable, "-m", "benchmarks.robustness_time", "--worker", fit,
+                    str(out)], check=True, env=env, cwd=tmp)
+    return json.loads(out.read_text())
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--against", default="bc9084d,15191f1",
+                        help="comma-separated commits; the first is the ratios' reference")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--seeds", type=int, default=2, help="evaluation seeds per case")
+    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        worker(*args.worker)
+        return
+    fits = [f"{case}:{seed}" for case in ("paper-20dB", "paper-30dB")
+            for seed in range(5000, 5000 + args.seeds)] + ["robot"]
+    load_start = os.getloadavg()[0]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        trees = {"this": ROOT}
+        for commit in args.against.split(","):
+            tree = previous_tree(commit, tmp / commit)
+            if tree is not None:
+                trees[commit] = tree
+        for repeat in range(args.repeats):
+            for fit in fits:
+                for version, tree in trees.items():
+                    rows.append({"fit": fit, "version": version, "repeat": repeat,
+                                 **run(fit, tree, tmp)})
+    load_end = os.getloadavg()[0]
+    df = pd.DataFrame(rows)
+    table = (df.groupby(["fit", "version"], sort=False)
+             .agg(median_seconds=("seconds", "median"),
+                  submodels_seconds=("submodels_seconds", "median"),
+                  n_submodels=("n_submodels", statistics.mode)).reset_index())
+    reference = args.against.split(",")[0]
+    ref = table[table["version"] == reference].set_index("fit")["median_seconds"]
+    table["ratio_to_" + reference] = table["median_seconds"] / table["fit"].map(ref)
+    meta = {"repeats": args.repeats, "load average at start": load_start,
+            "load average at end": load_end, "versions": list(trees)}
+    write_json({"meta": meta, "runs": rows, "table": table.to_dict("records")},
+               "robustness_time")
+    text = (f"Fit time, each fit in a fresh process, {args.repeats} repeats interleaved; "
+            f"1-minute load {load_start:.2f} at the start, {load_end:.2f} at the end "
+            f"(2 CPUs, shared machine). Versions: `this` (the checkout), "
+            f"{', '.join(f'`{v}`' for v in trees if v != 'this')}.\n\n"
+            + table.to_markdown(index=False, floatfmt=".3g") + "\n")
+    (RESULTS / "robustness_time.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
