@@ -63,15 +63,10 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
         raise ValueError(f"need 1 <= k <= n, got k = {k} for n = {n} points")
     workers = workers or len(os.sched_getaffinity(0))
     # Coinciding points: search the distinct ones, then expand by multiplicity.
-    rows = np.ascontiguousarray(x).view(np.dtype((np.void, x.dtype.itemsize * x.shape[1])))
-    _, first, inverse, counts = np.unique(rows.ravel(), return_index=True,
-                                          return_inverse=True, return_counts=True)
+    first, inverse = distinct_rows(x)
     if len(first) == n:
         return _distinct(x, k, workers)[0]
-    order = np.argsort(first)  # distinct points in order of their first occurrence
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    inverse, counts, first = rank[inverse.ravel()], counts[order], first[order]
+    counts = np.bincount(inverse, minlength=len(first))
     idx, sq = _distinct(x[first], min(k, len(first)), workers)
     # Rows of each distinct point, by index; the k nearest rows are the first k of the
     # distinct neighbours' rows in order of (distance, row index).
@@ -90,6 +85,25 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     owned = np.bincount(owner, minlength=len(idx))
     out = rows[srt][(np.cumsum(owned) - owned)[:, None] + np.arange(k)]
     return out[inverse]
+
+
+def distinct_rows(x: Float2D) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of ``x`` (rows of equal values are one), in order of first occurrence.
+
+    Returns
+    -------
+    first : ndarray of shape (n_distinct,), int
+        Index of each distinct row's first occurrence, increasing.
+    inverse : ndarray of shape (n,), int
+        The distinct row of every row: ``x[first][inverse]`` is ``x``.
+    """
+    x = np.ascontiguousarray(x) + 0.0  # −0.0 becomes 0.0: compared by their bytes below
+    rows = x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse.ravel()]
 
 
 def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]:
