@@ -121,8 +121,11 @@ def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.n
             dense[rows] = d
         if min_pts > 1:
             d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
-            core[rows] = (np.partition(d, min_pts - 2, axis=1)[:, min_pts - 2]
-                          if min_pts - 1 < n else np.inf)
+            if min_pts - 1 < n:
+                d.partition(min_pts - 2, axis=1)  # in place: d is not used after
+                core[rows] = d[:, min_pts - 2]
+            else:
+                core[rows] = np.inf
     # Prim's algorithm on max(c_p, c_q, d(p, q)); an inf edge starts a new tree.
     best = np.full(n, np.inf)
     done = np.zeros(n, bool)

@@ -166,6 +166,9 @@ class LocalLeastSquares(BaseEstimator):
     """Steps 2–3 of the method: a local set of n_ρ neighbours around every φ(k) and its
     least-squares parameter matrix θ_k (eq. 6–7).
 
+    A sample that repeats an earlier one exactly (equal φ(k) and y(k)) counts once: the local
+    sets hold distinct samples, and a copy gets its original's local model (:meth:`fit`).
+
     Parameters
     ----------
     n_rho : int, optional
