@@ -4,10 +4,9 @@ Cases: the simulated system of the paper's section 5 (``make_hure_vasak``, 30 dB
 na = nb = 1, d = 4, m = 2) at N = 4,000, 40,000 and 400,000 samples, and the KUKA training
 record (39,988 samples in 66 experiments, na = nb = 2, d = 24, m = 6) once and tiled ten
 times (its 66 experiments repeated: 399,880 samples whose regressor rows each occur ten
-times). Ten copies of each row put ten copies of only ~8 distinct rows in each local set
-of the default's n_ρ = 72 > 24 = d: every local set is rank-deficient, and the fit stops, as
-documented, at the clustering step ("too few left to cluster"); its neighbour search and
-local least squares on 399,880 rows are measured all the same.
+times). Repeated (φ, y) rows count once in steps 2–4
+(:class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`): the tiled record has the
+local models and clusters of the record once, and steps 5–6 fit on all 398,560 rows.
 
 Each case runs in a fresh subprocess with the data set's ``default`` hyper-parameter set;
 the steps run one after another as ``PWARX.fit`` runs them (``fit_step``), and before each

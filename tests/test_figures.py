@@ -218,3 +218,21 @@ def test_to_markdown_inlines_a_small_png(fit):
     assert struct.unpack(">I", narrow[16:20])[0] == 450
     small = _png(to_markdown(figs[0], max_bytes=40_000))
     assert len(small) <= 40_000
+
+
+def test_parameter_clusters_are_projected_on_their_principal_components(fit):
+    from pwa_pipeline.orchestration.figures import _clustering_embedding
+
+    step = fit.model.clustering_
+    fig = parameter_clusters_figure(fit.model.local_models_, step, fit.reg.target)
+    emb = _clustering_embedding(fit.model.local_models_, step, fit.reg.target)
+    centred = emb - emb.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    drawn = {c.get_label(): c.get_offsets() for c in fig.axes[0].collections}
+    labels = step.labels_[step.clustered_]
+    for c in np.unique(labels):
+        name = next(k for k in drawn if k.startswith("noise" if c < 0 else f"cluster {c + 1} "))
+        # each axis is the SVD's up to its sign
+        ref = centred[labels == c] @ vt[:2].T
+        np.testing.assert_allclose(np.abs(drawn[name]), np.abs(ref), rtol=1e-6, atol=1e-9)
+    assert fig.axes[0].get_xlabel() == f"PC 1 ({100 * sv[0]**2 / np.sum(sv**2):.0f} % of variance)"

@@ -32,7 +32,9 @@ def test_the_message_names_the_setting_of_the_largest_step(monkeypatch):
     assert max(need, key=need.get) == "clustering"
     with pytest.raises(FitMemoryError, match="clustering__max_clustered"):
         memory.check_fit_memory(10**6, 24, 6, est.steps())
-    default = PWARX.default(2, 2).set_params(regions__max_rows=None)
+    default = PWARX.default(2, 2).set_params(regions__max_rows=None, local_models__n_rho=200)
+    need = fit_memory(10**6, 24, 6, default.steps())
+    assert max(need, key=need.get) == "local_models"
     with pytest.raises(FitMemoryError, match="local_models__n_rho"):
         memory.check_fit_memory(10**6, 24, 6, default.steps())
 

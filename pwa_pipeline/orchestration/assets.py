@@ -73,7 +73,7 @@ from .storage import (
 GROUP = "identification"
 #: Layout of a cached fitted local-model step; raise it when the step's fitted attributes
 #: change, so that entries written by older code are never loaded.
-LOCAL_MODELS_FORMAT = 2
+LOCAL_MODELS_FORMAT = 3
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.
 STEP_ASSETS = {**dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
                           strict=True)), "refinement": "output_error_refinement"}

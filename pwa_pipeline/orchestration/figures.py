@@ -187,10 +187,13 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     emb = _clustering_embedding(local, step, target)
     labels = step.labels_[step.clustered_]
     centred = emb - emb.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    # principal axes from the d·m × d·m scatter matrix: an SVD of the rows would also form
+    # their n × d·m left factor (6.5 s on the robot's 24,732 clustered local models)
+    var, axes = np.linalg.eigh(centred.T @ centred)
+    var, axes = np.maximum(var[::-1], 0), axes[:, ::-1]
     pcs = np.zeros((emb.shape[0], 2))
-    pcs[:, :min(2, vt.shape[0])] = centred @ vt[:2].T
-    share = 100 * sv**2 / max(float(np.sum(sv**2)), np.finfo(float).tiny)
+    pcs[:, :min(2, axes.shape[1])] = centred @ axes[:, :2]
+    share = 100 * var / max(float(np.sum(var)), np.finfo(float).tiny)
     fig = _figure(10, 4.0)
     ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
     for c in np.unique(labels):  # (labels run by decreasing size: small clusters on top)

@@ -14,6 +14,9 @@ import mlflow.pyfunc
 import numpy as np
 import pandas as pd
 
+_SCHEMA_ROWS = 100
+"""Rows of the training table from which its MLflow schema is inferred."""
+
 
 class Simulator(mlflow.pyfunc.PythonModel):
     """A fitted PWARX, LinearARX or SubspaceSS as an MLflow pyfunc (see the module doc).
@@ -65,8 +68,22 @@ def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: lis
 class ModelToLog:
     """What :meth:`~pwa_pipeline.orchestration.resources.MLflowTracker.log_run` logs as the
     run's model: the simulator, an input example (for the signature), and the training
-    table (logged as the run's dataset)."""
+    table (logged as the run's dataset, :meth:`dataset`)."""
 
     simulator: Simulator
     input_example: pd.DataFrame
     training: pd.DataFrame
+
+    def dataset(self) -> "mlflow.data.pandas_dataset.PandasDataset":
+        """The training table as an MLflow dataset, its schema taken from the first rows.
+
+        MLflow infers a dataset's schema by testing every cell for a missing value (1.3 s
+        a run on the robot's 40k × 13 table); the table has no missing value (the data are
+        validated finite) and one type per column, so its first rows give the same schema.
+        """
+        from mlflow.data import from_pandas
+        from mlflow.models import infer_signature
+
+        data = from_pandas(self.training, name="training")
+        data.__dict__["schema"] = infer_signature(self.training.head(_SCHEMA_ROWS)).inputs
+        return data

@@ -265,8 +265,7 @@ class MLflowTracker(dg.ConfigurableResource):
         pyfunc_log.setLevel(logging.ERROR)
         try:
             with mlflow.start_run(run_id=run_id):
-                mlflow.log_input(mlflow.data.from_pandas(model.training, name="training"),
-                                 context="training")
+                mlflow.log_input(model.dataset(), context="training")
                 mlflow.pyfunc.log_model(
                     name="model", python_model=model.simulator,
                     signature=infer_signature(model.input_example, output),

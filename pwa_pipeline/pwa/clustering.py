@@ -121,8 +121,11 @@ def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.n
             dense[rows] = d
         if min_pts > 1:
             d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
-            core[rows] = (np.partition(d, min_pts - 2, axis=1)[:, min_pts - 2]
-                          if min_pts - 1 < n else np.inf)
+            if min_pts - 1 < n:
+                d.partition(min_pts - 2, axis=1)  # in place: d is not used after
+                core[rows] = d[:, min_pts - 2]
+            else:
+                core[rows] = np.inf
     # Prim's algorithm on max(c_p, c_q, d(p, q)); an inf edge starts a new tree.
     best = np.full(n, np.inf)
     done = np.zeros(n, bool)
@@ -240,7 +243,7 @@ class DBSCANClustering(BaseEstimator):
         Whether ε was chosen from the data.
     min_pts_ : int
     clustered_ : ndarray of shape (n,), bool
-        The local models passed to DBSCAN.
+        The local models passed to DBSCAN, and their repeats.
     n_clusters_ : int
     noise_share_ : float
         Share of the clustered local models that DBSCAN labelled noise.
@@ -281,18 +284,24 @@ class DBSCANClustering(BaseEstimator):
         Parameters
         ----------
         local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
-            Its ``theta_``, ``residual_var_``, ``phi_scale_`` and ``degenerate_`` are used;
-            degenerate local models are never clustered.
+            Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_`` and
+            ``original_`` are used; degenerate local models are never clustered, and each
+            distinct sample is clustered once (MinPts, the confidence median and the subset
+            count it once): a repeated sample takes its first occurrence's label, so a
+            record repeated r times is clustered as the record once.
         target : ndarray of shape (n, m)
             The outputs y(k) (their RMS makes θ unit-free).
         """
         theta = local.theta_
         n = theta.shape[0]
         self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * theta.shape[1]
-        keep = ~local.degenerate_
+        original = local.original_
+        distinct = original == np.arange(n)
+        keep = ~local.degenerate_ & distinct
         if keep.sum() < self.min_pts_:
             raise ValueError(
-                f"{local.n_degenerate_} of {n} local sets are degenerate (their regressors "
+                f"{int((local.degenerate_ & distinct).sum())} of {int(distinct.sum())} "
+                f"local sets are degenerate (their regressors "
                 f"are linearly dependent, e.g. inputs held constant for longer than a local "
                 f"set): too few left to cluster. Raise local_models__n_rho, lower na/nb, or "
                 f"excite the system with an input that changes more often"
@@ -304,11 +313,17 @@ class DBSCANClustering(BaseEstimator):
                 np.nonzero(keep)[0], self.max_clustered, replace=False)
             keep = np.zeros(n, bool)
             keep[rows] = True
+        rows = np.flatnonzero(keep)
+        theta = theta[rows]
         if self.unit_free:
-            theta = theta * local.phi_scale_[None, :, None] / column_rms(target)
-        self.labels_, self.eps_ = cluster_local_models(theta, self.eps, self.min_pts_,
-                                                       self.embedding, keep)
+            theta = theta * local.phi_scale_[None, :, None] / column_rms(target[distinct])
+        labels = np.full(n, -1)
+        labels[rows], self.eps_ = cluster_local_models(theta, self.eps, self.min_pts_,
+                                                       self.embedding)
+        # a repeated sample is clustered as its first occurrence, which it equals
+        self.labels_ = relabel_by_size(labels[original])
         self.eps_auto_ = self.eps is None
+        keep = keep[original]
         self.clustered_ = keep
         self.n_clusters_ = int(self.labels_.max()) + 1
         self.noise_share_ = float(np.mean(self.labels_[keep] < 0))

@@ -12,10 +12,11 @@ from sklearn.utils._param_validation import Interval
 from .._arrays import column_rms
 from .._typing import Float2D
 from ._blas import single_threaded_blas
-from .neighbours import nearest_neighbours
+from .neighbours import distinct_rows, nearest_neighbours
 
 _RANK_TOL = 1e-10
 _CHUNK = 1024
+_CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
 
 
 def check_n_rho(n_rho: int, d: int) -> None:
@@ -53,9 +54,7 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
         std = phi.std(axis=0)
         keep = std > 0
         if not keep.any():
-            raise ValueError(
-                "every regressor column is constant (the data do not vary): no local sets"
-            )
+            raise ValueError(_CONSTANT)
         x = (phi[:, keep] - phi[:, keep].mean(axis=0)) / std[keep]
     if d > 12:  # blocked float32 products (exact); trees lose to brute force there
         idx = nearest_neighbours(x, n_rho)
@@ -167,6 +166,9 @@ class LocalLeastSquares(BaseEstimator):
     """Steps 2–3 of the method: a local set of n_ρ neighbours around every φ(k) and its
     least-squares parameter matrix θ_k (eq. 6–7).
 
+    A sample that repeats an earlier one exactly (equal φ(k) and y(k)) counts once: the local
+    sets hold distinct samples, and a copy gets its original's local model (:meth:`fit`).
+
     Parameters
     ----------
     n_rho : int, optional
@@ -186,9 +188,11 @@ class LocalLeastSquares(BaseEstimator):
     residual_var_ : ndarray of shape (n, m)
         Residual variance of each local fit, SSR / (n_ρ − d), per output.
     neighbours_ : ndarray of shape (n, n_ρ)
-        Row indices of each local set C_k (the row itself first).
+        Row indices of each local set C_k (the row itself first, then first occurrences of
+        distinct samples).
     phi_scale_ : ndarray of shape (d,)
-        Root mean square of each regressor column, used to make θ unit-free.
+        Root mean square of each regressor column (over the distinct rows), used to make θ
+        unit-free.
     n_rho_ : int
         The n_ρ used.
     degenerate_ : ndarray of shape (n,), bool
@@ -196,6 +200,9 @@ class LocalLeastSquares(BaseEstimator):
         one hold of a piecewise-constant input): θ_k is not identified there, and the
         clustering step leaves them out.
     n_degenerate_ : int
+    original_ : ndarray of shape (n,), int
+        The first row with the same (φ(k), y(k)) as row k (k itself for a row met first);
+        the clustering step counts each distinct sample once.
 
     Examples
     --------
@@ -219,20 +226,44 @@ class LocalLeastSquares(BaseEstimator):
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
-        """Local sets (:func:`local_sets`) and local least squares (:func:`local_least_squares`).
+        """Local sets (:func:`local_sets`) and local least squares (:func:`local_least_squares`)
+        on the distinct samples (φ(k), y(k)); a repeated sample gets its first occurrence's.
+
+        A sample that repeats another exactly (the same experiment given twice, a record
+        tiled) is the same measurement, not a new one: counted again, its copies would fill
+        the local sets (ten copies of each row leave n_ρ/10 distinct rows in a set of n_ρ, a
+        rank-deficient Φ_k when that is below d). So the search and the fits run on the
+        distinct rows and every copy gets its original's local set (its own index first),
+        θ_k and residual variance: a record repeated r times gives the local models of the
+        record once, r times over. Rows with equal φ(k) but different y(k) stay distinct.
 
         Parameters
         ----------
         phi : ndarray of shape (n, d)
         target : ndarray of shape (n, m)
         """
-        d = phi.shape[1]
+        n, d = phi.shape
         self.n_rho_ = self.n_rho if self.n_rho is not None else 3 * d
         check_n_rho(self.n_rho_, d)
-        self.neighbours_ = local_sets(phi, self.n_rho_, self.standardize)
-        self.theta_, self.residual_var_, self.phi_scale_, self.degenerate_ = \
-            local_least_squares(phi, target, self.neighbours_, self.ridge)
-        self.n_degenerate_ = int(self.degenerate_.sum())
+        first, inverse = distinct_rows(np.concatenate([phi, target], axis=1))
+        if len(first) == 1 < n:
+            raise ValueError(_CONSTANT)
+        if self.n_rho_ > len(first):
+            raise ValueError(
+                f"too few samples for n_rho = {self.n_rho_}: the data give only {len(first)} "
+                f"distinct regressor rows" + (f" ({n} with repeats)" if len(first) < n else "")
+            )
+        repeats = len(first) < n
+        p, t = (phi[first], target[first]) if repeats else (phi, target)
+        idx = local_sets(p, self.n_rho_, self.standardize)
+        theta, resvar, self.phi_scale_, degenerate = local_least_squares(p, t, idx, self.ridge)
+        if repeats:
+            idx, theta, resvar, degenerate = (first[idx][inverse], theta[inverse],
+                                              resvar[inverse], degenerate[inverse])
+            idx[:, 0] = np.arange(n)
+        self.neighbours_, self.theta_, self.residual_var_ = idx, theta, resvar
+        self.degenerate_, self.original_ = degenerate, first[inverse]
+        self.n_degenerate_ = int(degenerate.sum())
         return self
 
     def resolved_params(self) -> dict:

@@ -8,6 +8,8 @@ the setting to change, instead of being killed by the operating system half-way.
 import os
 from pathlib import Path
 
+from .neighbours import _BLOCK
+
 _GiB = 2**30
 _SLACK = 2**28
 """Added to every step: temporaries and memory the allocator keeps after earlier steps
@@ -61,8 +63,9 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     n_rho = min(getattr(local, "n_rho", None) or 3 * d, n)
     workers = len(os.sched_getaffinity(0))
     kept = n * (n_rho * 8 + d * m * 8 + m * 8)  # neighbours, θ_k, residual variances
-    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidate pairs a row (20 B each)
-        search = n * ((d + 2) * 8 + 6 * n_rho * 20)
+    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidates a row (8 B each, and
+        # the 20 B of row, column and distance while a block of them is selected)
+        search = n * ((d + 2) * 8 + 6 * n_rho * 8) + _BLOCK * 6 * n_rho * 20 * workers
     else:  # scikit-learn's tree: distances and indices of every row
         search = n * n_rho * 16
     solve = workers * 1024 * (n_rho + d) * (d + m) * 8 * 3

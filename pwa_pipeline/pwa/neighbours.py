@@ -63,15 +63,10 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
         raise ValueError(f"need 1 <= k <= n, got k = {k} for n = {n} points")
     workers = workers or len(os.sched_getaffinity(0))
     # Coinciding points: search the distinct ones, then expand by multiplicity.
-    rows = np.ascontiguousarray(x).view(np.dtype((np.void, x.dtype.itemsize * x.shape[1])))
-    _, first, inverse, counts = np.unique(rows.ravel(), return_index=True,
-                                          return_inverse=True, return_counts=True)
+    first, inverse = distinct_rows(x)
     if len(first) == n:
         return _distinct(x, k, workers)[0]
-    order = np.argsort(first)  # distinct points in order of their first occurrence
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    inverse, counts, first = rank[inverse.ravel()], counts[order], first[order]
+    counts = np.bincount(inverse, minlength=len(first))
     idx, sq = _distinct(x[first], min(k, len(first)), workers)
     # Rows of each distinct point, by index; the k nearest rows are the first k of the
     # distinct neighbours' rows in order of (distance, row index).
@@ -90,6 +85,25 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     owned = np.bincount(owner, minlength=len(idx))
     out = rows[srt][(np.cumsum(owned) - owned)[:, None] + np.arange(k)]
     return out[inverse]
+
+
+def distinct_rows(x: Float2D) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct rows of ``x`` (rows of equal values are one), in order of first occurrence.
+
+    Returns
+    -------
+    first : ndarray of shape (n_distinct,), int
+        Index of each distinct row's first occurrence, increasing.
+    inverse : ndarray of shape (n,), int
+        The distinct row of every row: ``x[first][inverse]`` is ``x``.
+    """
+    x = np.ascontiguousarray(x) + 0.0  # −0.0 becomes 0.0: compared by their bytes below
+    rows = x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
+    _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse.ravel()]
 
 
 def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]:
@@ -116,7 +130,20 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         kth = np.partition(d2, k - 1, axis=1)[:, k - 1].astype(float)
         return kth + 2 * err[a:b]
 
+    # A candidate is one integer, (row in its block, float32 distance, column) from the high
+    # bits down: sorting those sorts by row, then distance. A non-negative float32's bits
+    # rank like its value; a distance rounded below 0 is lifted to 0 (nearer the truth).
+    col_bits = max(n - 1, 1).bit_length()
+    dist_shift, row_shift = np.uint64(col_bits), np.uint64(col_bits + 31)
+    if col_bits + 31 + (_BLOCK - 1).bit_length() > 64:
+        raise ValueError(f"at most 2**{64 - 31 - (_BLOCK - 1).bit_length()} distinct points, "
+                         f"got {n}")
     found: list[list] = [[] for _ in blocks]
+
+    def pack(row: np.ndarray, col: np.ndarray, val: np.ndarray) -> np.ndarray:
+        bits = np.maximum(val, 0).view(np.uint32) & np.uint32(0x7FFFFFFF)  # −0.0 as 0.0
+        return (row.astype(np.uint64) << row_shift) | (bits.astype(np.uint64) << dist_shift) \
+            | col.astype(np.uint64)
 
     def tile(pair):  # one tile, for the rows of both of its blocks
         i, j = pair
@@ -127,23 +154,24 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
             near_row |= d2 <= thr32[None, c:e]
         r, s = _nonzero(near_row)
         val = d2[r, s]
-        r, s = r.astype(np.int32), s.astype(np.int32)
         keep = val <= thr32[a + r]
-        found[i].append((r[keep], c + s[keep], val[keep]))
+        found[i].append(pack(r[keep], c + s[keep], val[keep]))
         if i != j:
             keep = val <= thr32[c + s]
-            found[j].append((s[keep], a + r[keep], val[keep]))
+            found[j].append(pack(s[keep], a + r[keep], val[keep]))
 
     out = np.empty((n, k), dtype=np.intp)
     out_sq = np.empty((n, k))
 
     def select(i):  # the k nearest of each row of block i among its candidates
         a, b = blocks[i]
-        r, s, val = (np.concatenate(v) for v in zip(*found[i], strict=True))
+        key = np.concatenate(found[i])
         found[i] = []
-        low = float(val.min())
-        srt = np.argsort(r * (float(val.max()) - low + 1.0) + (val - low))  # by row, distance
-        r, s, val = r[srt], s[srt], val[srt]
+        key.sort()  # by row, then distance
+        r = (key >> row_shift).astype(np.intp)
+        s = (key & np.uint64((1 << col_bits) - 1)).astype(np.intp)
+        val = ((key >> dist_shift).astype(np.uint32) & np.uint32(0x7FFFFFFF)).view(np.float32)
+        del key
         count = np.bincount(r, minlength=b - a)
         start = np.cumsum(count) - count
         kth = val[start + k - 1].astype(float)[r]
@@ -151,10 +179,12 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         inside = val < kth - e  # surely among the k nearest (fewer than k a row)
         use = np.flatnonzero(val <= kth + e)  # those and the band float32 cannot rank
         r, s, val, inside = r[use], s[use], val[use], inside[use]
-        exact = np.where(inside, -np.inf, np.inf)
+        # In each row the inside candidates come first (by float32 distance, their order
+        # is not needed); the band after them is ranked by exact distance, then index.
         band = np.flatnonzero(~inside)
-        exact[band] = _exact_sq(xs, a + r[band], s[band])
-        pick = np.lexsort((order[s], exact, r))  # by row: inside, then the band by distance
+        rb, sb = r[band], s[band]
+        pick = np.arange(len(r))
+        pick[band] = band[np.lexsort((order[sb], _exact_sq(xs, a + rb, sb), rb))]
         count = np.bincount(r, minlength=b - a)
         first = (np.cumsum(count) - count)[:, None] + np.arange(k)
         chosen = s[pick][first]
