@@ -24,3 +24,14 @@ def relabel_by_size(labels: np.ndarray) -> np.ndarray:
     mask = labels >= 0
     out[mask] = lookup[labels[mask]]
     return out
+
+
+def sparse_nonzero(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero`` of a sparse C-contiguous 2-D boolean array, reading 8 entries at once."""
+    flat = mask.reshape(-1)
+    n8 = flat.size // 8 * 8
+    words = flat[:n8].view(np.uint64)
+    hit = np.flatnonzero(words)
+    w, b = np.nonzero(words[hit].view(np.uint8).reshape(-1, 8))
+    pos = np.concatenate([hit[w] * 8 + b, n8 + np.flatnonzero(flat[n8:])])
+    return np.divmod(pos, mask.shape[1])

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
+from .._arrays import sparse_nonzero
 from .._typing import Float2D
 
 _PIVOTS = 64
@@ -182,7 +183,7 @@ class _Geometry:
         margin = self.unit * (self.norm[rows] * top + top * top / 2 + np.abs(self.thr[rows]))
         low = prod >= (self.thr[rows] - margin).astype(np.float32)[:, None]
         near = prod >= (self.thr[rows] + margin).astype(np.float32)[:, None]
-        i, j = _nonzero(np.not_equal(low, near, out=low))  # within rounding of ε: decide again
+        i, j = sparse_nonzero(np.not_equal(low, near, out=low))  # within rounding of ε: decide again
         near[i, j] = self.within_eps(rows[i], np.arange(len(self.x))[cols][j])
         return near
 
@@ -264,7 +265,7 @@ def _sweep_q(geo: _Geometry, state: _State, nq: int, block: int | None) -> None:
         else:  # the most rows whose block (rows × columns up to the last row's end) fits
             size = np.arange(1, nq - r0 + 1) * (end[r0:] - r0)
             r1 = r0 + max(1, int(np.searchsorted(size, _BUDGET, "right")))
-        i, j = _nonzero(geo.near(slice(r0, r1), slice(r0, end[r1 - 1])))
+        i, j = sparse_nonzero(geo.near(slice(r0, r1), slice(r0, end[r1 - 1])))
         upper = j > i
         state.add(r0 + i[upper], r0 + j[upper])
         r0 = r1
@@ -308,14 +309,3 @@ def _sweep_g(geo: _Geometry, state: _State, nq: int, block: int | None,
             alone = np.flatnonzero(~sure & (hits > 0))
             i, j = np.nonzero(near[alone])
             state.kept.append(np.stack([rows[alone[i]], a + j]))
-
-
-def _nonzero(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``np.nonzero`` of a sparse C-contiguous 2-D boolean array, reading 8 entries at once."""
-    flat = mask.reshape(-1)
-    n8 = flat.size // 8 * 8
-    words = flat[:n8].view(np.uint64)
-    hit = np.flatnonzero(words)
-    w, b = np.nonzero(words[hit].view(np.uint8).reshape(-1, 8))
-    pos = np.concatenate([hit[w] * 8 + b, n8 + np.flatnonzero(flat[n8:])])
-    return np.divmod(pos, mask.shape[1])

@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .._arrays import sparse_nonzero
 from .._typing import Float2D
 from ._blas import single_threaded_blas
 
@@ -152,7 +153,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         near_row = d2 <= thr32[a:b, None]
         if i != j:
             near_row |= d2 <= thr32[None, c:e]
-        r, s = _nonzero(near_row)
+        r, s = sparse_nonzero(near_row)
         val = d2[r, s]
         keep = val <= thr32[a + r]
         found[i].append(pack(r[keep], c + s[keep], val[keep]))
@@ -228,14 +229,3 @@ def _spatial_order(x: Float2D, leaf: int = 64) -> np.ndarray:
         order[a:b] = order[a:b][np.argpartition(seg[:, dim], mid)]
         todo += [(a, a + mid), (a + mid, b)]
     return order
-
-
-def _nonzero(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``np.nonzero`` of a sparse C-contiguous 2-D boolean array, reading 8 entries at once."""
-    flat = mask.reshape(-1)
-    n8 = flat.size // 8 * 8
-    words = flat[:n8].view(np.uint64)
-    hit = np.flatnonzero(words)
-    w, b = np.nonzero(words[hit].view(np.uint8).reshape(-1, 8))
-    pos = np.concatenate([hit[w] * 8 + b, n8 + np.flatnonzero(flat[n8:])])
-    return np.divmod(pos, mask.shape[1])
