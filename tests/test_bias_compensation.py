@@ -61,7 +61,7 @@ def test_a_region_whose_lags_cannot_hold_the_noise_keeps_least_squares():
 def test_residual_regions_refits_compensated_given_the_output_lags():
     phi, y, mode = _pwarx()
     lags = output_lag_columns(1, 1, 2)
-    fits = {bc: ResidualRegions(bias_compensation=bc).fit(
+    fits = {bc: ResidualRegions(compensate_bias=bc).fit(
         phi, mode, 2, target=y, thetas=refit(phi, y, mode, 2), output_lags=lags)
         for bc in (False, True)}
     assert np.abs(fits[True].thetas_ - THETAS).max() < 0.5 * np.abs(
@@ -74,7 +74,7 @@ def test_residual_regions_refits_compensated_given_the_output_lags():
 def test_the_default_compensates_and_the_paper_setting_does_not():
     data = make_hure_vasak(n_samples=2000, snr_db=30, seed=3)
     default = PWARX(na=1, nb=1).fit(data.u, data.y)
-    plain = PWARX(na=1, nb=1, regions=ResidualRegions(bias_compensation=False)).fit(
+    plain = PWARX(na=1, nb=1, regions=ResidualRegions(compensate_bias=False)).fit(
         data.u, data.y)
     assert default.regions_.n_uncompensated_ == 0
     assert not np.allclose(default.thetas_, plain.thetas_, atol=1e-3)

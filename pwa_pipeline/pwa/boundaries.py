@@ -185,7 +185,7 @@ class ResidualRegions(SVMRegions):
         L-BFGS iterations of each boundary placement.
     n_em : int, default 3
         EM steps refitting the sub-models (0: boundaries only, the sub-models kept).
-    bias_compensation : bool, default True
+    compensate_bias : bool, default True
         Refit the sub-models in the EM steps by bias-compensated least squares
         (:func:`~.submodels.bias_compensated_refit`): measurement noise on the outputs also
         sits in φ's output lags and biases least squares towards zero on them. Needs
@@ -228,19 +228,19 @@ class ResidualRegions(SVMRegions):
         "gate_max_rows": [Interval(Integral, 2, None, closed="left"), None],
         "gate_max_iter": [Interval(Integral, 0, None, closed="left")],
         "n_em": [Interval(Integral, 0, None, closed="left")],
-        "bias_compensation": ["boolean"],
+        "compensate_bias": ["boolean"],
     }
 
     def __init__(self, C: float = 1.0, max_rows: int | None = 5000, random_state: int = 0,
                  tol: float = 1e-4, gate_ridge: float = 1e-5,
                  gate_max_rows: int | None = 20000, gate_max_iter: int = 200, n_em: int = 3,
-                 bias_compensation: bool = True):
+                 compensate_bias: bool = True):
         super().__init__(C=C, max_rows=max_rows, random_state=random_state, tol=tol)
         self.gate_ridge = gate_ridge
         self.gate_max_rows = gate_max_rows
         self.gate_max_iter = gate_max_iter
         self.n_em = n_em
-        self.bias_compensation = bias_compensation
+        self.compensate_bias = compensate_bias
 
     def fit(self, phi: Float2D, labels: np.ndarray, n_regions: int | None = None,
             sample_weight: np.ndarray | None = None, target: Float2D | None = None,
@@ -258,7 +258,7 @@ class ResidualRegions(SVMRegions):
         thetas : ndarray of shape (s, d, m), optional
             The sub-models, one per region.
         output_lags : ndarray of shape (d,), optional
-            :func:`~.submodels.output_lag_columns` of φ, for ``bias_compensation``.
+            :func:`~.submodels.output_lag_columns` of φ, for ``compensate_bias``.
 
         Raises
         ------
@@ -283,7 +283,7 @@ class ResidualRegions(SVMRegions):
             raise ValueError(f"output_lags must have one entry per column of phi "
                              f"({phi.shape[1]}), got shape {np.shape(output_lags)}")
         lag_output = (np.asarray(output_lags, int)
-                      if self.bias_compensation and output_lags is not None else None)
+                      if self.compensate_bias and output_lags is not None else None)
         rows = np.arange(phi.shape[0])
         if self.gate_max_rows is not None and rows.size > self.gate_max_rows:
             rows = np.sort(np.random.default_rng(self.random_state).choice(
