@@ -116,11 +116,12 @@ def bias_compensated_refit(phi: Float2D, target: Float2D, weights: np.ndarray,
     m = target.shape[1]
     lag = lag_output >= 0
     total = weights.sum(axis=0)
-    grams = np.einsum("ns,nd,ne->sde", weights, phi, phi)
-    rhs = np.einsum("ns,nd,nm->sdm", weights, phi, target)
+    weighted = [phi * w[:, None] for w in weights.T]
+    grams = np.stack([wp.T @ phi for wp in weighted])
+    rhs = np.stack([wp.T @ target for wp in weighted])
     ls = np.stack([np.linalg.lstsq(g, r, rcond=None)[0] for g, r in zip(grams, rhs)])
-    resid = target[None] - phi @ ls
-    mean_sq = np.einsum("ns,snm->sm", weights, resid**2) / total[:, None]
+    mean_sq = np.stack([w @ (target - phi @ th) ** 2 for w, th in zip(weights.T, ls)]
+                       ) / total[:, None]
     share = total / total.sum()
     j_bar = share @ mean_sq
     owner = np.zeros((lag_output.size, m))  # column c → one-hot of its output q(c)
