@@ -27,7 +27,11 @@ Per run: whether the fit raised; the number of sub-models (exact = the true numb
 largest absolute parameter error after pairing sub-models with the true modes
 (:func:`~pwa_pipeline.scoring.metrics.match_submodels`; only when the count is exact), and
 beside it that of least squares on the true modes' rows (the oracle: what the record allows
-a least-squares fit that knows the modes, errors in the variables included);
+a least-squares fit that knows the modes, errors in the variables included) and of
+bias-compensated least squares on them (:func:`~pwa_pipeline.pwa.submodels.bias_compensated_refit`,
+what the default's final refit aims at); how many of the default's EM refits the
+compensation's guard left at least squares (``n_uncompensated_`` of
+:class:`~pwa_pipeline.pwa.boundaries.ResidualRegions`, summed over the seeds);
 region accuracy on a fresh noise-free record (:func:`~pwa_pipeline.scoring.truth.ground_truth_scores`);
 free-run NRMSE on a fresh noisy record of the PWARX, of linear ARX and of the true system
 (true θ and true regions); fit seconds.
@@ -56,7 +60,7 @@ from pwa_pipeline import PWARX, LinearARX, evaluate, make_hure_vasak
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, add_output_noise, hure_vasak_mode
 from pwa_pipeline.pwa.arx import ARXModelBase
 from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.submodels import refit
+from pwa_pipeline.pwa.submodels import bias_compensated_refit, output_lag_columns, refit
 from pwa_pipeline.scoring.metrics import match_submodels
 from pwa_pipeline.scoring.truth import ground_truth_scores
 
@@ -285,7 +289,10 @@ def one_run(name: str, seed: int) -> dict:
     truth = ground_truth_scores(model, system.thetas, clean.u, clean.y_clean, clean.modes)
     error = np.nanmax(match_submodels(model.thetas_, system.thetas)[1])
     reg = build_regressors([(train.u, train.y)], system.na, system.nb, False)
-    oracle = refit(reg.phi, reg.target, train.modes[max(system.na, system.nb):], s)
+    modes = train.modes[max(system.na, system.nb):]
+    oracle = refit(reg.phi, reg.target, modes, s)
+    lags = output_lag_columns(reg.n_outputs, system.na, reg.phi.shape[1])
+    oracle_bc = bias_compensated_refit(reg.phi, reg.target, np.eye(s)[modes], lags)[0]
     linear = LinearARX(system.na, system.nb).fit(train.u, train.y)
     free = {label: evaluate(mdl, fresh.u, fresh.y, warmup=10).mean("free_run")
             for label, mdl in [("pwarx", model), ("linear_arx", linear),
@@ -293,6 +300,8 @@ def one_run(name: str, seed: int) -> dict:
     return {**row, "n_submodels": model.n_submodels_, "exact": model.n_submodels_ == s,
             "max_param_error": float(error) if model.n_submodels_ == s else np.nan,
             "oracle_param_error": float(np.nanmax(np.abs(oracle - system.thetas))),
+            "oracle_bc_param_error": float(np.nanmax(np.abs(oracle_bc - system.thetas))),
+            "n_uncompensated": getattr(model.regions_, "n_uncompensated_", np.nan),
             "n_split": getattr(model.submodels_, "n_split_", np.nan),
             "region_accuracy": truth["region_accuracy"],
             **{f"free_run_nrmse_{k}": v for k, v in free.items()}}
@@ -308,6 +317,8 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
             "median largest param error": ok["max_param_error"].median(),
             "worst largest param error": ok["max_param_error"].max(),
             "oracle LS error": ok["oracle_param_error"].median(),
+            "oracle BCLS error": ok["oracle_bc_param_error"].median(),
+            "uncompensated refits": int(ok["n_uncompensated"].sum()),
             "median region accuracy": ok["region_accuracy"].median(),
             "worst region accuracy": ok["region_accuracy"].min(),
             "median free-run NRMSE": ok["free_run_nrmse_pwarx"].median(),

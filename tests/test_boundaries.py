@@ -40,7 +40,7 @@ def test_em_steps_refit_the_sub_models_with_the_regions():
     phi, y, mode = _record()
     start = THETAS + np.array([[[0.1], [-0.1]], [[0.1], [0.1]]])
     svm = SVMRegions().fit(phi, mode, 2)
-    thetas, coef, intercept, _ = mixture_of_experts(phi, y, start, svm.coef_, svm.intercept_,
+    thetas, coef, intercept, *_ = mixture_of_experts(phi, y, start, svm.coef_, svm.intercept_,
                                                     n_em=3)
     np.testing.assert_allclose(thetas, THETAS, atol=0.01)
     assert abs(_boundary(coef, intercept) - 0.3) < 0.02

@@ -21,7 +21,7 @@ from sklearn.utils._param_validation import Interval
 
 from .._typing import Float2D
 from .regions import SVMRegions
-from .submodels import robust_noise_var
+from .submodels import bias_compensated_refit, robust_noise_var
 
 
 def _log_likelihood(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
@@ -110,7 +110,8 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
 
 def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: Float2D,
                        intercept: np.ndarray, n_em: int = 3, ridge: float = 1e-5,
-                       max_iter: int = 200) -> tuple[np.ndarray, Float2D, np.ndarray, int]:
+                       max_iter: int = 200, lag_output: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, Float2D, np.ndarray, int, int]:
     """Regions and sub-models re-estimated together, as a mixture of experts gated by the
     regions, by ``n_em`` EM steps.
 
@@ -119,15 +120,22 @@ def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: 
     and refits every θ_i by least squares weighted by q_ik; the boundaries are placed once
     more at the end. A sub-model whose rows weigh less than d + 1 keeps its θ_i.
 
+    With ``lag_output`` (:func:`~.submodels.output_lag_columns`), the refit is
+    bias-compensated for the measurement noise in the output lags
+    (:func:`~.submodels.bias_compensated_refit`, with the same weights); where its guard
+    rejects the compensation the θ_i are weighted least squares.
+
     Returns
     -------
     thetas, coef, intercept
         The refitted sub-models and hyperplanes.
     n_iter : int
         L-BFGS iterations over all boundary placements.
+    n_uncompensated : int
+        Sub-model refits that kept least squares (the guard; 0 without ``lag_output``).
     """
     thetas = thetas.copy()
-    n_iter = 0
+    n_iter = n_uncompensated = 0
     d = phi.shape[1]
     for step in range(n_em + 1):
         coef, intercept, it = refine_boundaries(phi, target, thetas, coef, intercept, ridge,
@@ -139,11 +147,18 @@ def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: 
         joint = _log_likelihood(phi, target, thetas[live]) + log_softmax(
             phi @ coef[live].T + intercept[live], axis=1)
         post = np.exp(joint - logsumexp(joint, axis=1, keepdims=True))
+        fit = post.sum(axis=0) > d + 1
+        if lag_output is not None and fit.any():
+            refitted, _, compensated = bias_compensated_refit(phi, target, post[:, fit],
+                                                              lag_output)
+            thetas[live[fit]] = refitted
+            n_uncompensated += int((~compensated).sum())
+            continue
         for j, i in enumerate(live):
-            if post[:, j].sum() > d + 1:
+            if fit[j]:
                 w = np.sqrt(post[:, j])[:, None]
                 thetas[i] = np.linalg.lstsq(phi * w, target * w, rcond=None)[0]
-    return thetas, coef, intercept, n_iter
+    return thetas, coef, intercept, n_iter, n_uncompensated
 
 
 class ResidualRegions(SVMRegions):
@@ -170,6 +185,12 @@ class ResidualRegions(SVMRegions):
         L-BFGS iterations of each boundary placement.
     n_em : int, default 3
         EM steps refitting the sub-models (0: boundaries only, the sub-models kept).
+    compensate_bias : bool, default True
+        Refit the sub-models in the EM steps by bias-compensated least squares
+        (:func:`~.submodels.bias_compensated_refit`): measurement noise on the outputs also
+        sits in φ's output lags and biases least squares towards zero on them. Needs
+        ``output_lags`` at fit (the estimator passes them on the joint level route only);
+        without, least squares.
 
     Attributes
     ----------
@@ -181,6 +202,10 @@ class ResidualRegions(SVMRegions):
         The sub-models refitted with the regions (fits given ``thetas`` only).
     n_gate_iter_ : int
         L-BFGS iterations run (0: not refined).
+    n_uncompensated_ : int
+        EM refits of a sub-model that kept least squares because the compensation's guard
+        rejected it (σ̂² implausible, no convergence, or a matrix not positive definite);
+        0 without compensation.
 
     Examples
     --------
@@ -203,20 +228,24 @@ class ResidualRegions(SVMRegions):
         "gate_max_rows": [Interval(Integral, 2, None, closed="left"), None],
         "gate_max_iter": [Interval(Integral, 0, None, closed="left")],
         "n_em": [Interval(Integral, 0, None, closed="left")],
+        "compensate_bias": ["boolean"],
     }
 
     def __init__(self, C: float = 1.0, max_rows: int | None = 5000, random_state: int = 0,
                  tol: float = 1e-4, gate_ridge: float = 1e-5,
-                 gate_max_rows: int | None = 20000, gate_max_iter: int = 200, n_em: int = 3):
+                 gate_max_rows: int | None = 20000, gate_max_iter: int = 200, n_em: int = 3,
+                 compensate_bias: bool = True):
         super().__init__(C=C, max_rows=max_rows, random_state=random_state, tol=tol)
         self.gate_ridge = gate_ridge
         self.gate_max_rows = gate_max_rows
         self.gate_max_iter = gate_max_iter
         self.n_em = n_em
+        self.compensate_bias = compensate_bias
 
     def fit(self, phi: Float2D, labels: np.ndarray, n_regions: int | None = None,
             sample_weight: np.ndarray | None = None, target: Float2D | None = None,
-            thetas: np.ndarray | None = None) -> "ResidualRegions":
+            thetas: np.ndarray | None = None, output_lags: np.ndarray | None = None
+            ) -> "ResidualRegions":
         """Fit the SVM's hyperplanes on the labelled rows, then (with ``target`` and
         ``thetas``) refine them and the sub-models on the residuals.
 
@@ -228,16 +257,19 @@ class ResidualRegions(SVMRegions):
             y(k) of each row.
         thetas : ndarray of shape (s, d, m), optional
             The sub-models, one per region.
+        output_lags : ndarray of shape (d,), optional
+            :func:`~.submodels.output_lag_columns` of φ, for ``compensate_bias``.
 
         Raises
         ------
         ValueError
             If only one of ``target`` and ``thetas`` is given, or ``thetas`` does not have
-            one sub-model per region and φ's and y's widths.
+            one sub-model per region and φ's and y's widths, or ``output_lags`` is not one
+            entry per column of φ.
         """
         super().fit(phi, labels, n_regions, sample_weight)
         self.svm_coef_, self.svm_intercept_ = self.coef_, self.intercept_
-        self.n_gate_iter_ = 0
+        self.n_gate_iter_ = self.n_uncompensated_ = 0
         if (target is None) != (thetas is None):
             raise ValueError("refining the regions needs both target and thetas, got only "
                              + ("target" if thetas is None else "thetas"))
@@ -247,11 +279,17 @@ class ResidualRegions(SVMRegions):
         if thetas.shape != (self.n_regions_, phi.shape[1], target.shape[1]):
             raise ValueError(f"thetas must have shape (regions, d, m) = ({self.n_regions_}, "
                              f"{phi.shape[1]}, {target.shape[1]}), got {thetas.shape}")
+        if output_lags is not None and np.shape(output_lags) != (phi.shape[1],):
+            raise ValueError(f"output_lags must have one entry per column of phi "
+                             f"({phi.shape[1]}), got shape {np.shape(output_lags)}")
+        lag_output = (np.asarray(output_lags, int)
+                      if self.compensate_bias and output_lags is not None else None)
         rows = np.arange(phi.shape[0])
         if self.gate_max_rows is not None and rows.size > self.gate_max_rows:
             rows = np.sort(np.random.default_rng(self.random_state).choice(
                 rows.size, self.gate_max_rows, replace=False))
-        self.thetas_, self.coef_, self.intercept_, self.n_gate_iter_ = mixture_of_experts(
+        (self.thetas_, self.coef_, self.intercept_, self.n_gate_iter_,
+         self.n_uncompensated_) = mixture_of_experts(
             phi[rows], target[rows], thetas, self.svm_coef_, self.svm_intercept_, self.n_em,
-            self.gate_ridge, self.gate_max_iter)
+            self.gate_ridge, self.gate_max_iter, lag_output)
         return self

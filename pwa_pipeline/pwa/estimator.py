@@ -19,7 +19,7 @@ from .regions import SVMRegions
 from .regressors import Regressors, build_regressors
 from .structure_fit import fit_structure
 from .structures import COUPLINGS, FORMS
-from .submodels import ClusterCentres, RefinedSubModels
+from .submodels import ClusterCentres, RefinedSubModels, output_lag_columns
 
 #: The step parameters of :class:`PWARX`, in the order the fit runs them.
 STEPS = ("local_models", "clustering", "submodels", "regions")
@@ -318,8 +318,13 @@ class PWARX(ARXModelBase):
         if name == "regions":
             subs = fitted["submodels"]
             # a region step that places boundaries by the residuals gets the sub-models
+            params = inspect.signature(step.fit).parameters
             residuals = ({"target": reg.target, "thetas": subs.thetas_}
-                         if "thetas" in inspect.signature(step.fit).parameters else {})
+                         if "thetas" in params else {})
+            if "output_lags" in params and not self.structured:
+                # φ of eq. (3): the columns that carry the outputs' measurement noise
+                residuals["output_lags"] = output_lag_columns(reg.n_outputs, self.na,
+                                                              reg.phi.shape[1])
             return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
                             sample_weight=subs.weights_, **residuals)
         raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
