@@ -19,6 +19,7 @@ from sklearn.utils._param_validation import Interval
 from .._arrays import relabel_by_size
 from .._typing import Float2D
 from ._blas import _controller, single_threaded_blas
+from .neighbours import distinct_rows
 
 
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -712,7 +713,8 @@ def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
                           ) -> np.ndarray | None:
     """Steps 2–4 again on the rows no sub-model explains: the cluster label of each row, or
     None when there are too few rows or no cluster."""
-    n_rho = min(local.n_rho_, phi.shape[0] - 1)
+    n_distinct = len(distinct_rows(np.hstack([phi, target]))[0])  # as step 2 counts them
+    n_rho = min(local.n_rho_, n_distinct - 1)
     if n_rho <= phi.shape[1]:
         return None
     try:
