@@ -249,8 +249,7 @@ class PWARX(ARXModelBase):
             for name in STEPS:
                 fitted[name] = self.fit_step(name, reg, **fitted)
             subs, regions = fitted["submodels"], fitted["regions"]
-            # the θ_i that go with the regions: step 6's where it refits them (base_thetas)
-            return getattr(regions, "thetas_", subs.thetas_), regions, subs.n_submodels_
+            return _base_thetas(subs, regions), regions, subs.n_submodels_
 
         self.structure_fit_ = fit_structure(
             experiments, self.na, self.nb, self.affine, self.form, self.outputs,
@@ -281,9 +280,8 @@ class PWARX(ARXModelBase):
             self.na, self.nb, self.affine, region_of=self.regions_.predict)
 
     def base_thetas(self) -> np.ndarray:
-        """The θ_i before any refinement: the region step's when it refits them with the
-        regions (:class:`~.boundaries.ResidualRegions` has ``thetas_``), else step 5's."""
-        return getattr(self.regions_, "thetas_", self.submodels_.thetas_)
+        """The θ_i before any refinement (:func:`_base_thetas` of the fitted steps)."""
+        return _base_thetas(self.submodels_, self.regions_)
 
     def fit_step(self, name: str, reg: Regressors, **fitted: BaseEstimator) -> BaseEstimator:
         """Fit a clone of the step ``name`` (one of :data:`STEPS`) on the regressors.
@@ -377,3 +375,9 @@ class PWARX(ARXModelBase):
             return self.structure_.predict_phi(phi)
         region = self.regions_.predict(phi)
         return np.einsum("nd,ndm->nm", phi, self.thetas_[region])
+
+
+def _base_thetas(submodels: BaseEstimator, regions: BaseEstimator) -> np.ndarray:
+    """The θ_i that go with fitted regions: the region step's where it refits them with the
+    regions (:class:`~.boundaries.ResidualRegions` has ``thetas_``), else step 5's."""
+    return getattr(regions, "thetas_", submodels.thetas_)
