@@ -234,3 +234,9 @@ def test_a_negative_one_step_weight_is_refused():
     for kw in ({}, {"form": "velocity", "outputs": "decoupled"}):
         with pytest.raises(InvalidParameterError, match="'one_step_weight' parameter"):
             LinearARX(1, 1, refinement=step, **kw).fit(u, y)
+
+
+def test_the_warm_up_covers_the_lags_and_none_means_the_lags_alone():
+    assert OutputErrorRefinement(warmup=None).run_warmup(2, 3) == 3
+    assert OutputErrorRefinement(warmup=10).run_warmup(2, 3) == 10
+    assert OutputErrorRefinement(warmup=1).run_warmup(3, 2) == 3

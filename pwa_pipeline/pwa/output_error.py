@@ -569,13 +569,18 @@ class OutputErrorRefinement(BaseEstimator):
         self.patience = patience
         self.one_step_weight = one_step_weight
 
+    def run_warmup(self, lags: int, nb: int) -> int:
+        """Measured samples that start each run of a model with ``lags`` output lags:
+        ``warmup`` (None: none beyond the lags), at least max(lags, nb)."""
+        return max(lags, nb) if self.warmup is None else max(self.warmup, lags, nb)
+
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int, nb: int,
             affine: bool, region_of: Callable | None = None) -> "OutputErrorRefinement":
         """Refine ``thetas`` on the experiments ``(u, y)``; arguments as
         :func:`refine_output_error`."""
         self._validate_params()  # also when an estimator fits it nested (sklearn skips then)
-        warmup = max(na, nb) if self.warmup is None else max(self.warmup, na, nb)
+        warmup = self.run_warmup(na, nb)
         n = len(u)
         n_val = held_out(n, self.validation_fraction)
         self.validation_experiments_ = list(range(n - n_val, n))

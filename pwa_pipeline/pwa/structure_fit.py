@@ -152,8 +152,7 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
     if reg.phi.shape[0] < reg.phi.shape[1]:
         raise ValueError(f"too few samples: {reg.phi.shape[0]} regressor rows for "
                          f"{reg.phi.shape[1]} regressor entries")
-    warmup = max(lags, nb, WARMUP if refinement is None or refinement.warmup is None
-                 else refinement.warmup)
+    warmup = max(lags, nb, WARMUP) if refinement is None else refinement.run_warmup(lags, nb)
     held_uy = ([e[0] for e in held], [e[1] for e in held]) if held else None
     groups = [[j] for j in range(m)] if coupling == "decoupled" else [list(range(m))]
     chosen: dict[int, OutputModel] = {}
