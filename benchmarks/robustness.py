@@ -141,6 +141,7 @@ class TrueModel(ARXModelBase):
 
     affine = False
     form = "level"
+    outputs = "joint"
 
     def fit(self):
         self.n_inputs_, self.n_outputs_ = self.system.n_inputs, self.system.n_outputs

@@ -80,7 +80,7 @@ class LinearARX(ARXModelBase):
         self.n_inputs_ = pairs[0][0].shape[1]
         self.n_outputs_ = pairs[0][1].shape[1]
         self.n_features_in_ = self.n_inputs_
-        if self.form != "level" or self.outputs != "joint":
+        if self.structured:
             self.structure_fit_ = fit_structure(pairs, self.na, self.nb, self.affine, self.form,
                                                 self.outputs, refinement=self.refinement)
             self.theta_ = np.column_stack([t[0] for t in self.structure_fit_.model.thetas])

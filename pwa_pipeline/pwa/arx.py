@@ -14,11 +14,17 @@ from .structures import output_lags
 class ARXModelBase(BaseEstimator):
     """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
 
-    Subclasses set ``na``, ``nb``, ``affine`` and ``form`` as parameters, the fitted
+    Subclasses set ``na``, ``nb``, ``affine``, ``form`` and ``outputs`` as parameters, the fitted
     ``n_inputs_`` and ``n_outputs_``, and implement :meth:`_predict_phi`. φ holds
     :attr:`output_lags_` output lags: na, or na + 1 in the velocity form
     (:mod:`~.structures`).
     """
+
+    @property
+    def structured(self) -> bool:
+        """Whether the fit takes the structured route of :mod:`~.structure_fit` (velocity
+        form or decoupled outputs)."""
+        return self.form != "level" or self.outputs != "joint"
 
     @property
     def output_lags_(self) -> int:

@@ -239,7 +239,7 @@ class PWARX(ARXModelBase):
     def structured(self) -> bool:
         """Whether the fit takes the structured route (velocity form, decoupled outputs or
         user regions)."""
-        return self.form != "level" or self.outputs != "joint" or self.scheduling is not None
+        return super().structured or self.scheduling is not None
 
     def _fit_structured(self, experiments: list[tuple[Float2D, Float2D]]) -> "PWARX":
         t0 = time.perf_counter()
