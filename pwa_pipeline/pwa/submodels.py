@@ -705,7 +705,8 @@ class RefinedSubModels(BaseEstimator):
                 new = labels.copy()
                 new[rows[halves == 1]] = s
                 best = (gain, new, key)
-        split_once.add(best[2])
+        if best[2] is not None:
+            split_once.add(best[2])
         return best[1]
 
 
