@@ -1,12 +1,16 @@
 """Helpers shared by the benchmark scripts: result paths, timing, writing tables."""
 
 import json
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pandas as pd
 
 RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = RESULTS.parents[1]
 
 
 def write_table(df: pd.DataFrame, stem: str) -> None:
@@ -31,3 +35,17 @@ class Timer:
 
     def __exit__(self, *exc):
         self.seconds = time.perf_counter() - self._t0
+
+
+def in_fresh_process(module: str, args: list[str], tmp: Path, tree: Path = ROOT) -> dict:
+    """Run ``python -m <module> --worker <args…> <tmp>/out.json`` in a new process, with the
+    package of ``tree`` (a checkout or an unpacked commit) first on its path and the KUKA
+    data where this checkout finds them; returns the JSON the worker wrote."""
+    out = tmp / "out.json"
+    path = os.pathsep.join(filter(None, [str(tree), str(ROOT), os.environ.get("PYTHONPATH")]))
+    env = {**os.environ, "PYTHONPATH": path}
+    env.setdefault("PWA_KUKA_DATA", str(ROOT.parent / "shared" / "data" / "kuka-kr300"))
+    # run from tmp: with -m, the working directory would come first on sys.path
+    subprocess.run([sys.executable, "-m", module, "--worker", *args, str(out)], check=True,
+                   env=env, cwd=tmp)
+    return json.loads(out.read_text())

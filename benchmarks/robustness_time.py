@@ -20,14 +20,12 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import pandas as pd
 
-from benchmarks._common import RESULTS, write_json
+from benchmarks._common import RESULTS, in_fresh_process, write_json
 from benchmarks.speed import previous_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -61,16 +59,6 @@ def worker(fit: str, out: str) -> None:
         "submodels_seconds": model.timings_["submodels"]}))
 
 
-def run(fit: str, tree: Path, tmp: Path) -> dict:
-    out = tmp / "out.json"
-    env = {**os.environ, "PYTHONPATH": f"{tree}{os.pathsep}{ROOT}"}
-    env.setdefault("PWA_KUKA_DATA", str(ROOT.parent / "shared" / "data" / "kuka-kr300"))
-    # run from tmp: with -m, the working directory would come first on sys.path
-    subprocess.run([sys.executable, "-m", "benchmarks.robustness_time", "--worker", fit,
-                    str(out)], check=True, env=env, cwd=tmp)
-    return json.loads(out.read_text())
-
-
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", default="bc9084d,15191f1",
@@ -97,7 +85,8 @@ def main(argv=None) -> None:
             for fit in fits:
                 for version, tree in trees.items():
                     rows.append({"fit": fit, "version": version, "repeat": repeat,
-                                 **run(fit, tree, tmp)})
+                                 **in_fresh_process("benchmarks.robustness_time",
+                                                         [fit], tmp, tree)})
     load_end = os.getloadavg()[0]
     df = pd.DataFrame(rows)
     table = (df.groupby(["fit", "version"], sort=False)

@@ -24,7 +24,6 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -32,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, write_json
+from benchmarks._common import RESULTS, in_fresh_process, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,14 +98,6 @@ def worker(case: str, size: int, out: str) -> None:
         "n_submodels": None if error else est.n_submodels_, "error": error}, default=float))
 
 
-def run(case: str, size: int, tmp: Path) -> dict:
-    out = tmp / "out.json"
-    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    subprocess.run([sys.executable, "-m", "benchmarks.scale", "--worker", case, str(size),
-                    str(out)], check=True, env=env, cwd=tmp)
-    return json.loads(out.read_text())
-
-
 def exponent(sizes, values) -> float:
     """b of values ∝ sizes^b, least squares on the logarithms."""
     return float(np.polyfit(np.log(sizes), np.log(values), 1)[0])
@@ -129,7 +120,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for case, size in cases:
             try:
-                res = run(case, size, Path(tmp))
+                res = in_fresh_process("benchmarks.scale", [case, str(size)], Path(tmp))
             except subprocess.CalledProcessError as exc:
                 print(f"{case} {size}: failed ({exc})")
                 continue

@@ -31,7 +31,6 @@ import json
 import os
 import statistics
 import subprocess
-import sys
 import tarfile
 import tempfile
 import time
@@ -41,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, write_json
+from benchmarks._common import RESULTS, in_fresh_process, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("default", "default, n_rho=61", "paper", "plain steps 1-4")
@@ -106,17 +105,6 @@ def previous_tree(commit: str, into: Path) -> Path | None:
     with tarfile.open(fileobj=BytesIO(blob)) as tar:
         tar.extractall(into, filter="data")
     return into
-
-
-def run(variant: str, tmp: Path, pythonpath: Path) -> dict:
-    out = tmp / "out.json"
-    env = {**os.environ, "PYTHONPATH": f"{pythonpath}{os.pathsep}{ROOT}"}
-    kuka = os.environ.get("PWA_KUKA_DATA") or str(ROOT.parent / "shared" / "data" / "kuka-kr300")
-    env["PWA_KUKA_DATA"] = kuka
-    # run from tmp: with -m, the working directory would come first on sys.path
-    subprocess.run([sys.executable, "-m", "benchmarks.speed", "--worker", variant, str(out)],
-                   check=True, env=env, cwd=tmp)
-    return json.loads(out.read_text())
 
 
 def crammer_singer_objective(svm: "CrammerSinger", z: np.ndarray, labels: np.ndarray) -> float:
@@ -222,7 +210,7 @@ def main(argv=None) -> None:
         for i in range(args.repeats):
             for variant, path in jobs:
                 name = variant if path == ROOT else f"previous {variant}"
-                res = run(variant, tmp, path)
+                res = in_fresh_process("benchmarks.speed", [variant], tmp, path)
                 runs.setdefault(name, []).append(res)
                 print(f"run {i + 1}, {name}: {res['seconds']:.2f} s, peak {res['peak_mb']:.0f} MB",
                       flush=True)
