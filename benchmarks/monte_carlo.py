@@ -2,11 +2,11 @@
 
 For each scenario (N = 4000 at 30 dB — the targets —, 20 dB, and N = 1000 at 30 dB) and each
 of ``--seeds`` seeds from ``--first-seed`` (default 20000: seeds never used while tuning the
-default; seeds 0–19, which earlier versions used, were): fit both settings on the seed's record, match sub-models to the true
-modes by parameters (Hungarian), and record the number of sub-models, the largest parameter
-error (when exactly 4 are found), the share of samples whose region (SVM on φ) is the true
-mode (samples of unmatched sub-models count as wrong), and the free-run NRMSE on a fresh
-validation record (seed + 1000, 10-sample warm-up).
+default; seeds 0–19, which earlier versions used, were): fit both settings on the seed's
+record, match sub-models to the true modes by parameters (Hungarian), and record the number
+of sub-models, the largest parameter error (when exactly 4 are found), the share of samples
+whose region (SVM on φ) is the true mode (samples of unmatched sub-models count as wrong),
+and the free-run NRMSE on a fresh validation record (seed + 1000, 10-sample warm-up).
 
 Writes results/monte_carlo.csv (one row per scenario, setting and seed) and
 results/monte_carlo.md (the summary). Both settings are the sets ``default`` and ``paper`` of

@@ -92,7 +92,8 @@ def test_evaluation_rejects_bad_input():
     u, y = rng.normal(size=(50, 1)), rng.normal(size=(50, 1))
     with pytest.raises(ValueError, match="u has 2 input.*fitted with 1"):
         evaluate(model, np.hstack([u, u]), y)
-    with pytest.raises(ValueError, match="warm-up too short: y_init has 1 row.*at least max\\(output lags, nb\\) = 2"):
+    with pytest.raises(ValueError, match="warm-up too short: y_init has 1 row.*"
+                                         "at least max\\(output lags, nb\\) = 2"):
         evaluate(model, u, y, warmup=1)
     y_nan = y.copy()
     y_nan[7] = np.nan

@@ -6,8 +6,14 @@ import pytest
 from pwa_pipeline import PWARX
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, RefinedSubModels, SVMRegions
-from pwa_pipeline.pwa.submodels import (least_squares, merge_indistinguishable, refine, refit,
-                                       separable, split_gain)
+from pwa_pipeline.pwa.submodels import (
+    least_squares,
+    merge_indistinguishable,
+    refine,
+    refit,
+    separable,
+    split_gain,
+)
 
 SIGMA = 0.05
 

@@ -299,8 +299,9 @@ class MLflowTracker(dg.ConfigurableResource):
         """Create, fill and close one run; returns its id.
 
         ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
-        matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are). ``model`` is logged as the run's MLflow
-        model (a pyfunc with signature and input example, registered as
+        matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are).
+        ``model`` is logged as the run's MLflow model (a pyfunc with signature and input
+        example, registered as
         ``<prefix>.<dataset>.<method>``) and its training table as the run's dataset.
         ``run_name`` defaults to ``<method>|<hparams>``.
         """
