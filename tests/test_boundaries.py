@@ -5,7 +5,10 @@ import pytest
 
 from pwa_pipeline import PWARX
 from pwa_pipeline.pwa import ResidualRegions, SVMRegions
-from pwa_pipeline.pwa.boundaries import mixture_of_experts
+from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, make_hure_vasak
+from pwa_pipeline.pwa.boundaries import denoised_regressors, mixture_of_experts, previous_rows
+from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.pwa.submodels import output_lag_columns
 
 THETAS = np.array([[[1.0], [0.5]], [[-1.0], [0.5]]])  # y = ±x + 0.5·v, boundary at x = 0.3
 
@@ -76,5 +79,51 @@ def test_the_estimator_passes_the_sub_models_and_uses_the_refitted_ones(sim_30db
     model = PWARX(na=1, nb=1).fit(sim_30db.u[:1500], sim_30db.y[:1500])
     assert isinstance(model.regions_, ResidualRegions) and model.regions_.n_gate_iter_ > 0
     assert model.thetas_ is model.regions_.thetas_ is model.base_thetas()
+    plain = PWARX(na=1, nb=1, regions=ResidualRegions(denoise=False)).fit(
+        sim_30db.u[:1500], sim_30db.y[:1500])
+    assert not np.allclose(plain.regions_.coef_, model.regions_.coef_)  # experiments passed
     paper = PWARX.paper(1, 1, n_rho=12, eps=0.3, min_pts=8)
     assert type(paper.steps()["regions"]) is SVMRegions
+
+
+def test_previous_rows_stop_at_each_experiment():
+    np.testing.assert_array_equal(previous_rows(np.array([0, 0, 0, 1, 1, 2])),
+                                  [-1, 0, 1, -1, 3, -1])
+
+
+def _hure_vasak_regressors(seed=0):
+    sim = make_hure_vasak(4000, 30.0, seed=seed)
+    reg = build_regressors([(sim.u, sim.y)], 1, 1, False)
+    clean = build_regressors([(sim.u, sim.y_clean)], 1, 1, False).phi
+    return sim, reg, clean, output_lag_columns(2, 1, 4)
+
+
+def test_denoised_output_lags_are_closer_to_the_noise_free_outputs():
+    sim, reg, clean, lags = _hure_vasak_regressors()
+    post = np.eye(4)[sim.modes[1:]]
+    sigma2 = (sim.y - sim.y_clean).var(axis=0)
+    denoised = denoised_regressors(reg.phi, reg.target, HURE_VASAK_THETAS, post, sigma2, lags,
+                                   previous_rows(reg.experiment), reg.phi)
+    ratio = ((denoised - clean)[:, :2] ** 2).mean(axis=0) / (
+        (reg.phi - clean)[:, :2] ** 2).mean(axis=0)
+    assert np.all(ratio < 0.5)  # measured 0.45 and 0.32: measurement and prediction averaged
+    np.testing.assert_array_equal(denoised[:, 2:], reg.phi[:, 2:])  # the inputs are kept
+    np.testing.assert_array_equal(denoised[0], reg.phi[0])  # no previous row: kept
+
+
+def test_the_gate_sees_denoised_lags_only_with_the_experiments():
+    sim, reg, _, lags = _hure_vasak_regressors(seed=1)
+    modes = sim.modes[1:]
+    fits = {key: ResidualRegions(denoise=key[0]).fit(
+        reg.phi, modes, 4, target=reg.target, thetas=HURE_VASAK_THETAS, output_lags=lags,
+        experiment=reg.experiment if key[1] else None)
+        for key in [(True, True), (True, False), (False, True)]}
+    np.testing.assert_array_equal(fits[True, False].coef_, fits[False, True].coef_)
+    assert not np.allclose(fits[True, True].coef_, fits[True, False].coef_)
+    fresh = make_hure_vasak(4000, None, seed=101)
+    phi = build_regressors([(fresh.u, fresh.y)], 1, 1, False).phi
+    accuracy = {k: np.mean(r.predict(phi) == fresh.modes[1:]) for k, r in fits.items()}
+    assert accuracy[True, True] > accuracy[True, False]  # measured 99.52 % against 99.45 %
+    with pytest.raises(ValueError, match=r"experiment must have one entry per row of phi"):
+        ResidualRegions().fit(reg.phi, modes, 4, target=reg.target, thetas=HURE_VASAK_THETAS,
+                              experiment=reg.experiment[1:])

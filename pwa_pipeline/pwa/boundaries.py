@@ -56,8 +56,8 @@ def gate_log_likelihood(z: Float2D, log_lik: np.ndarray, ridge: float):
 
 
 def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: Float2D,
-                      intercept: np.ndarray, ridge: float = 1e-5, max_iter: int = 200
-                      ) -> tuple[Float2D, np.ndarray, int]:
+                      intercept: np.ndarray, ridge: float = 1e-7, max_iter: int = 200,
+                      gate_phi: Float2D | None = None) -> tuple[Float2D, np.ndarray, int]:
     """Move the hyperplanes of φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j) to where the
     sub-models' residuals switch.
 
@@ -78,10 +78,13 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
     thetas : ndarray of shape (s, d, m)
     coef, intercept : ndarrays of shape (s, d) and (s,)
         The starting hyperplanes, e.g. an :class:`~pwa_pipeline.pwa.regions.SVMRegions`'s.
-    ridge : float, default 1e-5
+    ridge : float, default 1e-7
         Penalty on the squared slopes in z-scored units.
     max_iter : int, default 200
         L-BFGS iterations.
+    gate_phi : ndarray of shape (n, d), optional
+        The regressors the gate sees, when not φ (:func:`denoised_regressors`); the
+        residuals are φ's.
 
     Returns
     -------
@@ -94,9 +97,10 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
     if live.size <= 1:
         return coef, intercept, 0
     log_lik = _log_likelihood(phi, target, thetas[live])
-    mean, std = phi.mean(axis=0), phi.std(axis=0)
+    x = phi if gate_phi is None else gate_phi
+    mean, std = x.mean(axis=0), x.std(axis=0)
     cols = std > 0
-    z = np.column_stack([(phi[:, cols] - mean[cols]) / std[cols], np.ones(phi.shape[0])])
+    z = np.column_stack([(x[:, cols] - mean[cols]) / std[cols], np.ones(x.shape[0])])
     v0 = np.column_stack([coef[np.ix_(live, np.flatnonzero(cols))] * std[cols],
                           intercept[live] + coef[live][:, cols] @ mean[cols]])
     result = minimize(gate_log_likelihood(z, log_lik, ridge), v0.ravel(), jac=True,
@@ -108,9 +112,59 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
     return coef, intercept, int(result.nit)
 
 
+def denoised_regressors(phi: Float2D, target: Float2D, thetas: np.ndarray, post: np.ndarray,
+                        sigma2: np.ndarray, lag_output: np.ndarray, previous: np.ndarray,
+                        gate_phi: Float2D) -> Float2D:
+    """φ with its output lags replaced by estimates of the noise-free outputs.
+
+    The measured y_q(k) = y⁰_q(k) + e_q(k) and the mixture's one-step prediction
+    ŷ_q(k) = Σ_i q_ik θ_i,qᵀ φ̃(k) (posterior q_ik; φ̃ = ``gate_phi``, the last estimate)
+    are averaged with inverse-variance weights: e_q has variance σ_q², the prediction's
+    error Σ_c θ_i,cq² σ²_q(c) from the noise in φ's output lags (taken at σ², an upper
+    bound once φ̃ is denoised). Row k's lag-1 columns become row ``previous[k]``'s average,
+    its lag-j columns that row's lag-(j − 1) columns; rows without a previous row
+    (``previous`` −1, the first of each experiment) keep their measured lags.
+
+    Parameters
+    ----------
+    phi, target : ndarrays of shape (n, d) and (n, m)
+    thetas : ndarray of shape (s, d, m)
+    post : ndarray of shape (n, s)
+        Posterior probability of each row under each sub-model.
+    sigma2 : ndarray of shape (m,)
+        Output noise variances.
+    lag_output : ndarray of shape (d,)
+        :func:`~.submodels.output_lag_columns`.
+    previous : ndarray of shape (n,)
+        Index of the row one sample earlier in the same experiment, −1 where none.
+    gate_phi : ndarray of shape (n, d)
+        φ̃ for the prediction (φ itself on the first call).
+    """
+    pred = np.einsum("ns,snm->nm", post, gate_phi @ thetas)
+    pred_var = np.maximum(np.mean((target - pred) ** 2, axis=0) - sigma2, 1e-3 * sigma2)
+    weight = pred_var / (pred_var + sigma2)
+    clean = weight * target + (1 - weight) * pred
+    out = phi.copy()
+    has = np.flatnonzero(previous >= 0)
+    for q in range(target.shape[1]):
+        cols = np.flatnonzero(lag_output == q)  # lags 1 … na of output q, in order
+        for j, c in enumerate(cols):
+            out[has, c] = clean[previous[has], q] if j == 0 else out[previous[has], cols[j - 1]]
+    return out
+
+
+def previous_rows(experiment: np.ndarray) -> np.ndarray:
+    """Index of the row one sample earlier in the same experiment (rows in time order within
+    each, as :func:`~.regressors.build_regressors` stacks them), −1 for each first row."""
+    previous = np.arange(-1, experiment.size - 1)
+    previous[np.flatnonzero(np.diff(experiment, prepend=np.nan) != 0)] = -1
+    return previous
+
+
 def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: Float2D,
-                       intercept: np.ndarray, n_em: int = 3, ridge: float = 1e-5,
-                       max_iter: int = 200, lag_output: np.ndarray | None = None
+                       intercept: np.ndarray, n_em: int = 3, ridge: float = 1e-7,
+                       max_iter: int = 200, lag_output: np.ndarray | None = None,
+                       previous: np.ndarray | None = None
                        ) -> tuple[np.ndarray, Float2D, np.ndarray, int, int]:
     """Regions and sub-models re-estimated together, as a mixture of experts gated by the
     regions, by ``n_em`` EM steps.
@@ -137,22 +191,26 @@ def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: 
     thetas = thetas.copy()
     n_iter = n_uncompensated = 0
     d = phi.shape[1]
+    gate_phi = phi
     for step in range(n_em + 1):
         coef, intercept, it = refine_boundaries(phi, target, thetas, coef, intercept, ridge,
-                                                max_iter)
+                                                max_iter, gate_phi)
         n_iter += it
         live = np.flatnonzero(np.isfinite(intercept))
         if step == n_em or live.size <= 1:
             break
         joint = _log_likelihood(phi, target, thetas[live]) + log_softmax(
-            phi @ coef[live].T + intercept[live], axis=1)
+            gate_phi @ coef[live].T + intercept[live], axis=1)
         post = np.exp(joint - logsumexp(joint, axis=1, keepdims=True))
         fit = post.sum(axis=0) > d + 1
         if lag_output is not None and fit.any():
-            refitted, _, compensated = bias_compensated_refit(phi, target, post[:, fit],
-                                                              lag_output)
+            refitted, sigma2, compensated = bias_compensated_refit(phi, target, post[:, fit],
+                                                                   lag_output)
             thetas[live[fit]] = refitted
             n_uncompensated += int((~compensated).sum())
+            if previous is not None and sigma2 is not None:
+                gate_phi = denoised_regressors(phi, target, thetas[live], post, sigma2,
+                                               lag_output, previous, gate_phi)
             continue
         for j, i in enumerate(live):
             if fit[j]:
@@ -177,7 +235,7 @@ class ResidualRegions(SVMRegions):
     ----------
     C, max_rows, random_state, tol
         Those of :class:`~.regions.SVMRegions`.
-    gate_ridge : float, default 1e-5
+    gate_ridge : float, default 1e-7
         ``ridge`` of :func:`refine_boundaries`.
     gate_max_rows : int, optional, default 20000
         Refine on at most this many rows (a seeded random choice). None: every row.
@@ -229,23 +287,25 @@ class ResidualRegions(SVMRegions):
         "gate_max_iter": [Interval(Integral, 0, None, closed="left")],
         "n_em": [Interval(Integral, 0, None, closed="left")],
         "compensate_bias": ["boolean"],
+        "denoise": ["boolean"],
     }
 
     def __init__(self, C: float = 1.0, max_rows: int | None = 5000, random_state: int = 0,
-                 tol: float = 1e-4, gate_ridge: float = 1e-5,
+                 tol: float = 1e-4, gate_ridge: float = 1e-7,
                  gate_max_rows: int | None = 20000, gate_max_iter: int = 200, n_em: int = 3,
-                 compensate_bias: bool = True):
+                 compensate_bias: bool = True, denoise: bool = True):
         super().__init__(C=C, max_rows=max_rows, random_state=random_state, tol=tol)
         self.gate_ridge = gate_ridge
         self.gate_max_rows = gate_max_rows
         self.gate_max_iter = gate_max_iter
         self.n_em = n_em
         self.compensate_bias = compensate_bias
+        self.denoise = denoise
 
     def fit(self, phi: Float2D, labels: np.ndarray, n_regions: int | None = None,
             sample_weight: np.ndarray | None = None, target: Float2D | None = None,
-            thetas: np.ndarray | None = None, output_lags: np.ndarray | None = None
-            ) -> "ResidualRegions":
+            thetas: np.ndarray | None = None, output_lags: np.ndarray | None = None,
+            experiment: np.ndarray | None = None) -> "ResidualRegions":
         """Fit the SVM's hyperplanes on the labelled rows, then (with ``target`` and
         ``thetas``) refine them and the sub-models on the residuals.
 
@@ -259,6 +319,8 @@ class ResidualRegions(SVMRegions):
             The sub-models, one per region.
         output_lags : ndarray of shape (d,), optional
             :func:`~.submodels.output_lag_columns` of φ, for ``compensate_bias``.
+        experiment : ndarray of shape (n,), optional
+            Experiment of each row (rows in time order within each), for ``denoise``.
 
         Raises
         ------
@@ -279,6 +341,9 @@ class ResidualRegions(SVMRegions):
         if thetas.shape != (self.n_regions_, phi.shape[1], target.shape[1]):
             raise ValueError(f"thetas must have shape (regions, d, m) = ({self.n_regions_}, "
                              f"{phi.shape[1]}, {target.shape[1]}), got {thetas.shape}")
+        if experiment is not None and np.shape(experiment) != (phi.shape[0],):
+            raise ValueError(f"experiment must have one entry per row of phi "
+                             f"({phi.shape[0]}), got shape {np.shape(experiment)}")
         if output_lags is not None and np.shape(output_lags) != (phi.shape[1],):
             raise ValueError(f"output_lags must have one entry per column of phi "
                              f"({phi.shape[1]}), got shape {np.shape(output_lags)}")
@@ -288,8 +353,14 @@ class ResidualRegions(SVMRegions):
         if self.gate_max_rows is not None and rows.size > self.gate_max_rows:
             rows = np.sort(np.random.default_rng(self.random_state).choice(
                 rows.size, self.gate_max_rows, replace=False))
+        previous = None
+        if self.denoise and lag_output is not None and experiment is not None:
+            # the previous row of each kept row, as a position among the kept rows
+            position = np.full(phi.shape[0] + 1, -1)
+            position[rows] = np.arange(rows.size)
+            previous = position[previous_rows(np.asarray(experiment))[rows]]
         (self.thetas_, self.coef_, self.intercept_, self.n_gate_iter_,
          self.n_uncompensated_) = mixture_of_experts(
             phi[rows], target[rows], thetas, self.svm_coef_, self.svm_intercept_, self.n_em,
-            self.gate_ridge, self.gate_max_iter, lag_output)
+            self.gate_ridge, self.gate_max_iter, lag_output, previous)
         return self

@@ -323,6 +323,8 @@ class PWARX(ARXModelBase):
                 # φ of eq. (3): the columns that carry the outputs' measurement noise
                 residuals["output_lags"] = output_lag_columns(reg.n_outputs, self.na,
                                                               reg.phi.shape[1])
+            if "experiment" in params and not self.structured:
+                residuals["experiment"] = reg.experiment
             return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
                             sample_weight=subs.weights_, **residuals)
         raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
