@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from pwa_pipeline import PWARX
-from pwa_pipeline.pwa import ResidualRegions, SVMRegions
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, make_hure_vasak
+from pwa_pipeline.pwa import ResidualRegions, SVMRegions
 from pwa_pipeline.pwa.boundaries import denoised_regressors, mixture_of_experts, previous_rows
 from pwa_pipeline.pwa.regressors import build_regressors
 from pwa_pipeline.pwa.submodels import output_lag_columns
