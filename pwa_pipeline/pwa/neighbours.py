@@ -36,11 +36,12 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     How: points are put in a spatial order (recursive median splits, each along the
     principal axis of the points it splits), so that a block of rows meets most of its
     neighbours in the columns next to it. Each row's k-th smallest distance among
-    ``_WINDOW`` such columns bounds its k-th nearest from above; then every tile of the distance matrix above the diagonal is
-    computed once, in float32 (‖p‖² + ‖q‖² − 2 p·q as one product), and kept only where a
-    distance is within its row's bound, for both of the tile's row blocks. Among the kept
-    candidates (about three times k a row on the robot), those float32 cannot rank against the k-th (within
-    its rounding bound) are decided on exact float64 distances Σ_j (x_pj − x_qj)².
+    ``_WINDOW`` such columns bounds its k-th nearest from above; then every tile of the
+    distance matrix above the diagonal is computed once, in float32 (‖p‖² + ‖q‖² − 2 p·q as
+    one product), and kept only where a distance is within its row's bound, for both of the
+    tile's row blocks. Among the kept candidates (about three times k a row on the robot),
+    those float32 cannot rank against the k-th (within its rounding bound) are decided on
+    exact float64 distances Σ_j (x_pj − x_qj)².
     Coinciding points are searched once, with their multiplicity.
 
     Memory: the candidates (about 12 bytes each, a few hundred a point) and one tile per
