@@ -340,3 +340,81 @@ def test_modes_three_noise_deviations_apart_are_split_from_the_threshold_start()
     assert gain > 2
     agree = np.mean(halves == mode)
     assert max(agree, 1 - agree) > 0.9
+
+
+def _axis_start_per_cut(phi, target, min_size, quantiles=np.linspace(0.1, 0.9, 9)):
+    """_axis_start as a loop of least-squares fits per cut (the reference it must match)."""
+    best, out = np.inf, None
+    for j in np.flatnonzero(phi.std(axis=0) > 0):
+        for cut in np.quantile(phi[:, j], quantiles):
+            side = phi[:, j] > cut
+            if min(side.sum(), (~side).sum()) < max(min_size, phi.shape[1] + 1):
+                continue
+            rss = sum(((target[r] - phi[r] @ least_squares(phi[r], target[r])) ** 2).sum(axis=0)
+                      for r in (side, ~side))
+            cost = float(np.log(rss).sum())
+            if cost < best:
+                best, out = cost, side.astype(int)
+    return out
+
+
+@pytest.mark.parametrize("case", ["white", "held", "ill-conditioned side"])
+def test_the_threshold_start_equals_least_squares_per_cut(case):
+    """_axis_start solves every cut's two sides from summed normal equations at once; the
+    split is the one a least-squares fit per side and cut picks."""
+    from pwa_pipeline.pwa.submodels import _axis_start
+
+    rng = np.random.default_rng(4)
+    n = 600
+    x = rng.uniform(-1, 1, (n, 3))
+    if case == "held":  # each value held 20 rows: many rows tie at a cut
+        x = np.repeat(x[:n // 20], 20, axis=0)
+    if case == "ill-conditioned side":  # columns 1 and 2 ~collinear where column 0 < 0
+        x[:, 2] = np.where(x[:, 0] > 0, x[:, 2], x[:, 1] + 1e-9 * x[:, 2])
+    phi = np.column_stack([x, np.ones(n)])
+    mode = (0.6 * phi[:, 0] - phi[:, 1] > 0.1).astype(int)
+    thetas = rng.normal(size=(2, 4, 2))
+    y = np.einsum("nd,ndm->nm", phi, thetas[mode]) + 0.05 * rng.normal(size=(n, 2))
+    for min_size in (8, 250):
+        expected = _axis_start_per_cut(phi, y, min_size)
+        assert expected is not None
+        np.testing.assert_array_equal(_axis_start(phi, y, min_size), expected)
+
+
+def test_memoised_sweeps_repeat_none_and_change_nothing(monkeypatch):
+    """refine with a memo gives the result without one, bit for bit, with and without
+    regions on one memo, and a repeated call fits no region SVM."""
+    import pwa_pipeline.pwa.submodels as submodels
+
+    phi, y, mode, _ = _two_modes(gap=3.0)  # overlapping: the sweeps do not settle at once
+    start = (phi[:, 0] > 0.4).astype(int)
+    plain = [refine(phi, y, start, 5, 20, regions) for regions in (None, SVMRegions())]
+    memo = {}
+    for _ in range(2):
+        for regions, expected in zip((None, SVMRegions()), plain):
+            got = refine(phi, y, start, 5, 20, regions, memo)
+            for a, b in zip(got, expected):
+                np.testing.assert_array_equal(a, b)
+    assert plain[1][3] >= 2
+    fits = []
+    real = SVMRegions.fit
+    monkeypatch.setattr(SVMRegions, "fit", lambda self, *a, **k: fits.append(1)
+                        or real(self, *a, **k))
+    submodels.refine(phi, y, start, 5, 20, SVMRegions(), memo)
+    assert fits == []
+    with pytest.raises(ValueError, match="memo holds sweeps of other data"):
+        refine(phi.copy(), y, start, 5, 20, SVMRegions(), memo)
+
+
+def test_sweeps_stop_when_few_rows_move_and_the_sub_models_are_kept():
+    """refine's tol: a sweep that moves at most tol × n rows ends it, unless it changed the
+    number of sub-models (a dropped one is re-assigned and the sweeps go on)."""
+    phi, y, mode, _ = _two_modes(gap=40.0)
+    start = (phi[:, 0] > 0.5).astype(int)
+    assert refine(phi, y, start, 5, 20, SVMRegions(), tol=1.0)[3] == 1
+    exact = refine(phi, y, start, 5, 20, SVMRegions())
+    assert exact[3] >= 2  # the first sweep moved rows
+    tiny = start.copy()
+    tiny[:3] = 2  # a third sub-model of 3 rows, below min_size: the first sweep drops it
+    dropped = refine(phi, y, tiny, 5, 20, SVMRegions(), tol=1.0)
+    assert dropped[0].shape[0] == 2 and dropped[3] == 2

@@ -33,14 +33,15 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     the k-th place lie within ~1e-15 relative of each other, and at exact ties (broken by
     index here, by its heap there).
 
-    How: points are put in a spatial order (recursive median splits along the widest of the
-    principal axes), so that a block of rows meets most of its neighbours in the columns
-    next to it. Each row's k-th smallest distance among ``_WINDOW`` such columns bounds its
-    k-th nearest from above; then every tile of the distance matrix above the diagonal is
-    computed once, in float32 (‖p‖² + ‖q‖² − 2 p·q as one product), and kept only where a
-    distance is within its row's bound, for both of the tile's row blocks. Among the kept
-    candidates (a few hundred a row), those float32 cannot rank against the k-th (within
-    its rounding bound) are decided on exact float64 distances Σ_j (x_pj − x_qj)².
+    How: points are put in a spatial order (recursive median splits, each along the
+    principal axis of the points it splits), so that a block of rows meets most of its
+    neighbours in the columns next to it. Each row's k-th smallest distance among
+    ``_WINDOW`` such columns bounds its k-th nearest from above; then every tile of the
+    distance matrix above the diagonal is computed once, in float32 (‖p‖² + ‖q‖² − 2 p·q as
+    one product), and kept only where a distance is within its row's bound, for both of the
+    tile's row blocks. Among the kept candidates (about three times k a row on the robot),
+    those float32 cannot rank against the k-th (within its rounding bound) are decided on
+    exact float64 distances Σ_j (x_pj − x_qj)².
     Coinciding points are searched once, with their multiplicity.
 
     Memory: the candidates (about 12 bytes each, a few hundred a point) and one tile per
@@ -215,17 +216,18 @@ def _exact_sq(x: Float2D, p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def _spatial_order(x: Float2D, leaf: int = 64) -> np.ndarray:
     """An order of the points in which nearby points tend to be close: recursive median
-    splits, each along the widest coordinate of the principal axes."""
-    z = x @ np.linalg.eigh(x.T @ x)[1]
+    splits, each along the principal axis of the points being split (their widest spread
+    in any direction, so that a block of the order is compact in all of them)."""
     order = np.arange(len(x))
     todo = [(0, len(x))]
     while todo:
         a, b = todo.pop()
         if b - a <= leaf:
             continue
-        seg = z[order[a:b]]
-        dim = int(np.argmax(seg.max(axis=0) - seg.min(axis=0)))
+        seg = x[order[a:b]]
+        seg = seg - seg.mean(axis=0)
+        axis = np.linalg.eigh(seg.T @ seg)[1][:, -1]
         mid = (b - a) // 2
-        order[a:b] = order[a:b][np.argpartition(seg[:, dim], mid)]
+        order[a:b] = order[a:b][np.argpartition(seg @ axis, mid)]
         todo += [(a, a + mid), (a + mid, b)]
     return order

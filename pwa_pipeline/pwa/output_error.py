@@ -105,10 +105,15 @@ class _NormalEquations:
 
 
 class _Runs:
-    """The training experiments padded to one length, simulated in lockstep."""
+    """The training experiments padded to one length, simulated in lockstep.
+
+    ``simulated`` (default: every output) are the outputs that run free; the others keep
+    their measured values (with decoupled per-output models they do not enter the
+    simulated ones).
+    """
 
     def __init__(self, u: list[Float2D], y: list[Float2D], na: int, nb: int, affine: bool,
-                 warmup: int):
+                 warmup: int, simulated: list[int] | None = None):
         self.na, self.nb, self.affine, self.warmup = na, nb, affine, warmup
         self.lengths = np.array([len(e) for e in y])
         n, e = self.lengths.max(), len(y)
@@ -116,7 +121,8 @@ class _Runs:
         self.y = np.zeros((e, n, y[0].shape[1]))
         for i, (ue, ye) in enumerate(zip(u, y, strict=True)):
             self.u[i, :len(ue)], self.y[i, :len(ye)] = ue, ye
-        self.n_scored = int(np.maximum(self.lengths - warmup, 0).sum()) * self.y.shape[2]
+        self.simulated = list(range(self.y.shape[2]) if simulated is None else simulated)
+        self.n_scored = int(np.maximum(self.lengths - warmup, 0).sum()) * len(self.simulated)
 
     def phi(self, ysim: np.ndarray, k: int) -> Float2D:
         """φ̂(k) of every experiment, in eq. (3)'s order, from the simulated outputs."""
@@ -128,88 +134,42 @@ class _Runs:
 
     def simulate(self, thetas: np.ndarray, region_of: Callable | None,
                  sensitivities: bool) -> tuple[float, np.ndarray | None, np.ndarray | None]:
-        """Cost J / (scored samples · outputs), and JᵀJ and Jᵀr when ``sensitivities``.
+        """Cost J / (scored samples · outputs), and JᵀJ and Jᵀr when ``sensitivities``, of
+        parameter matrices θ (s, d, m) flattened as (region, regressor, output).
 
         Returns inf (and no normal equations) when the run leaves the finite numbers.
         """
-        with np.errstate(over="ignore", invalid="ignore"):
-            return self._run(thetas, region_of, sensitivities)
-
-    def _run(self, thetas: np.ndarray, region_of: Callable | None, sensitivities: bool):
         s, d, m = thetas.shape
-        e, n = self.y.shape[:2]
-        p, w, na = s * d * m, self.warmup, self.na
-        ysim = self.y.copy()
-        rows, outs = np.arange(e)[:, None, None], np.arange(m)[None, :, None]
-        lag_rows = [[q * na + lag - 1 for q in range(m)] for lag in range(1, na + 1)]
-        sens = np.zeros((na + 1, e, m, p))  # ring buffer of dŷ(k)/dθ
-        normal = _NormalEquations(p)
-        cost = 0.0
-        for k in range(w, n):
-            active = self.lengths > k
-            phi = self.phi(ysim, k)
-            region = np.zeros(e, dtype=int) if region_of is None else region_of(phi)
-            theta_k = thetas[region]                                   # (e, d, m)
-            yk = np.einsum("ed,edm->em", phi, theta_k)
-            ysim[:, k] = np.where(active[:, None], yk, self.y[:, k])
-            r = np.where(active[:, None], yk - self.y[:, k], 0.0)
-            cost += float(np.sum(r * r))
-            if not np.isfinite(cost):
-                return np.inf, None, None
-            if not sensitivities:
-                continue
-            sk = np.zeros((e, m, p))
-            # direct term: dŷ_j(k)/dθ_{λ(k), a, j} = φ_a(k)
-            cols = region[:, None, None] * d * m + np.arange(d)[None, None, :] * m + outs
-            sk[rows, outs, cols] = phi[:, None, :]
-            # through the output lags of φ̂: φ_{q, lag}(k) = ŷ_q(k − lag)
-            for lag in range(1, min(na, k - w) + 1):
-                a = theta_k[:, lag_rows[lag - 1], :]                   # (e, q, j)
-                sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
-            sk[~active] = 0.0
-            sens[k % (na + 1)] = sk
-            normal.add(sk.reshape(e * m, p), r.ravel(), last=k == n - 1)
-        if not sensitivities:
-            return cost / self.n_scored, None, None
-        return cost / self.n_scored, normal.jtj, normal.jtr
+        rows, outs = np.arange(self.y.shape[0])[:, None, None], np.arange(m)[None, :, None]
 
+        def step(phi):
+            region = np.zeros(len(phi), dtype=int) if region_of is None else region_of(phi)
 
-class _OutputRuns(_Runs):
-    """The experiments simulated with per-output models
-    (:class:`~.structures.OutputModel`): the outputs ``simulated`` run free, the others
-    keep their measured values (with decoupled models they do not enter the simulated ones).
+            def direct(sk):  # dŷ_j(k)/dθ_{λ(k), a, j} = φ_a(k)
+                cols = region[:, None, None] * d * m + np.arange(d)[None, None, :] * m + outs
+                sk[rows, outs, cols] = phi[:, None, :]
 
-    The parameters are the concatenated p_j of the simulated outputs.
-    """
+            return thetas[region], direct
 
-    def __init__(self, u, y, lags: int, nb: int, affine: bool, warmup: int,
-                 models: list, simulated: list[int]):
-        super().__init__(u, y, lags, nb, affine, warmup)
-        self.models, self.simulated = models, list(simulated)
-        self.g = [models[j].G() for j in self.simulated]
-        self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
-        self.n_scored = self.n_scored // self.y.shape[2] * len(self.simulated)
-
-    def simulate(self, p: np.ndarray, sensitivities: bool):
-        """As :meth:`_Runs.simulate`, with the concatenated p_j."""
         with np.errstate(over="ignore", invalid="ignore"):
-            return self._run_outputs(p, sensitivities)
+            return self._run(step, s * d * m, sensitivities)
 
-    def _run_outputs(self, p: np.ndarray, sensitivities: bool):
+    def _run(self, step: Callable, n_params: int, sensitivities: bool):
+        """The free run and its sensitivities dŷ(k)/dθ, propagated through the output lags
+        of φ̂. ``step(φ̂)`` gives every experiment's parameter matrix at k, (e, d, outputs
+        simulated), and a function adding the direct term dŷ(k)/dθ at fixed φ̂ to an
+        (e, outputs simulated, n_params) array."""
         e, n = self.y.shape[:2]
-        sim, w, lags, total = self.simulated, self.warmup, self.na, int(self.offsets[-1])
-        thetas = [self.models[j].c + g @ p[a:b] for j, g, a, b in
-                  zip(sim, self.g, self.offsets[:-1], self.offsets[1:], strict=True)]
+        sim, w, na = self.simulated, self.warmup, self.na
         ysim = self.y.copy()
-        lag_rows = [[q * lags + lag - 1 for q in sim] for lag in range(1, lags + 1)]
-        sens = np.zeros((lags + 1, e, len(sim), total))
-        normal, cost = _NormalEquations(total), 0.0
+        lag_rows = [[q * na + lag - 1 for q in sim] for lag in range(1, na + 1)]
+        sens = np.zeros((na + 1, e, len(sim), n_params))  # ring buffer of dŷ(k)/dθ
+        normal, cost = _NormalEquations(n_params), 0.0
         for k in range(w, n):
             active = self.lengths > k
             phi = self.phi(ysim, k)
-            regions = [self.models[j].regions(phi) for j in sim]
-            theta_k = np.stack([t[r] for t, r in zip(thetas, regions, strict=True)], axis=1)
-            yk = np.einsum("ed,ejd->ej", phi, theta_k)
+            theta_k, direct = step(phi)
+            yk = np.einsum("ed,edj->ej", phi, theta_k)
             target = self.y[:, k][:, sim]
             ysim[:, k, sim] = np.where(active[:, None], yk, target)
             r = np.where(active[:, None], yk - target, 0.0)
@@ -218,19 +178,52 @@ class _OutputRuns(_Runs):
                 return np.inf, None, None
             if not sensitivities:
                 continue
-            sk = np.zeros((e, len(sim), total))
-            for jj, (g, reg) in enumerate(zip(self.g, regions, strict=True)):
-                a, b = self.offsets[jj], self.offsets[jj + 1]
-                sk[:, jj, a:b] = np.einsum("ed,edp->ep", phi, g[reg])
-            for lag in range(1, min(lags, k - w) + 1):
-                a = theta_k[:, :, lag_rows[lag - 1]]                       # (e, j, q)
-                sk += np.einsum("ejq,eqp->ejp", a, sens[(k - lag) % (lags + 1)])
+            sk = np.zeros((e, len(sim), n_params))
+            direct(sk)
+            # through the output lags of φ̂: φ_{q, lag}(k) = ŷ_q(k − lag)
+            for lag in range(1, min(na, k - w) + 1):
+                a = theta_k[:, lag_rows[lag - 1], :]                   # (e, q, j)
+                sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
             sk[~active] = 0.0
-            sens[k % (lags + 1)] = sk
-            normal.add(sk.reshape(-1, total), r.ravel(), last=k == n - 1)
+            sens[k % (na + 1)] = sk
+            normal.add(sk.reshape(-1, n_params), r.ravel(), last=k == n - 1)
         if not sensitivities:
             return cost / self.n_scored, None, None
         return cost / self.n_scored, normal.jtj, normal.jtr
+
+
+class _OutputRuns(_Runs):
+    """The experiments simulated with per-output models
+    (:class:`~.structures.OutputModel`): the outputs ``simulated`` run free, the others
+    keep their measured values.
+
+    The parameters are the concatenated p_j of the simulated outputs.
+    """
+
+    def __init__(self, u, y, lags: int, nb: int, affine: bool, warmup: int,
+                 models: list, simulated: list[int]):
+        super().__init__(u, y, lags, nb, affine, warmup, simulated)
+        self.models = models
+        self.g = [models[j].G() for j in self.simulated]
+        self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
+
+    def simulate(self, p: np.ndarray, sensitivities: bool):
+        """As :meth:`_Runs.simulate`, with the concatenated p_j."""
+        sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
+        thetas = [self.models[j].c + g @ p[a:b]
+                  for j, g, (a, b) in zip(sim, self.g, bounds, strict=True)]
+
+        def step(phi):
+            regions = [self.models[j].regions(phi) for j in sim]
+
+            def direct(sk):
+                for jj, (g, reg, (a, b)) in enumerate(zip(self.g, regions, bounds)):
+                    sk[:, jj, a:b] = np.einsum("ed,edp->ep", phi, g[reg])
+
+            return np.stack([t[r] for t, r in zip(thetas, regions, strict=True)], axis=2), direct
+
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._run(step, int(self.offsets[-1]), sensitivities)
 
 
 class _OneStep:

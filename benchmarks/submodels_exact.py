@@ -1,0 +1,112 @@
+"""Whether this checkout's default fit gives the sub-models of an earlier commit (the speed-ups
+of the sub-model step must not change its results).
+
+Each fit (cases of ``benchmarks.robustness`` at ``case:seed``, and ``robot``) runs in a fresh
+process with this checkout's package and with the ``--against`` commit's; this checkout runs
+with ``split_sweep_tol=0`` (the split search's sweeps wait for no row to move, as before that
+parameter), so everything else it changed must leave θ_i, the labels and the regions as they
+were. Reported per fit: the number of sub-models of each, the largest |Δθ|, the rows labelled
+differently, the largest |Δ| of the region hyperplanes. Exits with status 1 when θ differs by
+more than 1e-9 or a label differs.
+
+Writes results/submodels_exact.md. Usage::
+
+    python -m benchmarks.submodels_exact [--against bf2d52f] [--fits paper-20dB:5000,robot]
+"""
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks._common import RESULTS, in_fresh_process
+from benchmarks.speed import previous_tree
+
+ROOT = Path(__file__).resolve().parents[1]
+FITS = ("paper-20dB:5000,paper-20dB:5001,paper-20dB:5002,paper-20dB:100,paper-25dB:5000,"
+        "paper-25dB:100,paper-30dB:5001,paper-held:5000,rare-mode:5000,modes-5:5000,"
+        "siso:5000,robot")
+
+
+def worker(fit: str, out: str) -> None:
+    """One default fit (``case:seed`` or ``robot``); θ_i, labels and regions to ``out``."""
+    from sklearn.base import clone
+
+    from pwa_pipeline.pwa.submodels import RefinedSubModels
+
+    if fit == "robot":
+        from pwa_pipeline import load_kuka
+        from pwa_pipeline.config import HParamsFile
+
+        robot = load_kuka()
+        est = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
+        u, y = robot.u_train, robot.y_train
+    else:
+        from benchmarks.robustness import CASES, paper_system, random_system
+        from pwa_pipeline import PWARX
+
+        name, seed = fit.split(":")
+        case = CASES[name]
+        system = (paper_system() if case.system is None
+                  else random_system(int(seed), **case.system, hold=case.hold))
+        record = system.record(case.n, int(seed), case.snr_db, case.hold)
+        est, u, y = PWARX(na=system.na, nb=system.nb), record.u, record.y
+    subs = est.submodels if est.submodels is not None else RefinedSubModels()
+    if "split_sweep_tol" in subs.get_params():
+        est.set_params(submodels=clone(subs).set_params(split_sweep_tol=0.0))
+    model = est.fit(u, y)
+    live = np.isfinite(model.regions_.intercept_)
+    Path(out).write_text(json.dumps({
+        "thetas": model.thetas_.tolist(), "labels": model.labels_.tolist(),
+        "coef": model.regions_.coef_.tolist(),
+        "intercept": np.where(live, model.regions_.intercept_, 0.0).tolist()}))
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--against", default="bf2d52f", help="the reference commit")
+    parser.add_argument("--fits", default=FITS, help="comma-separated case:seed or robot")
+    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        worker(*args.worker)
+        return
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        tree = previous_tree(args.against, tmp / args.against)
+        if tree is None:
+            sys.exit(f"cannot unpack {args.against}")
+        for fit in args.fits.split(","):
+            this, ref = (in_fresh_process("benchmarks.submodels_exact", [fit], tmp, t)
+                         for t in (ROOT, tree))
+            a, b = ({k: np.asarray(v) for k, v in r.items()} for r in (this, ref))
+            same_shape = a["thetas"].shape == b["thetas"].shape
+            rows.append({
+                "fit": fit, "n_submodels": len(a["thetas"]),
+                f"n_submodels {args.against}": len(b["thetas"]),
+                "max |Δθ|": float(np.abs(a["thetas"] - b["thetas"]).max()) if same_shape
+                else np.inf,
+                "labels differing": int((a["labels"] != b["labels"]).sum()),
+                "max |Δ region|": float(max(np.abs(a["coef"] - b["coef"]).max(),
+                                            np.abs(a["intercept"] - b["intercept"]).max()))
+                if same_shape else np.inf})
+            print(rows[-1])
+    df = pd.DataFrame(rows)
+    exact = bool(((df["max |Δθ|"] <= 1e-9) & (df["labels differing"] == 0)).all())
+    text = (f"This checkout (with `split_sweep_tol=0`) against `{args.against}`, each fit in a "
+            f"fresh process: {'every fit the same' if exact else 'FITS DIFFER'}.\n\n"
+            + df.to_markdown(index=False, floatfmt=".3g") + "\n")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "submodels_exact.md").write_text(text)
+    print(text)
+    if not exact:
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
