@@ -25,7 +25,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process, write_json
+from benchmarks._common import RESULTS, default_fit, in_fresh_process, write_json
 from benchmarks.speed import previous_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,23 +35,7 @@ def worker(fit: str, out: str) -> None:
     """One fit (``case:seed`` or ``robot``) in this process; its seconds to ``out``."""
     import time
 
-    if fit == "robot":
-        from sklearn.base import clone
-
-        from pwa_pipeline import load_kuka
-        from pwa_pipeline.config import HParamsFile
-
-        robot = load_kuka()
-        est = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
-        u, y = robot.u_train, robot.y_train
-    else:
-        from benchmarks.robustness import CASES, paper_system
-        from pwa_pipeline import PWARX
-
-        name, seed = fit.split(":")
-        case = CASES[name]
-        record = paper_system().record(case.n, int(seed), case.snr_db, case.hold)
-        est, u, y = PWARX(na=1, nb=1), record.u, record.y
+    est, u, y = default_fit(fit)
     t0 = time.perf_counter()
     model = est.fit(u, y)
     Path(out).write_text(json.dumps({

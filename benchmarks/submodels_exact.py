@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process
+from benchmarks._common import RESULTS, default_fit, in_fresh_process
 from benchmarks.speed import previous_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,23 +38,7 @@ def worker(fit: str, out: str) -> None:
 
     from pwa_pipeline.pwa.submodels import RefinedSubModels
 
-    if fit == "robot":
-        from pwa_pipeline import load_kuka
-        from pwa_pipeline.config import HParamsFile
-
-        robot = load_kuka()
-        est = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
-        u, y = robot.u_train, robot.y_train
-    else:
-        from benchmarks.robustness import CASES, paper_system, random_system
-        from pwa_pipeline import PWARX
-
-        name, seed = fit.split(":")
-        case = CASES[name]
-        system = (paper_system() if case.system is None
-                  else random_system(int(seed), **case.system, hold=case.hold))
-        record = system.record(case.n, int(seed), case.snr_db, case.hold)
-        est, u, y = PWARX(na=system.na, nb=system.nb), record.u, record.y
+    est, u, y = default_fit(fit)
     subs = est.submodels if est.submodels is not None else RefinedSubModels()
     if "split_sweep_tol" in subs.get_params():
         est.set_params(submodels=clone(subs).set_params(split_sweep_tol=0.0))
