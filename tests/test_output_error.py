@@ -152,7 +152,7 @@ def _weighted_objective(route: str):
 def test_the_weighted_objectives_gradient_matches_finite_differences(route):
     errors, x0, x, one_step = _weighted_objective(route)
     assert errors.one_step(x0, False)[0] == pytest.approx(one_step, rel=1e-9)
-    objective = errors.weighted(0.5, x0)
+    objective = errors.weighted(0.5, errors.costs(x0))
     cost, _, jtr = objective(x, True)
     # J_w = J + w·J(θ0)/J1(θ0)·J1, each a mean of squares: its gradient is 2·(the Jᵀr returned)
     ratio = 0.5 * errors.free(x0, False)[0] / errors.one_step(x0, False)[0]

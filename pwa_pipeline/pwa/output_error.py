@@ -284,13 +284,14 @@ class _Errors:
     n_free: int
     one_step: _OneStep
 
-    def weighted(self, weight: float, x0: np.ndarray) -> Callable:
-        """J_w of the module doc as ``(x, sensitivities)`` → (cost, JᵀJ, Jᵀr); the free-run
-        error itself when ``weight`` is 0."""
-        if weight == 0:
-            return self.free
-        ratio = weight * self.free(x0, False)[0] / max(self.one_step(x0, False)[0],
-                                                       np.finfo(float).tiny)
+    def costs(self, x: np.ndarray) -> tuple[float, float]:
+        """J and J₁ at x, per sample and output."""
+        return self.free(x, False)[0], self.one_step(x, False)[0]
+
+    def weighted(self, weight: float, start: tuple[float, float]) -> Callable:
+        """J_w of the module doc (``weight`` > 0) as ``(x, sensitivities)`` → (cost, JᵀJ,
+        Jᵀr); ``start`` is :meth:`costs` at θ₀, for the ratio J(θ₀) / J₁(θ₀)."""
+        ratio = weight * start[0] / max(start[1], np.finfo(float).tiny)
 
         def objective(x: np.ndarray, sensitivities: bool):
             cost, jtj, jtr = self.free(x, sensitivities)
@@ -306,19 +307,24 @@ class _Errors:
 
 def _refine(x0: np.ndarray, train: _Errors, held: _Errors | None, weight: float,
             **options) -> OutputErrorResult:
-    """Levenberg–Marquardt on J_w, the iterate chosen on J_w of ``held``; the result's
-    costs are the free-run and one-step errors apart."""
-    objective = train.weighted(weight, x0)
-    held_w = None if held is None else held.weighted(weight, x0)
+    """Levenberg–Marquardt on J_w (on J when ``weight`` is 0), the iterate chosen on J_w of
+    ``held``; the result's costs are the free-run and one-step errors apart. The costs at
+    θ₀ are simulated once, for the ratios and the result."""
+    if weight:
+        start = train.costs(x0)
+        held_start = None if held is None else held.costs(x0)
+        objective = train.weighted(weight, start)
+        held_w = None if held is None else held.weighted(weight, held_start)
+    else:
+        start = (np.nan, train.one_step(x0, False)[0])
+        objective, held_w = train.free, None if held is None else held.free
     res = levenberg_marquardt(x0, objective, None if held_w is None else
                               (lambda x: held_w(x, False)[0]), **options)
-    parts = {"one_step_start": train.one_step(x0, False)[0],
-             "one_step_cost": train.one_step(res.thetas, False)[0]}
+    parts = {"one_step_start": start[1], "one_step_cost": train.one_step(res.thetas, False)[0]}
     if weight:
-        parts |= {"cost_start": train.free(x0, False)[0],
-                  "cost": train.free(res.thetas, False)[0]}
+        parts |= {"cost_start": start[0], "cost": train.free(res.thetas, False)[0]}
         if held is not None:
-            parts |= {"validation_start": held.free(x0, False)[0],
+            parts |= {"validation_start": held_start[0],
                       "validation_cost": held.free(res.thetas, False)[0]}
     return replace(res, **parts)
 
