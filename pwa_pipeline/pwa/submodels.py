@@ -6,7 +6,6 @@ imports no other step.
 """
 
 import hashlib
-import itertools
 from numbers import Integral, Real
 
 import numpy as np
@@ -127,8 +126,7 @@ def bias_compensated_refit(phi: Float2D, target: Float2D, weights: np.ndarray,
     j_bar = share @ mean_sq
     owner = np.zeros((lag_output.size, m))  # column c → one-hot of its output q(c)
     owner[np.flatnonzero(lag), lag_output[lag]] = 1.0
-    thetas, done = ls.copy(), np.zeros(len(total), bool)
-    sigma2 = None
+    thetas = ls.copy()
     for _ in range(n_iter):
         # J̄_p = σ_p² + Σ_q σ_q² M_pq, M_pq = Σ_i share_i Σ_{c of q} θ_i,cp θ_i,cp^LS
         prod = np.einsum("i,icp,icp->cp", share, thetas, ls)
@@ -778,11 +776,15 @@ class RefinedSubModels(BaseEstimator):
         own = _own_sq_residuals(phi, target, thetas, labels)
         cost = _cost(own, robust_noise_var(own))
         excess = np.bincount(labels, cost, s) / np.maximum(np.bincount(labels, minlength=s), 1)
-        best = (self.split_tol, None, None)
-        candidates = ((rows, hashlib.blake2b(rows.tobytes()).digest())
-                      for rows in (np.flatnonzero(labels == i) for i in np.argsort(-excess)))
-        for rows, key in itertools.islice(((r, k) for r, k in candidates
-                                           if k not in split_once), SPLIT_CANDIDATES):
+        best, tried = (self.split_tol, None, None), 0
+        for i in np.argsort(-excess):
+            if tried == SPLIT_CANDIDATES:
+                break
+            rows = np.flatnonzero(labels == i)
+            key = hashlib.blake2b(rows.tobytes()).digest()
+            if key in split_once:
+                continue
+            tried += 1
             if key not in searched:  # split_gain depends only on the rows
                 searched[key] = split_gain(phi[rows], target[rows], local_theta[rows],
                                            min_size, min(self.n_refine, 5), regions,
