@@ -3,8 +3,12 @@ peak memory, and where the time goes (issue 12).
 
 Each repeat runs the command in a fresh process with ``PWA_PIPELINE_HOME`` set to a new
 temporary directory (so the Dagster home, the asset store, the local-model cache and the
-MLflow sqlite store are all created by the run) and ``MLFLOW_TRACKING_URI`` unset. The time
-is then split with the Dagster event log of that home:
+MLflow sqlite store are all created by the run) and ``MLFLOW_TRACKING_URI`` unset, once per
+``--jobs`` value (default ``2,1``: the default, two partitions at once, and one at a time
+as the reference in the same run), the values alternated within each repeat. Peak memory is
+the largest sum of the resident memory of the command's processes (it and its workers),
+sampled every 0.1 s. The time of the first repeat of each ``--jobs`` value is then split with
+the Dagster event log of its home:
 
 - ``start``: process start to the first run's start (imports, definitions, the Dagster
   instance's creation);
@@ -17,14 +21,14 @@ is then split with the Dagster event log of that home:
   steps is Dagster's own (events, storage, input loading between steps);
 - ``leaderboard`` and ``end`` (last run to process exit).
 
+Runs at once overlap: each partition's row says when it started after the first one.
+
 Writes results/first_command.json and results/first_command.md; the last line printed is a
-summary. Usage: python -m benchmarks.first_command [--repeats 1]
+summary. Usage: python -m benchmarks.first_command [--repeats 1] [--jobs 2,1]
 """
 
 import argparse
-import json
 import os
-import resource
 import statistics
 import subprocess
 import sys
@@ -33,6 +37,7 @@ import time
 from pathlib import Path
 
 import pandas as pd
+import psutil
 
 from benchmarks._common import RESULTS, write_json
 
@@ -41,20 +46,39 @@ FIT_STEPS = {"local_models", "clusters", "sub_models", "svm_regions", "output_er
              "pwa_model", "linear_arx_model", "subspace_model"}
 
 
-def one_run(home: Path) -> dict:
-    """Run the command with its stores in ``home``; wall seconds, peak RSS and the split."""
+def one_run(home: Path, jobs: int) -> dict:
+    """Run the command with its stores in ``home``; wall seconds, peak memory, the split."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("MLFLOW_TRACKING_URI", "DAGSTER_HOME", "PWA_DATASETS")}
     env.update(PWA_PIPELINE_HOME=str(home),
                PYTHONPATH=f"{ROOT}{os.pathsep}{env.get('PYTHONPATH', '')}".rstrip(os.pathsep))
     start = time.time()
+    peak = 0
     with open(home / "output.txt", "w") as out:
-        code = subprocess.run([sys.executable, "-m", "pwa_pipeline", "run"], cwd=home, env=env,
-                              stdout=out, stderr=subprocess.STDOUT).returncode
+        proc = subprocess.Popen([sys.executable, "-m", "pwa_pipeline", "run", "--jobs",
+                                 str(jobs)], cwd=home, env=env, stdout=out,
+                                stderr=subprocess.STDOUT)
+        tree = psutil.Process(proc.pid)
+        while proc.poll() is None:
+            peak = max(peak, tree_rss(tree))
+            time.sleep(0.1)
     wall = time.time() - start
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024**2  # GB, largest child
-    return {"wall_seconds": wall, "peak_gb": peak, "exit_code": code,
-            **split(home / ".dagster_home", start, start + wall)}
+    return {"jobs": jobs, "wall_seconds": wall, "peak_gb": peak / 1024**3,
+            "exit_code": proc.returncode, **split(home / ".dagster_home", start, start + wall)}
+
+
+def tree_rss(proc: psutil.Process) -> int:
+    """Resident bytes of a process and its descendants (0 for those already gone)."""
+    total = 0
+    try:
+        for p in [proc, *proc.children(recursive=True)]:
+            try:
+                total += p.memory_info().rss
+            except psutil.NoSuchProcess:
+                pass
+    except psutil.NoSuchProcess:
+        pass
+    return total
 
 
 def split(dagster_home: Path, start: float, end: float) -> dict:
@@ -68,7 +92,7 @@ def split(dagster_home: Path, start: float, end: float) -> dict:
         logs = [r for r in instance.all_logs(run.run_id) if r.is_dagster_event]
         t_start, t_end = logs[0].timestamp, logs[-1].timestamp
         first = t_start if first is None else first
-        last = t_end
+        last = t_end if last is None else max(last, t_end)
         steps, mlflow_log = {}, 0.0
         for r in logs:
             kind = r.dagster_event.event_type_value
@@ -83,6 +107,7 @@ def split(dagster_home: Path, start: float, end: float) -> dict:
         fit = sum(v for k, v in steps.items() if k in FIT_STEPS)
         score = sum(v for k, v in steps.items() if k.endswith("_scores"))
         row = {"partition": run.tags.get("dagster/partition"), "seconds": t_end - t_start,
+               "started after the first": t_start - first,
                "fitting": fit, "scoring": score, "of which MLflow logging": mlflow_log,
                "other steps": sum(steps.values()) - fit - score,
                "Dagster between steps": t_end - t_start - sum(steps.values()),
@@ -100,37 +125,57 @@ def split(dagster_home: Path, start: float, end: float) -> dict:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--jobs", default="2,1",
+                        help="comma-separated --jobs values of the command, alternated "
+                             "(default 2,1; the first is the one the summary quotes)")
     args = parser.parse_args(argv)
+    variants = [int(j) for j in args.jobs.split(",")]
     load_start = os.getloadavg()[0]
-    runs = []
+    runs: dict[int, list[dict]] = {j: [] for j in variants}
     for i in range(args.repeats):
-        with tempfile.TemporaryDirectory() as tmp:
-            runs.append(one_run(Path(tmp)))
-        print(f"run {i + 1}: {runs[-1]['wall_seconds']:.1f} s, peak {runs[-1]['peak_gb']:.2f} GB, "
-              f"exit code {runs[-1]['exit_code']}", flush=True)
+        for jobs in variants:
+            with tempfile.TemporaryDirectory() as tmp:
+                runs[jobs].append(one_run(Path(tmp), jobs))
+            run = runs[jobs][-1]
+            print(f"repeat {i + 1}, --jobs {jobs}: {run['wall_seconds']:.1f} s, peak "
+                  f"{run['peak_gb']:.2f} GB, exit code {run['exit_code']}", flush=True)
     load_end = os.getloadavg()[0]
-    wall = statistics.median(r["wall_seconds"] for r in runs)
-    table = pd.DataFrame(runs[0]["partitions"]).set_index("partition")
-    overview = pd.Series({"start (imports, definitions, instance)": runs[0]["start_seconds"],
-                          **{f"partition {k}": v for k, v in table["seconds"].items()},
-                          "leaderboard": runs[0]["leaderboard_seconds"],
-                          "end": runs[0]["end_seconds"]}, name="seconds")
     cpus = len(os.sched_getaffinity(0))
     write_json({"load_average_1min": {"start": load_start, "end": load_end}, "cpus": cpus,
-                "repeats": args.repeats, "runs": runs}, "first_command")
-    each = ", ".join(f"{r['wall_seconds']:.1f}" for r in runs)
-    summary = (f"summary: python -m pwa_pipeline run on fresh stores {wall:.1f} s (median of "
-               f"{args.repeats}; runs {each}), "
-               f"peak {max(r['peak_gb'] for r in runs):.2f} GB; load {load_start:.2f} -> "
-               f"{load_end:.2f} on {cpus} CPUs")
-    md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} run(s); 1-minute load "
-          f"average {load_start:.2f} at the start, {load_end:.2f} at the end, {cpus} CPUs. The "
-          f"split is that of the first run.\n",
-          overview.to_markdown(floatfmt=".3g"), "",
-          "Per partition (seconds; scoring includes the MLflow logging with model "
-          "registration):\n", table.to_markdown(floatfmt=".3g"), "", summary]
-    (RESULTS / "first_command.md").write_text("\n".join(md) + "\n")
-    print(json.dumps(runs[0], indent=2, default=float))
+                "repeats": args.repeats, "runs": {str(j): r for j, r in runs.items()}},
+               "first_command")
+    wall = {j: statistics.median(r["wall_seconds"] for r in runs[j]) for j in variants}
+    ref = variants[-1]
+    walls = pd.DataFrame([{
+        "--jobs": j, "median seconds": wall[j],
+        "runs": ", ".join(f"{r['wall_seconds']:.1f}" for r in runs[j]),
+        "peak GB": max(r["peak_gb"] for r in runs[j]),
+        f"over --jobs {ref}": wall[j] / wall[ref],
+        "exit codes": ", ".join(str(r["exit_code"]) for r in runs[j])} for j in variants])
+    main_jobs = variants[0]
+    summary = (f"summary: python -m pwa_pipeline run (--jobs {main_jobs}) on fresh stores "
+               f"{wall[main_jobs]:.1f} s (median of {args.repeats}; runs "
+               f"{walls['runs'].iloc[0]}), peak {walls['peak GB'].iloc[0]:.2f} GB"
+               + (f", {wall[main_jobs] / wall[ref]:.2f}x the {wall[ref]:.1f} s of --jobs {ref} "
+                  f"in the same run" if len(variants) > 1 else "")
+               + f"; load {load_start:.2f} -> {load_end:.2f} on {cpus} CPUs")
+    md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} repeat(s) of each "
+          f"`--jobs` value, alternated; 1-minute load average {load_start:.2f} at the start, "
+          f"{load_end:.2f} at the end, {cpus} CPUs. Peak memory: the largest sum over the "
+          f"command's processes.\n", walls.to_markdown(index=False, floatfmt=".3g"), ""]
+    for j in variants:
+        first = runs[j][0]
+        table = pd.DataFrame(first["partitions"]).set_index("partition")
+        overview = pd.Series({"start (imports, definitions, instance)": first["start_seconds"],
+                              **{f"partition {k}": v for k, v in table["seconds"].items()},
+                              "leaderboard": first["leaderboard_seconds"],
+                              "end": first["end_seconds"]}, name="seconds")
+        md += [f"## --jobs {j}: where the first repeat's time went\n",
+               overview.to_markdown(floatfmt=".3g"), "",
+               "Per partition (seconds; scoring includes the MLflow logging with model "
+               "registration; partitions run at once overlap):\n",
+               table.to_markdown(floatfmt=".3g"), ""]
+    (RESULTS / "first_command.md").write_text("\n".join(md + [summary]) + "\n")
     print(summary)
 
 

@@ -1,5 +1,5 @@
-"""Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end;
-``add-dataset``, ``list-datasets`` and ``remove-dataset`` manage the user's data sets.
+"""Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end
+(``--jobs`` partitions at once, :mod:`.parallel_runs`); ``add-dataset``, ``list-datasets`` and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and
 MLflow's embedded store ``<project>/mlflow.db`` (or ``$MLFLOW_TRACKING_URI``), so the Dagster
@@ -12,6 +12,7 @@ import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .instance import prepare_instance
+from .parallel_runs import default_jobs
 from .paths import (
     MLFLOW_TRAINING_VIEW,
     default_datasets_path,
@@ -53,17 +54,17 @@ def run(args: argparse.Namespace) -> int:
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
     failed = []
     summaries = []
-    for key, result, t0 in _partition_runs(args, defs, keys, instance, resources, quiet,
-                                           SWEEP_SELECTION):
+    for key, result, seconds in _partition_runs(args, defs, keys, instance, resources, quiet,
+                                                SWEEP_SELECTION):
         if not result.success:
             failed.append(key)
-            summaries.append(f"{key}: FAILED after {time.perf_counter() - t0:.1f} s (run "
-                             f"{result.run_id} in the Dagster UI)")
+            summaries.append(f"{key}: FAILED after {seconds:.1f} s (run {result.run_id} in "
+                             f"the Dagster UI)")
             print(summaries[-1])
             continue
         table = result.output_for_node("comparison")
-        print(mean_scores(table).to_markdown(floatfmt=".4g"))
-        summaries.append(_summary(key, result, table, time.perf_counter() - t0))
+        print(f"\n{key}: mean over the outputs\n\n{mean_scores(table).to_markdown(floatfmt='.4g')}")
+        summaries.append(_summary(key, result, table, seconds))
     print("\nSummary\n  " + "\n  ".join(summaries))
     # the leaderboard ranks every partition stored so far, not only the ones just run
     board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
@@ -96,21 +97,30 @@ Open the UIs on the same stores:
 
 def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, resources: dict,
                     run_config: dict, selection):
-    """``(key, result, start time)`` of each partition's run, in one process
-    (``dg.materialize``) or, with ``--executor dask``, as ``sweep_dask`` runs on a dask
-    cluster (a LocalCluster unless ``--scheduler``)."""
-    import dagster as dg
+    """``(key, result, seconds)`` of each partition's run: in this process
+    (``dg.materialize``), ``--jobs`` at once with worker processes (:mod:`.parallel_runs`), or,
+    with ``--executor dask``, as ``sweep_dask`` runs on a dask cluster (a LocalCluster unless
+    ``--scheduler``)."""
+    from .parallel_runs import materialize_partition, partition_runs_at_once
 
     def announce(key: str) -> None:
         print(f"\n=== materialising {key} ===", flush=True)
 
+    def run_here(key: str):
+        return materialize_partition(defs, key, resources, instance, run_config, selection)
+
     if args.executor != "dask":
+        jobs = min(args.jobs, len(keys))
+        if jobs > 1:
+            yield from partition_runs_at_once(keys, jobs, run_here, run_config,
+                                              args.tracking_uri, resources["io_manager"],
+                                              announce)
+            return
         for key in keys:
             announce(key)
             t0 = time.perf_counter()
-            yield key, dg.materialize(list(defs.assets), partition_key=key, selection=selection,
-                                      resources=resources, instance=instance,
-                                      run_config=run_config, raise_on_error=False), t0
+            result = run_here(key)
+            yield key, result, time.perf_counter() - t0
         return
     from .dask_sweep import dask_scheduler, sweep_on_dask
 
@@ -124,7 +134,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
         t0 = time.perf_counter()
         for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
                                          io_manager=resources["io_manager"]):
-            yield key, result, t0
+            yield key, result, time.perf_counter() - t0
             t0 = time.perf_counter()
 
 
@@ -241,9 +251,14 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
     p_run.add_argument("--executor", choices=("in-process", "dask"), default="in-process",
                        help="in-process (default): each partition one run, every step in "
-                            "this process; dask: each partition one run of the sweep_dask "
-                            "job whose steps are tasks on a dask cluster (a LocalCluster "
+                            "one process (--jobs runs at once); dask: each partition one run "
+                            "of the sweep_dask job whose steps are tasks on a dask cluster (a LocalCluster "
                             "started here, or --scheduler); partitions run one at a time")
+    p_run.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
+                       help=f"partitions run at once by the in-process executor: this process "
+                            f"runs one, N - 1 worker processes the others (default "
+                            f"{default_jobs()}: the CPUs this process may use, at most 2; 1: "
+                            f"one after the other in this process)")
     p_run.add_argument("--scheduler", default="", metavar="ADDRESS",
                        help="address of a running dask scheduler, e.g. tcp://10.0.0.5:8786 "
                             "(implies --executor dask; its workers need pwa-pipeline installed "
@@ -299,6 +314,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "run" and args.scheduler:
         args.executor = "dask"
+    if args.command == "run" and args.jobs < 1:
+        parser.error(f"--jobs must be at least 1, got {args.jobs}")
     if args.command == "partitions":
         from .definitions import build_definitions, partitions_of
         from .partitions import all_keys

@@ -1,0 +1,65 @@
+"""``run --jobs``: partitions at once in this process and a worker process, on shared stores."""
+
+import os
+import shutil
+
+import dagster as dg
+import pandas as pd
+
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.orchestration.paths import default_storage_dir
+from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+
+
+def test_partitions_run_at_once_in_two_processes_and_a_failure_keeps_the_others(
+        tmp_path, mlflow_template, monkeypatch, capsys):
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    d = make_hure_vasak(n_samples=1200, seed=7)
+    frame = pd.DataFrame({"u1": d.u[:, 0], "u2": d.u[:, 1], "y1": d.y[:, 0], "y2": d.y[:, 1]})
+    for name in ("plant", "mill", "gone"):
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+        assert main(["add-dataset", name, str(tmp_path / f"{name}.csv"), "--u", "u1", "u2",
+                     "--y", "y1", "y2"]) == 0
+    (tmp_path / "gone.csv").unlink()  # its run fails: the others' results must stay
+    capsys.readouterr()
+    keys = ["plant|default", "mill|default", "gone|default"]
+    args = ["run", "--jobs", "2"] + [a for k in keys for a in ("--partition", k)]
+    assert main(args) == 1
+    out = capsys.readouterr().out
+    assert "gone|default: FAILED after" in out
+    for key in keys[:2]:
+        assert f"{key}: mean over the outputs" in out
+        assert f"  {key}: " in out.split("Summary")[1]  # its summary line
+    instance = dg.DagsterInstance.get()
+    runs = {r.tags["dagster/partition"]: r for r in instance.get_runs()
+            if "dagster/partition" in r.tags}
+    assert {k: runs[k].status for k in keys} == {
+        "plant|default": dg.DagsterRunStatus.SUCCESS,
+        "mill|default": dg.DagsterRunStatus.SUCCESS,
+        "gone|default": dg.DagsterRunStatus.FAILURE}
+    pids = {k: {e.dagster_event.pid for e in instance.all_logs(runs[k].run_id)
+                if e.is_dagster_event and e.dagster_event.pid is not None} for k in keys}
+    assert all(len(p) == 1 for p in pids.values())  # each run in one process
+    used = set().union(*pids.values())
+    assert len(used) == 2 and os.getpid() in used  # this one and the worker
+    client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
+    for dataset in ("plant", "mill"):
+        exp = client.get_experiment_by_name(f"pwa-pipeline/{dataset}")
+        logged = client.search_runs([exp.experiment_id],
+                                    filter_string="tags.method != 'leaderboard'")
+        assert sorted(r.data.tags["method"] for r in logged) == [
+            "linear_arx", "pwa", "subspace"]
+    assert client.get_experiment_by_name("pwa-pipeline/gone") is None
+    # the summary of the worker's partition was read back from the store the runs wrote
+    store = PartitionedFileIOManager(base_dir=str(default_storage_dir()))
+    for key in keys[:2]:
+        model = store.load(dg.AssetKey("pwa_model"), key)
+        assert f"  {key}: {model.n_submodels_} PWA sub-model(s)" in out
