@@ -3,6 +3,7 @@
 import base64
 import copy
 import struct
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,6 +22,7 @@ from pwa_pipeline.orchestration.figures import (
     regions_figure,
     switching_figure,
     to_markdown,
+    to_png,
 )
 from pwa_pipeline.pwa.clustering import k_distances
 from pwa_pipeline.pwa.embedding import exact_embedding
@@ -191,6 +193,28 @@ def test_regions_slice_covers_every_region(fit):
     assert sum(c.get_offsets().shape[0] for c in points) == fit.reg.phi.shape[0]
     with pytest.raises(ValueError, match="names"):
         regions_figure(model, fit.reg.phi, fit.names[:3])
+
+
+def test_regions_figure_keeps_a_long_legend_inside_the_figure():
+    """27 regions and their rows (as the paper's setting gives on the robot): 55 legend
+    entries, drawn in columns inside the figure, and no layout warning."""
+    rng = np.random.default_rng(0)
+    coef = rng.normal(size=(27, 4))
+    regions = SimpleNamespace(coef_=coef, n_regions_=27,
+                              predict=lambda x: np.argmax(x @ coef.T, axis=1))
+    phi = rng.normal(size=(2000, 4))
+    model = SimpleNamespace(regions_=regions, labels_=np.r_[-1, rng.integers(0, 27, 1999)])
+    fig = regions_figure(model, phi, ["a", "b", "c", "d"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "constrained_layout not applied" before the columns
+        to_png(fig)  # drawn as the asset page shows it
+    legend = fig.axes[0].get_legend()
+    assert len(legend.legend_handles) == 27 + 28
+    page = fig.bbox
+    for text in legend.get_texts():
+        box = text.get_window_extent()
+        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and \
+            box.y1 <= page.y1, text.get_text()
 
 
 def _png(markdown):

@@ -35,6 +35,8 @@ _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#
             "#17becf")
 _NOISE = "#9a9a9a"
 _DIVERGED = "#d62728"
+_LEGEND_ROWS = 22
+"""Entries of a legend column of the regions figure (more fit beside its 5.2-inch axes)."""
 
 
 def _colour(i: int) -> str:
@@ -354,17 +356,19 @@ def regions_figure(model: PWARX, phi: np.ndarray, names: list[str],
     grid[:, i], grid[:, j] = gx.ravel(), gy.ravel()
     z = regions.predict(grid).reshape(gx.shape)
     s = regions.n_regions_
-    fig = _figure(7.5, 5.2)
-    ax = fig.subplots()
-    ax.contourf(gx, gy, z, levels=np.arange(s + 1) - 0.5, colors=[_colour(r) for r in range(s)],
-                alpha=0.25)
     rng = np.random.default_rng(0)
     rows = np.sort(rng.choice(phi.shape[0], max_points, replace=False)) \
         if phi.shape[0] > max_points else np.arange(phi.shape[0])
+    labels = np.asarray(model.labels_)[rows]
+    # one legend column per _LEGEND_ROWS entries, the figure widened for each further one
+    columns = -(-(s + np.unique(labels).size) // _LEGEND_ROWS)
+    fig = _figure(7.5 + 1.3 * (columns - 1), 5.2)
+    ax = fig.subplots()
+    ax.contourf(gx, gy, z, levels=np.arange(s + 1) - 0.5, colors=[_colour(r) for r in range(s)],
+                alpha=0.25)
     from matplotlib.patches import Patch
 
     handles = [Patch(color=_colour(r), alpha=0.4, label=f"H{r + 1}") for r in range(s)]
-    labels = np.asarray(model.labels_)[rows]
     for c in np.unique(labels):
         at = rows[labels == c]
         handles.append(ax.scatter(phi[at, i], phi[at, j], s=6, color=_colour(c), lw=0.2,
@@ -375,7 +379,7 @@ def regions_figure(model: PWARX, phi: np.ndarray, names: list[str],
     ax.set_xlabel(names[i])
     ax.set_ylabel(names[j])
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-              frameon=False)
+              frameon=False, ncols=columns)
     others = "others at their median" if phi.shape[1] > 2 else "no other regressors"
     fig.suptitle(title or f"Step 6: regions H_i in the slice ({names[i]}, {names[j]}), {others}",
                  fontsize=10)
