@@ -15,6 +15,7 @@ from pwa_pipeline._arrays import column_rms
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.orchestration import figures
 from pwa_pipeline.orchestration.figures import (
     clip_range,
     parameter_clusters_figure,
@@ -117,7 +118,7 @@ def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
     assert "(diverged)" in ax2.get_title(loc="left")
 
 
-def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit):
+def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatch):
     model, step = fit.model, fit.model.clustering_
     assert step.unit_free
     fig = parameter_clusters_figure(model.local_models_, step, fit.reg.target)
@@ -131,9 +132,21 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit):
     assert np.allclose(noise.get_facecolor()[0][:3], 0x9A / 255)
     theta = model.local_models_.theta_[step.clustered_]
     scale = model.local_models_.phi_scale_[None, :, None] / column_rms(fit.reg.target)
+    n = int(step.clustered_.sum())
+    assert n <= figures._CURVE_POINTS  # every clustered local model is queried
     expected = k_distances(exact_embedding(theta * scale), step.min_pts_)
     assert not np.allclose(expected, k_distances(exact_embedding(theta), step.min_pts_))
-    assert np.allclose(_line(ax_k, "k-distance").get_ydata(), expected)
+    curve = _line(ax_k, "k-distance")
+    assert np.allclose(curve.get_ydata(), expected)
+    assert np.allclose(curve.get_xdata(), 100 * (np.arange(n) + 0.5) / n)
+    assert ax_k.get_xlabel() == "% of the clustered local models, sorted"
+    assert ax_k.get_title(loc="left") == f"k-distance curve (MinPts = {step.min_pts_})"
+    monkeypatch.setattr(figures, "_CURVE_POINTS", 400)  # more than it queries: a subset
+    sub = parameter_clusters_figure(model.local_models_, step, fit.reg.target).axes[1]
+    assert np.allclose(_line(sub, "k-distance").get_ydata(), k_distances(
+        exact_embedding(theta * scale), step.min_pts_, max_query=400))
+    assert sub.get_title(loc="left") == (f"k-distance curve (MinPts = {step.min_pts_}; 400 of "
+                                         f"{n} queried)")
     eps = _line(ax_k, f"ε = {step.eps_:.4g} (chosen from the data)")
     assert np.allclose(eps.get_ydata(), step.eps_)
     given = copy.copy(step)
@@ -215,6 +228,24 @@ def test_regions_figure_keeps_a_long_legend_inside_the_figure():
         box = text.get_window_extent()
         assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and \
             box.y1 <= page.y1, text.get_text()
+
+
+def test_parameter_clusters_legend_lists_the_clusters_with_their_own_colour():
+    """27 clusters (the paper's setting on the robot): the 8 with a colour of their own and
+    noise are listed, the rest is one line with their sizes."""
+    rng = np.random.default_rng(1)
+    labels = np.r_[np.full(60, -1), np.repeat(np.arange(27), np.arange(27)[::-1] + 22)]
+    local = SimpleNamespace(theta_=rng.normal(size=(labels.size, 3, 2)), phi_scale_=np.ones(3))
+    step = SimpleNamespace(unit_free=False, embedding="exact", labels_=labels, min_pts_=6,
+                           clustered_=np.ones(labels.size, bool), eps_=1.0, eps_auto_=False)
+    fig = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        to_png(fig)
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts == ["noise (60)"] + [f"cluster {c + 1} ({48 - c})" for c in range(8)] + [
+        "clusters 9–27 (22–40 each; colours repeat)"]
+    assert sum(c.get_label().startswith("cluster") for c in fig.axes[0].collections) == 27
 
 
 def _png(markdown):

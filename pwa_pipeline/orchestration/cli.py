@@ -1,5 +1,6 @@
 """Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end
-(``--jobs`` partitions at once, :mod:`.parallel_runs`); ``add-dataset``, ``list-datasets`` and ``remove-dataset`` manage the user's data sets.
+(``--jobs`` partitions at once, :mod:`.parallel_runs`); ``add-dataset``, ``list-datasets``
+and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and
 MLflow's embedded store ``<project>/mlflow.db`` (or ``$MLFLOW_TRACKING_URI``), so the Dagster

@@ -37,6 +37,9 @@ _NOISE = "#9a9a9a"
 _DIVERGED = "#d62728"
 _LEGEND_ROWS = 22
 """Entries of a legend column of the regions figure (more fit beside its 5.2-inch axes)."""
+_CURVE_POINTS = 1000
+"""Points queried for the parameter-clusters figure's k-distance curve: its shape, at a
+fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.clustering.k_distances`)."""
 
 
 def _colour(i: int) -> str:
@@ -167,7 +170,8 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     distances are those DBSCAN used) projected on their first two principal components,
     coloured by cluster, noise grey; local models left out of the clustering (mixed local
     sets, the subset cap, degenerate ones) are not drawn. Right: the k-distance curve
-    (distance of each point to its MinPts-th neighbour, sorted) with ε as a horizontal line;
+    (distance of each point to its MinPts-th neighbour, sorted, against the share of points;
+    at most ``_CURVE_POINTS`` of them queried, a seeded subset) with ε as a horizontal line;
     its label says whether ε was chosen from the data or given.
 
     Parameters
@@ -198,27 +202,41 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     share = 100 * var / max(float(np.sum(var)), np.finfo(float).tiny)
     fig = _figure(10, 4.0)
     ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
+    listed = []
     for c in np.unique(labels):  # (labels run by decreasing size: small clusters on top)
         rows = labels == c
-        ax.scatter(pcs[rows, 0], pcs[rows, 1], s=5 if c < 0 else 7, color=_colour(c),
-                   alpha=0.5 if c < 0 else 0.8, lw=0, zorder=1 if c < 0 else 2 + c / 100,
-                   label=f"noise ({rows.sum()})" if c < 0 else f"cluster {c + 1} ({rows.sum()})")
+        dots = ax.scatter(pcs[rows, 0], pcs[rows, 1], s=5 if c < 0 else 7, color=_colour(c),
+                          alpha=0.5 if c < 0 else 0.8, lw=0, zorder=1 if c < 0 else 2 + c / 100,
+                          label=f"noise ({rows.sum()})" if c < 0 else
+                          f"cluster {c + 1} ({rows.sum()})")
+        if c < len(_PALETTE):  # beyond, colours repeat: the rest is one legend line
+            listed.append(dots)
+    if labels.max() >= len(_PALETTE):
+        from matplotlib.lines import Line2D
+
+        sizes = np.bincount(labels[labels >= len(_PALETTE)])[len(_PALETTE):]
+        listed.append(Line2D([], [], ls="none", label=(
+            f"clusters {len(_PALETTE) + 1}–{labels.max() + 1} ({sizes.min()}–{sizes.max()} "
+            f"each; colours repeat)")))
     ax.set_xlabel(f"PC 1 ({share[0]:.0f} % of variance)")
     ax.set_ylabel(f"PC 2 ({share[1] if share.size > 1 else 0:.0f} % of variance)")
     scale = "unit-free θ_k·rms(φ)/rms(y)" if getattr(step, "unit_free", False) else "θ_k"
     ax.set_title(f"{labels.size} of {step.labels_.size} local models clustered ({scale})",
                  fontsize=9, loc="left")
-    ax.legend(fontsize=8, markerscale=2, loc="upper center", bbox_to_anchor=(0.5, -0.16),
-              ncols=min(3, np.unique(labels).size), frameon=False)
-    dist = k_distances(emb, step.min_pts_)
-    ax_k.plot(np.arange(dist.size), dist, color="black", lw=1.0, label="k-distance")
+    ax.legend(handles=listed, fontsize=8, markerscale=2, loc="upper center",
+              bbox_to_anchor=(0.5, -0.16), ncols=min(3, len(listed)), frameon=False)
+    dist = k_distances(emb, step.min_pts_, max_query=_CURVE_POINTS)
+    ax_k.plot(100 * (np.arange(dist.size) + 0.5) / dist.size, dist, color="black", lw=1.0,
+              label="k-distance")
     how = "chosen from the data" if step.eps_auto_ else "given"
     ax_k.axhline(step.eps_, color=_DIVERGED, ls="--", lw=1.0,
                  label=f"ε = {step.eps_:.4g} ({how})")
     ax_k.set_yscale("log")
-    ax_k.set_xlabel("clustered local models, sorted")
+    ax_k.set_xlabel("% of the clustered local models, sorted")
     ax_k.set_ylabel("distance to the MinPts-th neighbour")
-    ax_k.set_title(f"k-distance curve (MinPts = {step.min_pts_})", fontsize=9, loc="left")
+    queried = f"; {dist.size:,} of {labels.size:,} queried" if dist.size < labels.size else ""
+    ax_k.set_title(f"k-distance curve (MinPts = {step.min_pts_}{queried})", fontsize=9,
+                   loc="left")
     ax_k.legend(fontsize=8, loc="upper left")
     fig.suptitle(title or "Step 4: local models θ_k in the DBSCAN embedding (PCA)")
     return fig

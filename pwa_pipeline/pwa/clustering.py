@@ -27,16 +27,17 @@ def confident_models(residual_var: np.ndarray, factor: float) -> np.ndarray:
     return np.all(ratio <= factor, axis=1)
 
 
-def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0) -> np.ndarray:
+def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0,
+                max_query: int = _EPS_SAMPLE) -> np.ndarray:
     """Sorted distance of each point to its MinPts-th neighbour, the point itself included.
 
     That distance decides whether a point is a DBSCAN core point: the curve is flat inside
-    dense clusters and rises for points between them. At most 5,000 points are queried
-    (against all points) to bound the cost.
+    dense clusters and rises for points between them. At most ``max_query`` points (a
+    seeded random subset) are queried, against all points, to bound the cost.
     """
     n = emb.shape[0]
     rng = np.random.default_rng(seed)
-    query = emb if n <= _EPS_SAMPLE else emb[rng.choice(n, _EPS_SAMPLE, replace=False)]
+    query = emb if n <= max_query else emb[rng.choice(n, max_query, replace=False)]
     nn = NearestNeighbors(n_neighbors=min(min_pts, n)).fit(emb)
     return np.sort(nn.kneighbors(query)[0][:, -1])
 
