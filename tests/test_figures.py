@@ -180,6 +180,15 @@ def test_switching_without_truth_and_bad_truth(fit):
     assert len(fig.axes) == 1
     region = model.regions_.predict(lagged_matrix(test.u, test.y, 1, 1, False))
     assert np.array_equal(fig.axes[0].collections[0].get_offsets()[:, 1], region[:605])
+    # 27 regions (the robot's paper setting), 3 of them visited: one level for each of those
+    many = copy.copy(model)
+    many.thetas_ = np.zeros((27, *model.thetas_.shape[1:]))
+    many.regions_ = SimpleNamespace(predict=lambda phi: np.array([3, 20, 26])[
+        np.arange(len(phi)) % 3])
+    ax = switching_figure(many, test.u, test.y).axes[0]
+    assert np.array_equal(ax.collections[0].get_offsets()[:, 1], np.arange(605) % 3)
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["H4", "H21", "H27"]
+    assert ax.get_ylabel() == "estimated region\n(3 of 27 visited)"
     with pytest.raises(ValueError, match="true_thetas"):
         switching_figure(model, test.u, test.y, test.modes)
     with pytest.raises(ValueError, match="true_modes has 10 entries"):

@@ -37,6 +37,8 @@ _NOISE = "#9a9a9a"
 _DIVERGED = "#d62728"
 _LEGEND_ROWS = 22
 """Entries of a legend column of the regions figure (more fit beside its 5.2-inch axes)."""
+_MAX_LEVELS = 10
+"""Regions the switching figure labels on its 2-inch axis without overlap."""
 _CURVE_POINTS = 1000
 """Points queried for the parameter-clusters figure's k-distance curve: its shape, at a
 fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.clustering.k_distances`)."""
@@ -249,7 +251,9 @@ def switching_figure(model: PWARX, u: np.ndarray, y: np.ndarray,
     """The estimated region H_i (step 6, eq. 1) of each sample of one experiment over time.
 
     The region is ``model.regions_.predict(φ(k))`` with φ built from (u, y) as in eq. (2)–(3);
-    at most the first 606 samples are shown. With the true modes (simulated data) a panel
+    at most the first 606 samples are shown. Without the true modes, a model of more than
+    ``_MAX_LEVELS`` regions gets a level for each region visited in them (every n-th
+    labelled if those are still more). With the true modes (simulated data) a panel
     above shows them, the estimated regions are paired with true sub-models by their
     parameters (:func:`~pwa_pipeline.scoring.metrics.match_submodels`), coloured as the mode
     they are paired with, samples where the two disagree are marked ×, and the title gives
@@ -283,11 +287,15 @@ def switching_figure(model: PWARX, u: np.ndarray, y: np.ndarray,
     if true_modes is None:
         fig = _figure(10, 2.6)
         ax = fig.subplots()
-        ax.scatter(k[shown], region[shown], c=[_colour(r) for r in region[shown]], marker="|",
-                   s=60, lw=1.2)
-        ax.set_yticks(range(s), [f"H{i + 1}" for i in range(s)])
-        ax.set_ylim(-0.6, s - 0.4)
-        ax.set_ylabel("estimated region")
+        # more regions than labels fit: a level for each region visited, every n-th labelled
+        levels = np.arange(s) if s <= _MAX_LEVELS else np.unique(region[shown])
+        ax.scatter(k[shown], np.searchsorted(levels, region[shown]),
+                   c=[_colour(r) for r in region[shown]], marker="|", s=60, lw=1.2)
+        ticks = np.arange(0, levels.size, -(-levels.size // _MAX_LEVELS))
+        ax.set_yticks(ticks, [f"H{levels[i] + 1}" for i in ticks])
+        ax.set_ylim(-0.6, levels.size - 0.4)
+        ax.set_ylabel("estimated region" if levels.size == s else
+                      f"estimated region\n({levels.size} of {s} visited)")
         ax.set_xlabel("sample k")
         fig.suptitle(title or "Estimated region H_i over time")
         return fig
