@@ -1,7 +1,12 @@
 """``run --jobs``: partitions at once in this process and a worker process, on shared stores."""
 
 import os
+import re
 import shutil
+import signal
+import subprocess
+import sys
+import time
 
 import dagster as dg
 import pandas as pd
@@ -63,3 +68,41 @@ def test_partitions_run_at_once_in_two_processes_and_a_failure_keeps_the_others(
     for key in keys[:2]:
         model = store.load(dg.AssetKey("pwa_model"), key)
         assert f"  {key}: {model.n_submodels_} PWA sub-model(s)" in out
+
+
+def test_an_interrupt_ends_the_runs_in_flight_and_starts_no_other(tmp_path, mlflow_template):
+    """Ctrl-C (SIGINT to the command's process group, as a terminal sends it) while two
+    partitions run: both end as interrupted runs, the third never starts, exit status 130,
+    and no run is left STARTED."""
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
+    env["PWA_PIPELINE_HOME"] = str(tmp_path)
+    keys = ["hure_vasak|paper", "hure_vasak|default", "kuka_robot|paper"]
+    out = tmp_path / "out.txt"
+    with open(out, "w") as sink:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pwa_pipeline", "run", "--jobs", "2",
+             *[a for k in keys for a in ("--partition", k)]], env=env, stdout=sink,
+            stderr=subprocess.STDOUT, start_new_session=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.time() + 120
+    while len(set(re.findall(r"__ephemeral_asset_job__ - ([0-9a-f-]{36}) -",
+                             out.read_text()))) < 2:  # both runs have logged a step
+        assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)
+    assert proc.wait(timeout=60) == 130
+    text = out.read_text()
+    summary = text.split("\nSummary\n")[1]
+    for key in keys[:2]:
+        assert f"  {key}: INTERRUPTED after" in summary
+    assert "  not run to the end: kuka_robot|paper" in summary
+    assert "=== materialising kuka_robot|paper ===" not in text
+    os.environ["DAGSTER_HOME"] = str(tmp_path / ".dagster_home")
+    try:
+        with dg.DagsterInstance.get() as instance:
+            statuses = [r.status for r in instance.get_runs()]
+    finally:
+        del os.environ["DAGSTER_HOME"]
+    assert statuses == [dg.DagsterRunStatus.FAILURE] * 2

@@ -9,11 +9,12 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 
 import argparse
 import sys
+import threading
 import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .instance import prepare_instance
-from .parallel_runs import default_jobs
+from .parallel_runs import default_jobs, was_interrupted
 from .paths import (
     MLFLOW_TRAINING_VIEW,
     default_datasets_path,
@@ -53,20 +54,35 @@ def run(args: argparse.Namespace) -> int:
     uri = mask_credentials(resources["mlflow"].uri())
     # INFO shows each step's one-line summary; Dagster's own events are DEBUG
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
-    failed = []
-    summaries = []
-    for key, result, seconds in _partition_runs(args, defs, keys, instance, resources, quiet,
-                                                SWEEP_SELECTION):
-        if not result.success:
-            failed.append(key)
-            summaries.append(f"{key}: FAILED after {seconds:.1f} s (run {result.run_id} in "
-                             f"the Dagster UI)")
-            print(summaries[-1])
-            continue
-        table = result.output_for_node("comparison")
-        print(f"\n{key}: mean over the outputs\n\n{mean_scores(table).to_markdown(floatfmt='.4g')}")
-        summaries.append(_summary(key, result, table, seconds))
+    failed, ended, interrupted, summaries = [], [], [], []
+    try:
+        for key, result, seconds in _partition_runs(args, defs, keys, instance, resources,
+                                                    quiet, SWEEP_SELECTION):
+            ended.append(key)
+            if not result.success:
+                failed.append(key)
+                if was_interrupted(result):
+                    interrupted.append(key)
+                how = "INTERRUPTED" if interrupted[-1:] == [key] else "FAILED"
+                summaries.append(f"{key}: {how} after {seconds:.1f} s (run {result.run_id} "
+                                 f"in the Dagster UI)")
+                print(summaries[-1])
+                if interrupted == [key]:
+                    print("interrupted: no further partition starts; the runs in flight end",
+                          flush=True)
+                continue
+            table = result.output_for_node("comparison")
+            print(f"\n{key}: mean over the outputs\n\n"
+                  f"{mean_scores(table).to_markdown(floatfmt='.4g')}")
+            summaries.append(_summary(key, result, table, seconds))
+    except KeyboardInterrupt:  # one that came outside a run (Dagster records those inside)
+        interrupted.append(None)
     print("\nSummary\n  " + "\n  ".join(summaries))
+    if interrupted:
+        left = [k for k in keys if k not in ended]
+        if left:
+            print(f"  not run to the end: {', '.join(left)}")
+        return 130  # as a shell reports SIGINT; the leaderboard is left as it was
     # the leaderboard ranks every partition stored so far, not only the ones just run
     board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
                            instance=instance, run_config=quiet, raise_on_error=False)
@@ -101,7 +117,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
     """``(key, result, seconds)`` of each partition's run: in this process
     (``dg.materialize``), ``--jobs`` at once with worker processes (:mod:`.parallel_runs`), or,
     with ``--executor dask``, as ``sweep_dask`` runs on a dask cluster (a LocalCluster unless
-    ``--scheduler``)."""
+    ``--scheduler``). No partition starts after a run was interrupted (Ctrl-C)."""
     from .parallel_runs import materialize_partition, partition_runs_at_once
 
     def announce(key: str) -> None:
@@ -115,13 +131,15 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
         if jobs > 1:
             yield from partition_runs_at_once(keys, jobs, run_here, run_config,
                                               args.tracking_uri, resources["io_manager"],
-                                              announce)
+                                              announce, threading.Event())
             return
         for key in keys:
             announce(key)
             t0 = time.perf_counter()
             result = run_here(key)
             yield key, result, time.perf_counter() - t0
+            if was_interrupted(result):
+                return
         return
     from .dask_sweep import dask_scheduler, sweep_on_dask
 
@@ -136,6 +154,8 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
         for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
                                          io_manager=resources["io_manager"]):
             yield key, result, time.perf_counter() - t0
+            if was_interrupted(result):
+                return
             t0 = time.perf_counter()
 
 

@@ -56,13 +56,15 @@ def _quiet_sizeof() -> None:
 
 @dataclass
 class PartitionRun:
-    """One partition's ``sweep_dask`` run: whether it succeeded, its run id, and its outputs
-    read from the store (a ``JobExecutionResult`` reads them without the partition)."""
+    """One partition's run in another process (a ``sweep_dask`` run, or a worker's of
+    :mod:`.parallel_runs`): whether it succeeded or was interrupted, its run id, and its
+    outputs read from the store (a ``JobExecutionResult`` reads them without the partition)."""
 
     key: str
     success: bool
     run_id: str
     io_manager: PartitionedFileIOManager
+    interrupted: bool = False
 
     def output_for_node(self, asset: str):
         """The stored value of ``asset`` for this partition."""

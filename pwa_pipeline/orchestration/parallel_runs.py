@@ -40,15 +40,27 @@ def default_jobs() -> int:
 
 @dataclass
 class LostRun:
-    """A partition whose worker process ended before its run did (killed, out of memory)."""
+    """A partition whose worker process ended before its run did (killed, out of memory), or
+    was interrupted before Dagster could record it."""
 
     key: str
     reason: str
     success: bool = False
+    interrupted: bool = False
 
     @property
     def run_id(self) -> str:
         return f"unknown: its worker process ended ({self.reason})"
+
+
+def was_interrupted(result) -> bool:
+    """Whether a partition's run ended by an interrupt (Ctrl-C, SIGINT): Dagster then fails
+    the step it was in with ``DagsterExecutionInterruptedError`` and returns."""
+    if hasattr(result, "interrupted"):
+        return result.interrupted
+    return any(e.event_type_value == "STEP_FAILURE" and e.event_specific_data.error is not None
+               and e.event_specific_data.error.cls_name == "DagsterExecutionInterruptedError"
+               for e in result.all_events)
 
 
 def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
@@ -63,8 +75,8 @@ def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
 _WORKER: dict = {}
 
 
-def _worker_run(key: str, run_config: dict, tracking_uri: str) -> tuple[bool, str]:
-    """In a worker process: one partition's run; ``(success, run id)``. The definitions,
+def _worker_run(key: str, run_config: dict, tracking_uri: str) -> tuple[bool, str, bool]:
+    """In a worker process: one partition's run; ``(success, run id, interrupted)``. The definitions,
     resources and instance are built at the worker's first run, from the environment this
     process was started with (``DAGSTER_HOME`` and the project's paths)."""
     from .definitions import build_definitions
@@ -80,7 +92,7 @@ def _worker_run(key: str, run_config: dict, tracking_uri: str) -> tuple[bool, st
         _WORKER.update(defs=defs, resources=resources, instance=prepare_instance())
     result = materialize_partition(_WORKER["defs"], key, _WORKER["resources"],
                                    _WORKER["instance"], run_config, SWEEP_SELECTION)
-    return result.success, result.run_id
+    return result.success, result.run_id, was_interrupted(result)
 
 
 def _warm_up() -> None:
@@ -91,9 +103,11 @@ def _warm_up() -> None:
 def partition_runs_at_once(keys: list[str], jobs: int, run_here: Callable[[str], object],
                            run_config: dict, tracking_uri: str,
                            io_manager: PartitionedFileIOManager,
-                           announce: Callable[[str], None]
+                           announce: Callable[[str], None], stop: threading.Event
                            ) -> Iterator[tuple[str, object, float]]:
-    """``(key, result, seconds)`` of every partition, in the order they end.
+    """``(key, result, seconds)`` of every partition started, in the order they end; none
+    is started once ``stop`` is set, as it is when a run was interrupted (the runs in
+    flight end and are yielded).
 
     ``run_here(key)`` runs a partition in this process; ``jobs − 1`` worker processes run
     the others with ``run_config`` and ``tracking_uri`` (empty: the default store), their
@@ -108,19 +122,26 @@ def partition_runs_at_once(keys: list[str], jobs: int, run_here: Callable[[str],
 
     def take() -> str | None:
         with lock:
-            return waiting.popleft() if waiting else None
+            return waiting.popleft() if waiting and not stop.is_set() else None
 
     def feed(pool: ProcessPoolExecutor) -> None:  # one worker's partitions, one at a time
         while (key := take()) is not None:
             announce(key)
             t0 = time.perf_counter()
             try:
-                success, run_id = pool.submit(_worker_run, key, run_config,
-                                              tracking_uri).result()
+                success, run_id, interrupted = pool.submit(_worker_run, key, run_config,
+                                                           tracking_uri).result()
             except BrokenProcessPool as exc:  # the rest is left to this process
                 finished.put((key, LostRun(key, str(exc)), time.perf_counter() - t0))
                 return
-            finished.put((key, PartitionRun(key, success, run_id, io_manager),
+            except KeyboardInterrupt:  # an interrupt outside the run's own handling
+                stop.set()
+                finished.put((key, LostRun(key, "interrupted", interrupted=True),
+                              time.perf_counter() - t0))
+                return
+            if interrupted:
+                stop.set()
+            finished.put((key, PartitionRun(key, success, run_id, io_manager, interrupted),
                           time.perf_counter() - t0))
 
     with ProcessPoolExecutor(jobs - 1, mp_context=get_context("spawn")) as pool:
@@ -134,6 +155,8 @@ def partition_runs_at_once(keys: list[str], jobs: int, run_here: Callable[[str],
             announce(key)
             t0 = time.perf_counter()
             result = run_here(key)
+            if was_interrupted(result):
+                stop.set()
             yield key, result, time.perf_counter() - t0
             while not finished.empty():
                 yield finished.get()
