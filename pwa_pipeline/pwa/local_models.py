@@ -17,8 +17,8 @@ from .neighbours import distinct_rows, nearest_neighbours
 _RANK_TOL = 1e-10
 _CHUNK = 256
 """Local sets per block of the solve: 256 × n_ρ × (d + m) floats (4.4 MB on the robot) stay
-near the cache, where 1,024 took ~1.4x the CPU time on the robot (one thread); the results
-do not depend on it, bit for bit."""
+nearer the cache than 1,024 did (1.14× the CPU time, ``benchmarks.local_solve``); the
+results do not depend on it, bit for bit."""
 _CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
 
 
