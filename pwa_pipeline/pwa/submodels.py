@@ -720,10 +720,11 @@ class RefinedSubModels(BaseEstimator):
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
         best, searched, split_once = None, {}, set()
-        # The search for missed modes (step 4, no SVM) runs in a second thread beside the
-        # split search (step 3, whose SVM runs in this one: liblinear draws from one global
-        # random generator), and is dropped when a split holds; BLAS single-threaded for
-        # both (one limit over the whole loop, so that the threads' limits do not undo it).
+        # The missed-mode search (4. above: local models and clusters, no SVM) runs in a
+        # second thread beside the split search (3., whose SVMs stay in this thread:
+        # liblinear draws from one global random generator) and is dropped when a split
+        # holds. BLAS single-threaded for both, one limit over the loop (a limit set and
+        # restored in one thread would undo the other's).
         with single_threaded_blas(), ThreadPoolExecutor(1) as beside:
             while True:
                 thetas, labels, margin, sweeps = refine(phi, target, labels, min_size,
