@@ -5,7 +5,8 @@ On the full KUKA training record (39,988 samples, na = nb = 2, d = 24, m = 6), e
 fresh subprocess (so that its peak resident memory, VmHWM of /proc/self/status, is its own;
 the value just before the fit, with Python, the libraries and the data loaded, is reported
 as the baseline), ``--repeats`` times, the runs of every variant interleaved so that they
-share the machine's load:
+share the machine's load; each fit's wall seconds and CPU seconds (the process time of all
+its threads: the work done, which a loaded machine inflates less than the wall time):
 
 - ``default``: ``PWARX.default`` (n_rho = 3d = 72, ε from the data), all steps;
 - ``default, n_rho=61``: the same with n_rho = 61 (the setting of benchmarks.identify);
@@ -76,15 +77,27 @@ def worker(variant: str, out: str) -> None:
         from benchmarks._plain import plain_steps_1_to_4
 
         before = peak_rss_mb()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         labels, eps = plain_steps_1_to_4(robot.u_train, robot.y_train, 2, 2)
-        result.update(seconds=time.perf_counter() - t0, eps=eps, labels=labels.tolist())
+        result.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
+                      eps=eps, labels=labels.tolist())
     else:
         est = estimator(variant)
+        cpu_steps: dict[str, float] = {}
+        fit_step = est.fit_step
+
+        def timed_step(name, *args, **kwargs):
+            c0 = time.process_time()
+            out = fit_step(name, *args, **kwargs)
+            cpu_steps[name] = time.process_time() - c0
+            return out
+
+        est.fit_step = timed_step  # each step's CPU seconds beside fit's wall timings_
         before = peak_rss_mb()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         model = est.fit(robot.u_train, robot.y_train)
-        result.update(seconds=time.perf_counter() - t0, steps=model.timings_,
+        result.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
+                      steps=model.timings_, cpu_steps=cpu_steps,
                       eps=model.clustering_.eps_, n_submodels=model.n_submodels_,
                       labels=model.clustering_.labels_.tolist(),
                       thetas=model.thetas_.tolist())
@@ -218,12 +231,15 @@ def main(argv=None) -> None:
     rows = []
     for name, res in runs.items():
         row = {"variant": name, "median_seconds": statistics.median(r["seconds"] for r in res),
+               "median_cpu_seconds": statistics.median(r["cpu_seconds"] for r in res),
                "runs": [round(r["seconds"], 2) for r in res],
                "peak_mb": max(r["peak_mb"] for r in res),
                "baseline_mb": statistics.median(r["before_mb"] for r in res)}
         if "steps" in res[0]:
             for step in res[0]["steps"]:
                 row[f"step_{step}"] = statistics.median(r["steps"][step] for r in res)
+            for step in res[0]["cpu_steps"]:
+                row[f"cpu_{step}"] = statistics.median(r["cpu_steps"][step] for r in res)
             row["steps_1_4"] = statistics.median(
                 sum(r["steps"][s] for s in ("regressors", "local_models", "clustering"))
                 for r in res)

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from sklearn.base import clone
 
 from pwa_pipeline import PWARX
 from pwa_pipeline.config import HParamsFile
@@ -188,9 +189,9 @@ def test_split_gain_tells_two_modes_from_one():
     assert gain_one < 0.5
 
 
-def test_a_four_percent_mode_merged_into_its_neighbour_is_found():
-    """Clusters that give a 4 % mode's rows to its neighbour: step 5 splits them apart (the
-    missed-mode search alone does not, as the rare rows are explained half-well)."""
+def _four_percent_mode():
+    """A 4 % mode (79 of 2000 samples) whose rows the clusters give to its neighbour: φ, y,
+    the local models and those clusters."""
     import copy
 
     thetas = np.array([[[0.5], [1.0]], [[-0.4], [1.0]], [[0.3], [2.0]]])
@@ -209,6 +210,13 @@ def test_a_four_percent_mode_merged_into_its_neighbour_is_found():
     clustering = DBSCANClustering().fit(local, target)
     absorbed = copy.copy(clustering)
     absorbed.labels_ = np.where(clustering.labels_ >= 0, np.minimum(mode, 1), -1)
+    return phi, target, local, absorbed
+
+
+def test_a_four_percent_mode_merged_into_its_neighbour_is_found():
+    """Clusters that give a 4 % mode's rows to its neighbour: step 5 splits them apart (the
+    missed-mode search alone does not, as the rare rows are explained half-well)."""
+    phi, target, local, absorbed = _four_percent_mode()
     found = RefinedSubModels().fit(phi, target, local, absorbed, SVMRegions())
     assert found.n_submodels_ == 3
     np.testing.assert_allclose(np.sort(found.thetas_[:, 0, 0]), [-0.4, 0.3, 0.5], atol=0.01)
@@ -418,3 +426,56 @@ def test_sweeps_stop_when_few_rows_move_and_the_sub_models_are_kept():
     tiny[:3] = 2  # a third sub-model of 3 rows, below min_size: the first sweep drops it
     dropped = refine(phi, y, tiny, 5, 20, SVMRegions(), tol=1.0)
     assert dropped[0].shape[0] == 2 and dropped[3] == 2
+
+
+class _InOrder:
+    """An executor that runs a submitted call only when its result is asked for (never when
+    cancelled): the missed-mode search where the sequential loop ran it."""
+
+    def __init__(self, workers: int):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def submit(self, fn, *args):
+        class Deferred:
+            def cancel(self):
+                return True
+
+            def result(self):
+                return fn(*args)
+
+        return Deferred()
+
+
+def test_the_missed_mode_search_beside_the_split_search_changes_nothing(monkeypatch):
+    """The search for missed modes runs in a second thread while the split search runs and is
+    dropped when a split holds: the fit is the one that runs it afterwards, only when no
+    split holds, to the last bit. Splits hold beside a search (the default), or never (a
+    bar no split reaches, and the searches run)."""
+    from pwa_pipeline.pwa import submodels
+
+    phi, target, local, absorbed = _four_percent_mode()
+    searches = []
+    search = submodels._missed_mode_clusters
+    monkeypatch.setattr(submodels, "_missed_mode_clusters",
+                        lambda phi, *a: searches.append(len(phi)) or search(phi, *a))
+    for split_tol, dropped in ((1.0, True), (1e6, False)):
+        step = RefinedSubModels(split_tol=split_tol)
+        with monkeypatch.context() as m:
+            m.setattr(submodels, "ThreadPoolExecutor", _InOrder)
+            in_order = clone(step).fit(phi, target, local, absorbed, SVMRegions())
+        n_in_order = len(searches)
+        beside = clone(step).fit(phi, target, local, absorbed, SVMRegions())
+        n_beside = len(searches) - n_in_order
+        searches.clear()
+        assert (n_beside > n_in_order) == dropped and n_beside >= 1
+        assert (beside.n_split_ > 0) == dropped
+        for name in ("thetas_", "labels_", "weights_"):
+            np.testing.assert_array_equal(getattr(beside, name), getattr(in_order, name))
+        assert (beside.n_submodels_, beside.n_merged_, beside.n_iter_) == (
+            in_order.n_submodels_, in_order.n_merged_, in_order.n_iter_)

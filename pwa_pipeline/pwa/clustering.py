@@ -62,11 +62,13 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     return float(grid[best])
 
 
-def _sq_distances(xt: np.ndarray, sq: np.ndarray | None, rows: np.ndarray) -> np.ndarray:
-    """Squared distances of the points ``rows`` to every point, rounded as scikit-learn's
-    radius search rounds them: its k-d tree's Σ_j (x_pj − x_qj)² summed in feature order
-    when ``sq`` is None, else (‖p‖² − 2 p·q) + ‖q‖² clipped at 0, like its brute force.
-    ``xt`` is the points' transpose (d, n)."""
+def _sq_distances(xt: np.ndarray, sq: np.ndarray | None, rows: np.ndarray | slice
+                  ) -> np.ndarray:
+    """Squared distances of the points ``rows`` (indices, or ``slice(None)`` for all) to
+    every point, rounded as scikit-learn's radius search rounds them: its k-d tree's
+    Σ_j (x_pj − x_qj)² summed in feature order when ``sq`` is None, else
+    (‖p‖² − 2 p·q) + ‖q‖² clipped at 0, like its brute force. ``xt`` is the points'
+    transpose (d, n)."""
     if sq is None:
         acc = np.subtract(xt[0], xt[0, rows, None])
         acc *= acc
@@ -104,47 +106,46 @@ def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.n
     # and for tiny sets (5 default neighbours >= n // 2), its k-d tree otherwise
     sq = np.einsum("ij,ij->i", x, x) if x.shape[1] > 15 or 5 >= n // 2 else None
 
-    def dist(rows: np.ndarray) -> np.ndarray:
+    def dist(rows: np.ndarray | slice) -> np.ndarray:
         acc = _sq_distances(xt, sq, rows)
         far = acc > r2
         np.sqrt(acc, out=acc)
         acc[far] = np.inf
         return acc
 
-    # All distances at once when they fit _DENSE entries (one BLAS product), else by rows.
-    dense = np.empty((n, n)) if n * n <= _DENSE else None
+    # All distances at once when they fit _DENSE entries (one symmetric BLAS product, the
+    # Gram xᵀx), else by rows.
+    dense = dist(slice(None)) if n * n <= _DENSE else None
     core = np.zeros(n)
     step = max(1, (1 << 22) // n)
-    for a in range(0, n if min_pts > 1 or dense is not None else 0, step):
+    for a in range(0, n if min_pts > 1 else 0, step):
         rows = np.arange(a, min(n, a + step))
-        d = dist(rows)
-        if dense is not None:
-            dense[rows] = d
-        if min_pts > 1:
-            d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
-            if min_pts - 1 < n:
-                d.partition(min_pts - 2, axis=1)  # in place: d is not used after
-                core[rows] = d[:, min_pts - 2]
-            else:
-                core[rows] = np.inf
+        d = dense[rows] if dense is not None else dist(rows)  # a copy either way
+        d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
+        if min_pts - 1 < n:
+            d.partition(min_pts - 2, axis=1)  # in place: d is not used after
+            core[rows] = d[:, min_pts - 2]
+        else:
+            core[rows] = np.inf
     # Prim's algorithm on max(c_p, c_q, d(p, q)); an inf edge starts a new tree.
     best = np.full(n, np.inf)
     done = np.zeros(n, bool)
+    left = core.copy()  # c_p of the points not in a tree yet, inf for those in one
     edges = np.empty(max(n - 1, 0))
     u = 0
     for it in range(n):
         done[u] = True
+        left[u] = np.inf
         if it:
             edges[it - 1] = best[u]
         best[u] = np.inf
         row = dense[u] if dense is not None else dist(np.array([u]))[0]
-        np.maximum(row, core, out=row)
         np.maximum(row, core[u], out=row)
-        row[done] = np.inf
+        np.maximum(row, left, out=row)
         np.minimum(best, row, out=best)
-        u = int(np.argmin(best))
+        u = int(best.argmin())
         if best[u] == np.inf:  # no finite edge left: a new tree from any point left
-            u = int(np.argmin(done))
+            u = int(done.argmin())
     core.sort()
     edges.sort()
     return np.searchsorted(core, grid, "right") - np.searchsorted(edges, grid, "right")

@@ -8,6 +8,8 @@ the setting to change, instead of being killed by the operating system half-way.
 import os
 from pathlib import Path
 
+from .clustering import _DENSE
+from .local_models import _CHUNK
 from .neighbours import _BLOCK
 
 _GiB = 2**30
@@ -68,7 +70,7 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
         search = n * ((d + 2) * 8 + 6 * n_rho * 8) + _BLOCK * 6 * n_rho * 20 * workers
     else:  # scikit-learn's tree: distances and indices of every row
         search = n * n_rho * 16
-    solve = workers * 1024 * (n_rho + d) * (d + m) * 8 * 3
+    solve = workers * _CHUNK * (n_rho + d) * (d + m) * 8 * 3
     out = {"local_models": kept + max(search, solve)}
 
     n_c = n if getattr(clustering, "max_clustered", None) is None else min(
@@ -76,8 +78,8 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     width = d * m * (m if getattr(clustering, "embedding", "exact") == "literal" else 1)
     dbscan = n_c * (width * 8 * 4 + 64 * 8 * 2 + (getattr(clustering, "min_pts", None) or 2 * d)
                     * 16) + 3 * 2**25
-    counts = 0 if getattr(clustering, "eps", None) is not None else (
-        n_c * n_c * 8 if n_c * n_c <= 1 << 24 else 2**25)
+    counts = 0 if getattr(clustering, "eps", None) is not None else (  # the distances and
+        n_c * n_c * 9 if n_c * n_c <= _DENSE else 2**25)  # their mask of pairs beyond ε
     out["clustering"] = kept + n * d * m * 8 + max(dbscan, counts)
 
     s = 30 if type(submodels).__name__ == "RefinedSubModels" else 0  # sub-models met at most

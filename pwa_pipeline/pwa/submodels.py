@@ -6,6 +6,7 @@ imports no other step.
 """
 
 import hashlib
+from concurrent.futures import ThreadPoolExecutor
 from numbers import Integral, Real
 
 import numpy as np
@@ -719,34 +720,47 @@ class RefinedSubModels(BaseEstimator):
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
         best, searched, split_once = None, {}, set()
-        while True:
-            thetas, labels, margin, sweeps = refine(phi, target, labels, min_size,
-                                                    self.n_refine, regions, memo)
-            n_iter += sweeps
-            merged, more = merge_indistinguishable(phi, target, labels, **merge)
-            if more:
-                labels, n_merged = merged, n_merged + more
-                continue
-            if self.split_tol is not None and n_split < self.n_split:
-                split = self._best_split(phi, target, labels, local.theta_, min_size, regions,
-                                         searched, split_once)
-                if split is not None:
-                    labels, n_split = split, n_split + 1
+        # The missed-mode search (4. above: local models and clusters, no SVM) runs in a
+        # second thread beside the split search (3., whose SVMs stay in this thread:
+        # liblinear draws from one global random generator) and is dropped when a split
+        # holds. BLAS single-threaded for both, one limit over the loop (a limit set and
+        # restored in one thread would undo the other's).
+        with single_threaded_blas(), ThreadPoolExecutor(1) as beside:
+            while True:
+                thetas, labels, margin, sweeps = refine(phi, target, labels, min_size,
+                                                        self.n_refine, regions, memo)
+                n_iter += sweeps
+                merged, more = merge_indistinguishable(phi, target, labels, **merge)
+                if more:
+                    labels, n_merged = merged, n_merged + more
                     continue
-            polished = refine(phi, target, labels, min_size, self.n_refine, memo=memo)
-            poor = unexplained_cost(phi, target, polished[0]) > limit
-            if best is not None and poor.sum() >= best[0]:
-                break  # the search did not explain more rows: keep the previous state
-            best = (int(poor.sum()), polished)
-            if searches >= self.n_search or poor.sum() < min_pts:
-                break
-            searches += 1
-            extra = _missed_mode_clusters(phi[poor], target[poor], local, clustering)
-            if extra is None:
-                break
-            labels = labels.copy()
-            found = extra >= 0
-            labels[np.nonzero(poor)[0][found]] = thetas.shape[0] + extra[found]
+                polished = refine(phi, target, labels, min_size, self.n_refine, memo=memo)
+                poor = unexplained_cost(phi, target, polished[0]) > limit
+                # the search did not explain more rows: the previous state is kept
+                better = best is None or poor.sum() < best[0]
+                search = better and searches < self.n_search and poor.sum() >= min_pts
+                found = beside.submit(_missed_mode_clusters, phi[poor], target[poor], local,
+                                      clustering) if search else None
+                if self.split_tol is not None and n_split < self.n_split:
+                    split = self._best_split(phi, target, labels, local.theta_, min_size,
+                                             regions, searched, split_once)
+                    if split is not None:
+                        if found is not None:
+                            found.cancel()  # (if not started)
+                        labels, n_split = split, n_split + 1
+                        continue
+                if not better:
+                    break
+                best = (int(poor.sum()), polished)
+                if not search:
+                    break
+                searches += 1
+                extra = found.result()
+                if extra is None:
+                    break
+                labels = labels.copy()
+                joins = extra >= 0
+                labels[np.nonzero(poor)[0][joins]] = thetas.shape[0] + extra[joins]
         self.thetas_, self.labels_, margin, sweeps = best[1]  # the state kept, polished
         self.weights_ = margin_weights(margin)
         self.n_submodels_ = self.thetas_.shape[0]
