@@ -117,7 +117,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
     """:func:`nearest_neighbours` of distinct points, and their exact squared distances."""
     n, d = x.shape
     x = x - x.mean(axis=0)
-    order = _spatial_order(x)
+    order = _spatial_order(x, leaf=_BLOCK // 2)  # finer splits only reorder within blocks
     xs = np.ascontiguousarray(x[order])
     sq = np.einsum("ij,ij->i", xs, xs)
     norm = np.sqrt(sq)
@@ -172,10 +172,11 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
     return out[back], out_sq[back]
 
 
-def _spatial_order(x: Float2D, leaf: int = 64) -> np.ndarray:
+def _spatial_order(x: Float2D, leaf: int) -> np.ndarray:
     """An order of the points in which nearby points tend to be close: recursive median
     splits, each along the principal axis of the points being split (their widest spread
-    in any direction, so that a block of the order is compact in all of them)."""
+    in any direction, so that a block of the order is compact in all of them), down to
+    groups of at most ``leaf`` points."""
     order = np.arange(len(x))
     todo = [(0, len(x))]
     while todo:
