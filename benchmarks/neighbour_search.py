@@ -5,8 +5,10 @@ On the KUKA training record's regressors (na = nb = 2, 39,856 rows, z-scored as 
 n_ρ = 3d) runs in a fresh process per version, twice in each (the second search is timed
 apart from thread pools and memory first touched), ``--repeats`` times, the versions
 alternated so that they share the machine's load. Reported: median seconds of the first and
-second search per version, their ratio, and whether both versions return the same neighbours
-(a hash of the index array). The 1-minute load average is recorded at the start and the end.
+second search per version, their ratio, the second search's CPU seconds (all threads; less
+sensitive than wall time to a shared machine's load) and their ratio, and whether both
+versions return the same neighbours (a hash of the index array). The 1-minute load average
+is recorded at the start and the end.
 
 Writes results/neighbour_search.json and .md. Usage::
 
@@ -40,12 +42,14 @@ def worker(k: str, out: str) -> None:
     phi = build_regressors(as_experiments(robot.u_train, robot.y_train), 2, 2, True).phi
     std = phi.std(axis=0)
     x = (phi[:, std > 0] - phi[:, std > 0].mean(axis=0)) / std[std > 0]
-    seconds = []
+    seconds, cpu = [], []
     for _ in range(2):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         idx = nearest_neighbours(x, int(k))
         seconds.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     Path(out).write_text(json.dumps({"first": seconds[0], "second": seconds[1],
+                                     "first_cpu": cpu[0], "second_cpu": cpu[1],
                                      "hash": hashlib.blake2b(idx.tobytes()).hexdigest()}))
 
 
@@ -73,12 +77,15 @@ def main(argv=None) -> None:
                                                        [str(args.k)], tmp, tree))
     load_end = os.getloadavg()[0]
     rows = [{"version": v, "median first search s": statistics.median(r["first"] for r in rs),
-             "median second search s": statistics.median(r["second"] for r in rs)}
+             "median second search s": statistics.median(r["second"] for r in rs),
+             "median second search CPU s": statistics.median(r["second_cpu"] for r in rs)}
             for v, rs in runs.items()]
     table = pd.DataFrame(rows)
     ref = table.iloc[1]
     table["second over reference"] = table["median second search s"] / ref[
         "median second search s"]
+    table["CPU over reference"] = table["median second search CPU s"] / ref[
+        "median second search CPU s"]
     same = {r["hash"] for rs in runs.values() for r in rs}
     head = (f"`nearest_neighbours` at k = {args.k} on the robot's z-scored regressors "
             f"(39,856 × 24), {args.repeats} fresh processes per version alternated, two "
