@@ -5,12 +5,15 @@ On the KUKA training record's regressors (na = nb = 2, 39,856 rows, z-scored as 
 n_ρ = 3d) runs in a fresh process per version, twice in each (the second search is timed
 apart from thread pools and memory first touched), ``--repeats`` times, the versions
 alternated so that they share the machine's load. Reported: median seconds of the first and
-second search per version, their ratio, and whether both versions return the same neighbours
-(a hash of the index array). The 1-minute load average is recorded at the start and the end.
+second search per version, their ratio, the second search's CPU seconds (all threads; less
+sensitive than wall time to a shared machine's load) and their ratio, and whether both
+versions return the same neighbours (a hash of the index array). The 1-minute load average
+is recorded at the start and the end.
 
-Writes results/neighbour_search.json and .md. Usage::
+Writes results/neighbour_search.json and .md (``--cold-cache``: neighbour_search_cold.*, this
+checkout's numba kernels compiled in every process, as in a fresh clone). Usage::
 
-    python -m benchmarks.neighbour_search [--against bf2d52f] [--repeats 5]
+    python -m benchmarks.neighbour_search [--against bf2d52f] [--repeats 5] [--cold-cache]
 """
 
 import argparse
@@ -40,12 +43,14 @@ def worker(k: str, out: str) -> None:
     phi = build_regressors(as_experiments(robot.u_train, robot.y_train), 2, 2, True).phi
     std = phi.std(axis=0)
     x = (phi[:, std > 0] - phi[:, std > 0].mean(axis=0)) / std[std > 0]
-    seconds = []
+    seconds, cpu = [], []
     for _ in range(2):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         idx = nearest_neighbours(x, int(k))
         seconds.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     Path(out).write_text(json.dumps({"first": seconds[0], "second": seconds[1],
+                                     "first_cpu": cpu[0], "second_cpu": cpu[1],
                                      "hash": hashlib.blake2b(idx.tobytes()).hexdigest()}))
 
 
@@ -54,6 +59,10 @@ def main(argv=None) -> None:
     parser.add_argument("--against", default="bf2d52f", help="the reference commit")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--k", type=int, default=72)
+    parser.add_argument("--cold-cache", action="store_true",
+                        help="compile this checkout's numba kernels anew in each process (an "
+                             "empty NUMBA_CACHE_DIR, as a fresh clone); writes "
+                             "neighbour_search_cold.*")
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -66,29 +75,40 @@ def main(argv=None) -> None:
         tree = previous_tree(args.against, tmp / "tree")
         if tree is None:
             raise SystemExit(f"git cannot give commit {args.against}")
-        for _ in range(args.repeats):
+        for r in range(args.repeats):
+            if args.cold_cache:
+                os.environ["NUMBA_CACHE_DIR"] = str(tmp / f"numba-cache-{r}")
             runs["this"].append(in_fresh_process("benchmarks.neighbour_search", [str(args.k)],
                                                  tmp))
+            os.environ.pop("NUMBA_CACHE_DIR", None)
             runs[args.against].append(in_fresh_process("benchmarks.neighbour_search",
                                                        [str(args.k)], tmp, tree))
     load_end = os.getloadavg()[0]
     rows = [{"version": v, "median first search s": statistics.median(r["first"] for r in rs),
-             "median second search s": statistics.median(r["second"] for r in rs)}
+             "median second search s": statistics.median(r["second"] for r in rs),
+             "median second search CPU s": statistics.median(r["second_cpu"] for r in rs)}
             for v, rs in runs.items()]
     table = pd.DataFrame(rows)
     ref = table.iloc[1]
     table["second over reference"] = table["median second search s"] / ref[
         "median second search s"]
+    table["CPU over reference"] = table["median second search CPU s"] / ref[
+        "median second search CPU s"]
     same = {r["hash"] for rs in runs.values() for r in rs}
     head = (f"`nearest_neighbours` at k = {args.k} on the robot's z-scored regressors "
             f"(39,856 × 24), {args.repeats} fresh processes per version alternated, two "
             f"searches each; 1-minute load {load_start:.2f} at the start, {load_end:.2f} at "
-            f"the end, {os.cpu_count()} CPUs. Same neighbours in every run: {len(same) == 1}.")
+            f"the end, {os.cpu_count()} CPUs. Same neighbours in every run: {len(same) == 1}."
+            + (" This checkout's kernels compiled anew in each of its processes (empty numba "
+               "cache): its first search includes their compilation." if args.cold_cache
+               else ""))
+    name = "neighbour_search_cold" if args.cold_cache else "neighbour_search"
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "neighbour_search.md").write_text(
+    (RESULTS / f"{name}.md").write_text(
         head + "\n\n" + table.to_markdown(index=False, floatfmt=".3g") + "\n")
     write_json({"against": args.against, "k": args.k, "load": [load_start, load_end],
-                "same_neighbours": len(same) == 1, "runs": runs}, "neighbour_search")
+                "cold_cache": args.cold_cache, "same_neighbours": len(same) == 1,
+                "runs": runs}, name)
     print(head)
     print(table.to_markdown(index=False, floatfmt=".3g"))
 

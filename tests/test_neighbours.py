@@ -1,10 +1,14 @@
 """Blocked exact k nearest neighbours (pwa_pipeline.pwa.neighbours) against references."""
 
+import platform
+
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from sklearn.neighbors import NearestNeighbors
 
 from pwa_pipeline.pwa import neighbours
+from pwa_pipeline.pwa._knn_kernels import sq_distance
 from pwa_pipeline.pwa.neighbours import nearest_neighbours
 
 
@@ -58,6 +62,54 @@ def test_a_far_outlier_and_a_tight_cluster():
     np.testing.assert_array_equal(nearest_neighbours(x, 20), reference(x, 20))
 
 
+@pytest.mark.parametrize("duplicates", [0, 80])
+def test_same_distances_as_an_exact_kd_tree_with_ties(duplicates):
+    rng = np.random.default_rng(11)
+    grid = rng.integers(-2, 3, size=(150, 16)) * 0.25  # distances exact and tying often
+    grid = grid[np.unique(grid, axis=0, return_index=True)[1]]
+    x = np.vstack([grid, grid[rng.integers(0, len(grid), duplicates)],
+                   rng.normal(size=(100, 16))])
+    x = x[rng.permutation(len(x))]  # duplicates spread over the indices
+    for k in (1, 9, 50):
+        got = nearest_neighbours(x, k)
+        dist = cKDTree(x).query(x, k)[0].reshape(len(x), k)  # its own order at ties
+        ours = np.sqrt(((x[got] - x[:, None, :]) ** 2).sum(axis=2))
+        np.testing.assert_allclose(ours, dist, rtol=1e-12, atol=0)
+        np.testing.assert_array_equal(got, reference(x, k))
+
+
+def test_near_ties_float32_cannot_rank_are_ranked_exactly():
+    # A shell of radii 1 + j·1e-6 around the origin, and a far cluster that puts the
+    # centred points at norms ~500: float32's rounding (~1 on these squared distances)
+    # ranks nothing in the shell, float64 ranks all of it.
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(300, 20))
+    shell = u / np.linalg.norm(u, axis=1, keepdims=True) * (1 + rng.permutation(300)[:, None]
+                                                             * 1e-6)
+    x = np.vstack([np.zeros((1, 20)), shell, 1e3 + rng.normal(size=(200, 20))])
+    for k in (40, 150):
+        np.testing.assert_array_equal(nearest_neighbours(x, k), reference(x, k))
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="numpy's einsum order on x86-64")
+def test_exact_distances_are_numpys_einsum_bit_for_bit():
+    # The kernels rank on the values numpy's einsum gave the search before them.
+    rng = np.random.default_rng(3)
+    for d in (1, 7, 8, 13, 24, 40):
+        x = rng.normal(size=(300, d)) * 10.0 ** rng.uniform(-3, 3, size=(300, 1))
+        p, q = rng.integers(0, 300, size=(2, 1000))
+        diff = x[p] - x[q]
+        got = np.array([sq_distance(x, a, b) for a, b in zip(p, q)])
+        np.testing.assert_array_equal(got, np.einsum("ij,ij->i", diff, diff))
+
+
 def test_k_out_of_range():
     with pytest.raises(ValueError, match="1 <= k <= n"):
         nearest_neighbours(np.zeros((5, 20)), 6)
+
+
+def test_non_finite_points():
+    x = np.zeros((5, 20))
+    x[2, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        nearest_neighbours(x, 2)

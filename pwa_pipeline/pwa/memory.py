@@ -65,9 +65,10 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     n_rho = min(getattr(local, "n_rho", None) or 3 * d, n)
     workers = len(os.sched_getaffinity(0))
     kept = n * (n_rho * 8 + d * m * 8 + m * 8)  # neighbours, θ_k, residual variances
-    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidates a row (8 B each, and
-        # the 20 B of row, column and distance while a block of them is selected)
-        search = n * ((d + 2) * 8 + 6 * n_rho * 8) + _BLOCK * 6 * n_rho * 20 * workers
+    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidates a row (12 B each, 24
+        # more while a block of them is selected), a tile's room for candidates per thread
+        search = n * ((d + 2) * 8 + 6 * n_rho * 12) + (
+            _BLOCK * 6 * n_rho * 24 + _BLOCK * _BLOCK * 24) * workers
     else:  # scikit-learn's tree: distances and indices of every row
         search = n * n_rho * 16
     solve = workers * _CHUNK * (n_rho + d) * (d + m) * 8 * 3

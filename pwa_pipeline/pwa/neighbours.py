@@ -4,7 +4,8 @@ scikit-learn's brute-force search ranks every row of the distance matrix in floa
 7 s on the robot's 40k regressor rows in 24 dimensions at k = 72). :func:`nearest_neighbours`
 gives the same neighbours from float32 products on tiles that fit in cache, each computed
 once for both of its row blocks, with two threads, deciding in float64 only the pairs that
-float32 cannot rank.
+float32 cannot rank. BLAS computes the tiles; compiled kernels (:mod:`._knn_kernels`) read
+each tile once to keep its candidates and rank each row's.
 """
 
 import os
@@ -12,9 +13,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .._arrays import sparse_nonzero
 from .._typing import Float2D
 from ._blas import single_threaded_blas
+from ._knn_kernels import kth_smallest_rows, select_nearest, tile_candidates
 
 _BLOCK = 512
 """Rows of a block; a tile is one block of rows against one block of columns."""
@@ -39,13 +40,15 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     ``_WINDOW`` such columns bounds its k-th nearest from above; then every tile of the
     distance matrix above the diagonal is computed once, in float32 (‖p‖² + ‖q‖² − 2 p·q as
     one product), and kept only where a distance is within its row's bound, for both of the
-    tile's row blocks. Among the kept candidates (about three times k a row on the robot),
-    those float32 cannot rank against the k-th (within its rounding bound) are decided on
-    exact float64 distances Σ_j (x_pj − x_qj)².
+    tile's row blocks, in one pass over the tile. Among a row's kept candidates (about three
+    times k a row on the robot), those below its k-th float32 distance plus twice the
+    rounding bound (the others are surely farther than the k nearest) are ranked on exact
+    float64 distances Σ_j (x_pj − x_qj)², then by index.
     Coinciding points are searched once, with their multiplicity.
 
-    Memory: the candidates (about 12 bytes each, a few hundred a point) and one tile per
-    thread; time n²·(d + 2)·2 floating-point operations over 2 (symmetry).
+    Memory: the candidates (12 bytes each, a few hundred a point) and one tile with room for
+    all its entries as candidates (24 bytes each) per thread; time n²·(d + 2)·2
+    floating-point operations over 2 (symmetry).
 
     Parameters
     ----------
@@ -63,6 +66,8 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     n = x.shape[0]
     if not 1 <= k <= n:
         raise ValueError(f"need 1 <= k <= n, got k = {k} for n = {n} points")
+    if not np.isfinite(x).all():
+        raise ValueError("x has NaN or infinite values: distances are undefined")
     workers = workers or len(os.sched_getaffinity(0))
     # Coinciding points: search the distinct ones, then expand by multiplicity.
     first, inverse = distinct_rows(x)
@@ -112,7 +117,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
     """:func:`nearest_neighbours` of distinct points, and their exact squared distances."""
     n, d = x.shape
     x = x - x.mean(axis=0)
-    order = _spatial_order(x)
+    order = _spatial_order(x, leaf=_BLOCK // 2)  # finer splits only reorder within blocks
     xs = np.ascontiguousarray(x[order])
     sq = np.einsum("ij,ij->i", xs, xs)
     norm = np.sqrt(sq)
@@ -129,72 +134,31 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         a, b = block
         c = min(max(0, (a + b - window) // 2), n - window)
         d2 = left[a:b] @ right[c:c + window].T
-        kth = np.partition(d2, k - 1, axis=1)[:, k - 1].astype(float)
-        return kth + 2 * err[a:b]
+        return kth_smallest_rows(d2, k) + 2 * err[a:b]
 
-    # A candidate is one integer, (row in its block, float32 distance, column) from the high
-    # bits down: sorting those sorts by row, then distance. A non-negative float32's bits
-    # rank like its value; a distance rounded below 0 is lifted to 0 (nearer the truth).
-    col_bits = max(n - 1, 1).bit_length()
-    dist_shift, row_shift = np.uint64(col_bits), np.uint64(col_bits + 31)
-    if col_bits + 31 + (_BLOCK - 1).bit_length() > 64:
-        raise ValueError(f"at most 2**{64 - 31 - (_BLOCK - 1).bit_length()} distinct points, "
-                         f"got {n}")
     found: list[list] = [[] for _ in blocks]
-
-    def pack(row: np.ndarray, col: np.ndarray, val: np.ndarray) -> np.ndarray:
-        bits = np.maximum(val, 0).view(np.uint32) & np.uint32(0x7FFFFFFF)  # −0.0 as 0.0
-        return (row.astype(np.uint64) << row_shift) | (bits.astype(np.uint64) << dist_shift) \
-            | col.astype(np.uint64)
 
     def tile(pair):  # one tile, for the rows of both of its blocks
         i, j = pair
         (a, b), (c, e) = blocks[i], blocks[j]
         d2 = left[a:b] @ right[c:e].T
-        near_row = d2 <= thr32[a:b, None]
+        row_side, col_side = np.empty((2, d2.size, 2), dtype=np.int32)
+        row_dist, col_dist = np.empty((2, d2.size), dtype=np.float32)
+        n_row, n_col = tile_candidates(d2, thr32[a:b], thr32[c:e], i == j, row_side,
+                                       row_dist, col_side, col_dist)
+        found[i].append((row_side[:n_row] + (0, c), row_dist[:n_row].copy()))
         if i != j:
-            near_row |= d2 <= thr32[None, c:e]
-        r, s = sparse_nonzero(near_row)
-        val = d2[r, s]
-        keep = val <= thr32[a + r]
-        found[i].append(pack(r[keep], c + s[keep], val[keep]))
-        if i != j:
-            keep = val <= thr32[c + s]
-            found[j].append(pack(s[keep], a + r[keep], val[keep]))
+            found[j].append((col_side[:n_col] + (0, a), col_dist[:n_col].copy()))
 
     out = np.empty((n, k), dtype=np.intp)
     out_sq = np.empty((n, k))
 
     def select(i):  # the k nearest of each row of block i among its candidates
         a, b = blocks[i]
-        key = np.concatenate(found[i])
+        pairs, val = (np.concatenate(part) for part in zip(*found[i]))
         found[i] = []
-        key.sort()  # by row, then distance
-        r = (key >> row_shift).astype(np.intp)
-        s = (key & np.uint64((1 << col_bits) - 1)).astype(np.intp)
-        val = ((key >> dist_shift).astype(np.uint32) & np.uint32(0x7FFFFFFF)).view(np.float32)
-        del key
-        count = np.bincount(r, minlength=b - a)
-        start = np.cumsum(count) - count
-        kth = val[start + k - 1].astype(float)[r]
-        e = 2 * err[a + r]
-        inside = val < kth - e  # surely among the k nearest (fewer than k a row)
-        use = np.flatnonzero(val <= kth + e)  # those and the band float32 cannot rank
-        r, s, val, inside = r[use], s[use], val[use], inside[use]
-        # In each row the inside candidates come first (by float32 distance, their order
-        # is not needed); the band after them is ranked by exact distance, then index.
-        band = np.flatnonzero(~inside)
-        rb, sb = r[band], s[band]
-        pick = np.arange(len(r))
-        pick[band] = band[np.lexsort((order[sb], _exact_sq(xs, a + rb, sb), rb))]
-        count = np.bincount(r, minlength=b - a)
-        first = (np.cumsum(count) - count)[:, None] + np.arange(k)
-        chosen = s[pick][first]
-        diff = xs[chosen] - xs[a:b, None, :]
-        dist = np.einsum("ijk,ijk->ij", diff, diff)  # exact, for the order and ties
-        ranked = np.lexsort((order[chosen], dist), axis=1)
-        out[a:b] = order[np.take_along_axis(chosen, ranked, 1)]
-        out_sq[a:b] = np.take_along_axis(dist, ranked, 1)
+        select_nearest(pairs[:, 0], pairs[:, 1], val, xs, a, 2 * err[a:b], order, out[a:b],
+                       out_sq[a:b])
 
     with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
         thr = np.concatenate(list(pool.map(bound, blocks)))
@@ -208,16 +172,11 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
     return out[back], out_sq[back]
 
 
-def _exact_sq(x: Float2D, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Σ_j (x_pj − x_qj)² of the pairs (p, q), in float64."""
-    diff = x[p] - x[q]
-    return np.einsum("ij,ij->i", diff, diff)
-
-
-def _spatial_order(x: Float2D, leaf: int = 64) -> np.ndarray:
+def _spatial_order(x: Float2D, leaf: int) -> np.ndarray:
     """An order of the points in which nearby points tend to be close: recursive median
     splits, each along the principal axis of the points being split (their widest spread
-    in any direction, so that a block of the order is compact in all of them)."""
+    in any direction, so that a block of the order is compact in all of them), down to
+    groups of at most ``leaf`` points."""
     order = np.arange(len(x))
     todo = [(0, len(x))]
     while todo:
