@@ -681,8 +681,10 @@ class RefinedSubModels(BaseEstimator):
         sweep that keeps the number of sub-models and changes no θ_i by more than this many
         of its standard errors (``settle`` of :func:`refine`, :func:`theta_shift`): at
         20 dB tens of rows near the boundaries move in every sweep and the sub-models
-        wander within their own uncertainty, so the sweeps ran to ``n_refine``. 0: only
-        when no row moves (or ``split_sweep_tol``).
+        wander within their own uncertainty, so the sweeps ran to ``n_refine``. On the
+        tuning seeds of ``benchmarks.robustness`` at 20 dB, 1 kept the mode count (16/20)
+        and the medians at 0.65× the fit's CPU time. 0: only when no row moves (or
+        ``split_sweep_tol``).
 
     Attributes
     ----------
