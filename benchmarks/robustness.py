@@ -39,14 +39,17 @@ free-run NRMSE on a fresh noisy record of the PWARX, of linear ARX and of the tr
 Writes results/robustness{suffix}.md, .json and .csv. Usage::
 
     python -m benchmarks.robustness [--seeds 20] [--cases paper-25dB,rare-mode]
-        [--set eval|tune] [--jobs 2] [--suffix _main]
+        [--set eval|tune] [--jobs 2] [--suffix _main] [--params submodels__settle_tol=0.5]
 
 ``--seeds 3 --cases ...`` is the quick form; the full run (10 cases × 20 seeds) takes about
 15 minutes with ``--jobs 2``. The reference (the landed code on the same seeds) runs this
-script with ``PYTHONPATH`` pointing at that checkout (``--suffix _main``).
+script with ``PYTHONPATH`` pointing at that checkout (``--suffix _main``); a variant of this
+checkout's default sets step parameters with ``--params`` (written beside the table). Fit
+seconds are wall time, with the fit's CPU seconds and step 5's wall seconds beside them.
 """
 
 import argparse
+import ast
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -270,7 +273,9 @@ CASES = {
 }
 
 
-def one_run(name: str, seed: int) -> dict:
+def one_run(name: str, seed: int, params: dict | None = None) -> dict:
+    """One fit of case ``name`` at ``seed`` and its scores; ``params`` (e.g.
+    ``{"submodels__settle_tol": 0.5}``) set on :meth:`PWARX.default` when given."""
     case = CASES[name]
     system = (paper_system() if case.system is None
               else random_system(seed, **case.system, hold=case.hold))
@@ -281,12 +286,15 @@ def one_run(name: str, seed: int) -> dict:
     row = {"case": name, "seed": seed, "true_modes": s,
            "smallest_mode_share": float(np.bincount(train.modes, minlength=s).min()
                                         / len(train.modes)), "error": ""}
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        model = PWARX(na=system.na, nb=system.nb).fit(train.u, train.y)
+        model = (PWARX(na=system.na, nb=system.nb) if not params else
+                 PWARX.default(system.na, system.nb).set_params(**params)).fit(train.u, train.y)
     except Exception as exc:  # noqa: BLE001 - a raised fit is a result here
         return {**row, "error": f"{type(exc).__name__}: {exc}"[:200]}
     row["fit_seconds"] = time.perf_counter() - t0
+    row["fit_cpu_seconds"] = time.process_time() - cpu0
+    row["submodels_seconds"] = model.timings_["submodels"]
     truth = ground_truth_scores(model, system.thetas, clean.u, clean.y_clean, clean.modes)
     error = np.nanmax(match_submodels(model.thetas_, system.thetas)[1])
     reg = build_regressors([(train.u, train.y)], system.na, system.nb, False)
@@ -329,7 +337,9 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
             "median free-run NRMSE": ok["free_run_nrmse_pwarx"].median(),
             "linear ARX": ok["free_run_nrmse_linear_arx"].median(),
             "true system": ok["free_run_nrmse_true"].median(),
-            "median fit s": ok["fit_seconds"].median()})
+            "median fit s": ok["fit_seconds"].median(),
+            "median fit CPU s": ok["fit_cpu_seconds"].median(),
+            "median step 5 s": ok["submodels_seconds"].median()})
     return pd.DataFrame(out)
 
 
@@ -342,13 +352,18 @@ def main(argv=None) -> None:
                         help="seed set: eval (never used while tuning) or tune")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes")
     parser.add_argument("--suffix", default="", help="appended to the result file names")
+    parser.add_argument("--params", default="",
+                        help="comma-separated name=value set on PWARX.default, e.g. "
+                             "submodels__settle_tol=0.5 (a variant; default: none)")
     args = parser.parse_args(argv)
     names = args.cases.split(",")
     unknown = sorted(set(names) - set(CASES))
     if unknown:
         parser.error(f"unknown case(s) {unknown}; the cases are {list(CASES)}")
     first = FIRST_SEED[args.set]
-    jobs = [(name, seed) for name in names for seed in range(first, first + args.seeds)]
+    params = {k: ast.literal_eval(v) for k, v in (p.split("=") for p in args.params.split(",") if p)}
+    jobs = [(name, seed, params) for name in names
+            for seed in range(first, first + args.seeds)]
     load, t0 = os.getloadavg()[0], time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(one_run, *zip(*jobs), chunksize=1))
@@ -359,12 +374,14 @@ def main(argv=None) -> None:
     df.to_csv(RESULTS / f"{stem}.csv", index=False)
     meta = {"seed set": args.set, "first seed": first, "seeds": args.seeds,
             "load average at start": load, "wall seconds": time.perf_counter() - t0,
-            "jobs": args.jobs}
+            "jobs": args.jobs, "params": params}
     write_json({"meta": meta, "summary": summary.to_dict("records")}, stem)
     (RESULTS / f"{stem}.md").write_text(
         f"Seed set `{args.set}` (seeds {first}–{first + args.seeds - 1}), "
         f"{meta['wall seconds']:.0f} s wall with {args.jobs} job(s), load {load:.2f} at "
-        f"start (shared machine).\n\n" + summary.to_markdown(index=False, floatfmt=".4g") + "\n")
+        f"start (shared machine)"
+        + (f"; variant `{args.params}`" if params else "") + ".\n\n"
+        + summary.to_markdown(index=False, floatfmt=".4g") + "\n")
     print(summary.to_markdown(index=False, floatfmt=".4g"))
 
 

@@ -2,18 +2,19 @@
 code against earlier commits, in one run.
 
 Fits: the section 5 system at 20 dB and 30 dB (records of ``benchmarks.robustness``,
-evaluation seeds 5000…) and the robot's training record (``PWARX.default`` of the
-``default`` set, as ``benchmarks.speed`` times it). Each fit runs in a fresh subprocess, once
-with this checkout's package and once with each ``--against`` commit's (unpacked with
-``git archive``), ``--repeats`` times, the versions interleaved so that they share the
-machine's load; the 1-minute load average is recorded at the start and the end. Reported per
-fit and version: median seconds, the sub-model step's median seconds, the number of
-sub-models, and the ratio to the first ``--against`` commit.
+evaluation seeds 5000…; or other ``--cases``, ``--set tune``) and the robot's training
+record (``PWARX.default`` of the ``default`` set, as ``benchmarks.speed`` times it). Each fit
+runs in a fresh subprocess, once with this checkout's package and once with each
+``--against`` commit's (unpacked with ``git archive``), ``--repeats`` times, the versions
+interleaved so that they share the machine's load; the 1-minute load average is recorded
+at the start and the end. Reported per fit and version: median wall and CPU seconds (CPU:
+the process's, BLAS threads included), the sub-model step's median wall seconds, the number
+of sub-models, and the wall and CPU ratios to the first ``--against`` commit.
 
-Writes results/robustness_time.json and .md. Usage::
+Writes results/robustness_time{suffix}.json and .md. Usage::
 
     python -m benchmarks.robustness_time [--against bc9084d,15191f1] [--repeats 3]
-        [--seeds 2]
+        [--seeds 2] [--set eval|tune] [--cases paper-20dB] [--no-robot] [--suffix _tune]
 """
 
 import argparse
@@ -26,6 +27,7 @@ from pathlib import Path
 import pandas as pd
 
 from benchmarks._common import RESULTS, default_fit, in_fresh_process, write_json
+from benchmarks.robustness import FIRST_SEED
 from benchmarks.speed import previous_tree
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,10 +38,11 @@ def worker(fit: str, out: str) -> None:
     import time
 
     est, u, y = default_fit(fit)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     model = est.fit(u, y)
     Path(out).write_text(json.dumps({
-        "seconds": time.perf_counter() - t0, "n_submodels": int(model.n_submodels_),
+        "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
+        "n_submodels": int(model.n_submodels_),
         "submodels_seconds": model.timings_["submodels"]}))
 
 
@@ -48,14 +51,21 @@ def main(argv=None) -> None:
     parser.add_argument("--against", default="bc9084d,15191f1",
                         help="comma-separated commits; the first is the ratios' reference")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--seeds", type=int, default=2, help="evaluation seeds per case")
+    parser.add_argument("--seeds", type=int, default=2, help="seeds per case")
+    parser.add_argument("--set", choices=list(FIRST_SEED), default="eval",
+                        help="seed set of benchmarks.robustness (tune: for tuning)")
+    parser.add_argument("--cases", default="paper-20dB,paper-30dB",
+                        help="comma-separated cases of benchmarks.robustness")
+    parser.add_argument("--no-robot", action="store_true", help="leave the robot's fit out")
+    parser.add_argument("--suffix", default="", help="appended to the result file names")
     parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         worker(*args.worker)
         return
-    fits = [f"{case}:{seed}" for case in ("paper-20dB", "paper-30dB")
-            for seed in range(5000, 5000 + args.seeds)] + ["robot"]
+    first = FIRST_SEED[args.set]
+    fits = [f"{case}:{seed}" for case in args.cases.split(",")
+            for seed in range(first, first + args.seeds)] + ([] if args.no_robot else ["robot"])
     load_start = os.getloadavg()[0]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -75,21 +85,25 @@ def main(argv=None) -> None:
     df = pd.DataFrame(rows)
     table = (df.groupby(["fit", "version"], sort=False)
              .agg(median_seconds=("seconds", "median"),
+                  cpu_seconds=("cpu_seconds", "median"),
                   submodels_seconds=("submodels_seconds", "median"),
                   n_submodels=("n_submodels", statistics.mode)).reset_index())
     reference = args.against.split(",")[0]
     ref = table[table["version"] == reference].set_index("fit")["median_seconds"]
     table["ratio_to_" + reference] = table["median_seconds"] / table["fit"].map(ref)
-    meta = {"repeats": args.repeats, "load average at start": load_start,
+    cpu = table[table["version"] == reference].set_index("fit")["cpu_seconds"]
+    table["CPU ratio"] = table["cpu_seconds"] / table["fit"].map(cpu)
+    meta = {"repeats": args.repeats, "seed set": args.set, "load average at start": load_start,
             "load average at end": load_end, "versions": list(trees)}
     write_json({"meta": meta, "runs": rows, "table": table.to_dict("records")},
-               "robustness_time")
-    text = (f"Fit time, each fit in a fresh process, {args.repeats} repeats interleaved; "
+               "robustness_time" + args.suffix)
+    text = (f"Fit time, each fit in a fresh process, {args.repeats} repeats interleaved, "
+            f"seed set `{args.set}`; "
             f"1-minute load {load_start:.2f} at the start, {load_end:.2f} at the end "
             f"(2 CPUs, shared machine). Versions: `this` (the checkout), "
             f"{', '.join(f'`{v}`' for v in trees if v != 'this')}.\n\n"
             + table.to_markdown(index=False, floatfmt=".3g") + "\n")
-    (RESULTS / "robustness_time.md").write_text(text)
+    (RESULTS / f"robustness_time{args.suffix}.md").write_text(text)
     print(text)
 
 

@@ -1,5 +1,7 @@
 """Region boundaries placed by the residuals (ResidualRegions, issue 10)."""
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -84,6 +86,28 @@ def test_the_estimator_passes_the_sub_models_and_uses_the_refitted_ones(sim_30db
     assert not np.allclose(plain.regions_.coef_, model.regions_.coef_)  # experiments passed
     paper = PWARX.paper(1, 1, n_rho=12, eps=0.3, min_pts=8)
     assert type(paper.steps()["regions"]) is SVMRegions
+
+
+def test_the_estimator_fits_step_6_with_blas_on_one_thread(monkeypatch, sim_30db):
+    """Step 6's products are tall and thin; the estimator runs it on one BLAS thread."""
+    from threadpoolctl import threadpool_info
+
+    def blas_threads():
+        return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+    if blas_threads() == {1}:
+        pytest.skip("BLAS runs on one thread here anyway")
+    seen, real = [], ResidualRegions.fit
+
+    @functools.wraps(real)  # the estimator reads the signature
+    def spy(self, *args, **kwargs):
+        if "thetas" in kwargs:  # step 6 (step 5's sweeps fit the regions without residuals)
+            seen.append(blas_threads())
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(ResidualRegions, "fit", spy)
+    PWARX(na=1, nb=1).fit(sim_30db.u[:1500], sim_30db.y[:1500])
+    assert seen == [{1}]
 
 
 def test_previous_rows_stop_at_each_experiment():

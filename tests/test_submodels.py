@@ -14,6 +14,7 @@ from pwa_pipeline.pwa.submodels import (
     refit,
     separable,
     split_gain,
+    theta_shift,
 )
 
 SIGMA = 0.05
@@ -479,3 +480,80 @@ def test_the_missed_mode_search_beside_the_split_search_changes_nothing(monkeypa
             np.testing.assert_array_equal(getattr(beside, name), getattr(in_order, name))
         assert (beside.n_submodels_, beside.n_merged_, beside.n_iter_) == (
             in_order.n_submodels_, in_order.n_merged_, in_order.n_iter_)
+
+
+def test_theta_shift_is_in_standard_errors_on_each_sub_models_rows():
+    """theta_shift: the root mean square over θ_i's d·m entries of its change, each in its
+    least-squares standard error on sub-model i's rows (the largest over i)."""
+    rng = np.random.default_rng(0)
+    n, d, m = 400, 3, 2
+    phi = rng.normal(size=(n, d))
+    labels = (phi[:, 0] > 0).astype(int)
+    sigma2 = np.array([0.01, 0.04])
+    before = rng.normal(size=(2, d, m))
+    after = before.copy()
+    v = rng.normal(size=d)
+    # output 1 of sub-model 1 moved along v so that Σ ‖Φ_1 Δθ‖² / σ² = 0.7² · d·m
+    after[1, :, 1] += 0.7 * np.sqrt(d * m * sigma2[1]) / np.linalg.norm(phi[labels == 1] @ v) * v
+    assert theta_shift(phi, before, after, labels, sigma2) == pytest.approx(0.7, rel=1e-12)
+    after[0, :, 0] += 0.3 * np.sqrt(d * m * sigma2[0]) / np.linalg.norm(phi[labels == 0] @ v) * v
+    assert theta_shift(phi, before, after, labels, sigma2) == pytest.approx(0.7, rel=1e-12)
+    assert np.isnan(theta_shift(phi, before, after[:1], labels, sigma2))
+
+
+def test_sweeps_stop_once_no_sub_model_moves_by_more_than_settle_standard_errors():
+    """refine's settle: the re-assignment ends at the first sweep that keeps the number of
+    sub-models and changes no θ_i by more than ``settle`` standard errors (theta_shift
+    between the sub-models it starts from and those it ends with, σ̂² its own)."""
+    import pwa_pipeline.pwa.submodels as submodels
+    from pwa_pipeline._arrays import relabel_by_size
+
+    phi, y, mode, _ = _two_modes(gap=3.0, seed=1)
+    plain = refine(phi, y, mode, 5, 20, SVMRegions())
+    settle = 0.5  # the sweeps' shifts: 49 (the first renumbers), 0.79, 0.25, 0.12, 0
+    got = refine(phi, y, mode, 5, 20, SVMRegions(), settle=settle)
+    labels = relabel_by_size(mode)
+    thetas = refit(phi, y, labels, 2)
+    for sweep in range(1, 21):
+        new, after, sigma2 = submodels._sweep(phi, y, thetas, 5, SVMRegions())
+        assert new.max() == labels.max()
+        if theta_shift(phi, thetas, after, new, sigma2) <= settle:
+            break
+        labels, thetas = new, after
+    assert 1 < sweep == got[3] < plain[3]
+    np.testing.assert_array_equal(got[1], new)
+    np.testing.assert_array_equal(got[0], after)
+    # settle 0: only a sweep that moves no row ends it, as without the parameter
+    for a, b in zip(refine(phi, y, mode, 5, 20, SVMRegions(), settle=0.0), plain):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_rows_flipping_on_a_boundary_end_the_sweeps_once_the_sub_models_settle():
+    """Modes 3 noise deviations apart: rows near the boundary flip between the sub-models in
+    every sweep and the sweeps run to their limit, while the sub-models settle at once."""
+    phi, y, mode, _ = _two_modes(gap=3.0, seed=3)
+    plain = refine(phi, y, mode, 5, 20, SVMRegions())
+    settled = refine(phi, y, mode, 5, 20, SVMRegions(), settle=0.3)
+    assert plain[3] == 20 and settled[3] <= 3
+    assert np.mean(settled[1] == plain[1]) > 0.99
+
+
+def test_the_settle_tolerance_reaches_every_sweep_with_regions(monkeypatch, sim_30db):
+    """RefinedSubModels(settle_tol=…) stops the re-assignments with the regions (steps 2–3
+    and the split search) by it; those by residual alone run until no row moves."""
+    import pwa_pipeline.pwa.submodels as submodels
+
+    calls = []
+    real = submodels.refine
+
+    def spy(*args, **kwargs):
+        regions = args[5] if len(args) > 5 else kwargs.get("regions")
+        calls.append((regions is not None, kwargs.get("settle", 0.0)))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(submodels, "refine", spy)
+    PWARX.default(1, 1).set_params(submodels__settle_tol=0.7).fit(sim_30db.u, sim_30db.y)
+    with_regions = {settle for has_regions, settle in calls if has_regions}
+    alone = {settle for has_regions, settle in calls if not has_regions}
+    assert with_regions == {0.7} and alone == {0.0}
+    assert sum(has for has, _ in calls) > 2  # the split search's refines among them
