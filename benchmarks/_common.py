@@ -4,7 +4,11 @@ import json
 import os
 import subprocess
 import sys
+import tarfile
+import tempfile
 import time
+from collections.abc import Callable
+from io import BytesIO
 from pathlib import Path
 
 import pandas as pd
@@ -37,18 +41,57 @@ class Timer:
         self.seconds = time.perf_counter() - self._t0
 
 
-def in_fresh_process(module: str, args: list[str], tmp: Path, tree: Path = ROOT) -> dict:
+def in_fresh_process(module: str, args: list[str], tmp: Path, tree: Path = ROOT,
+                     env: dict[str, str] | None = None) -> dict:
     """Run ``python -m <module> --worker <args…> <tmp>/out.json`` in a new process, with the
-    package of ``tree`` (a checkout or an unpacked commit) first on its path and the KUKA
-    data where this checkout finds them; returns the JSON the worker wrote."""
+    package of ``tree`` (a checkout or an unpacked commit) first on its path, the KUKA data
+    where this checkout finds them and ``env`` added to its environment; returns the JSON the
+    worker wrote."""
     out = tmp / "out.json"
     path = os.pathsep.join(filter(None, [str(tree), str(ROOT), os.environ.get("PYTHONPATH")]))
-    env = {**os.environ, "PYTHONPATH": path}
+    env = {**os.environ, **(env or {}), "PYTHONPATH": path}
     env.setdefault("PWA_KUKA_DATA", str(ROOT.parent / "shared" / "data" / "kuka-kr300"))
     # run from tmp: with -m, the working directory would come first on sys.path
     subprocess.run([sys.executable, "-m", module, "--worker", *args, str(out)], check=True,
                    env=env, cwd=tmp)
     return json.loads(out.read_text())
+
+
+def previous_tree(commit: str, into: Path) -> Path | None:
+    """The package at ``commit``, unpacked under ``into`` (None if git cannot give it)."""
+    try:
+        blob = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "pwa_pipeline",
+                               "data"], check=True, capture_output=True).stdout
+    except (OSError, subprocess.CalledProcessError) as exc:
+        print(f"previous implementation unavailable: {exc}")
+        return None
+    with tarfile.open(fileobj=BytesIO(blob)) as tar:
+        tar.extractall(into, filter="data")
+    return into
+
+
+def against_commit(module: str, args: list[str], commit: str, repeats: int,
+                   this_env: Callable[[int, Path], dict[str, str]] | None = None,
+                   report: Callable[[int, str, dict], None] | None = None
+                   ) -> dict[str, list[dict]]:
+    """``module``'s worker on ``args`` in fresh processes (:func:`in_fresh_process`), this
+    checkout and the package at ``commit`` alternated, ``repeats`` times each: their results
+    as ``{"this": [...], commit: [...]}``. ``this_env(repeat, tmp)`` adds environment
+    variables to this checkout's process of each repeat; ``report(repeat, version, result)``
+    is called after each. Exits when git cannot give ``commit``."""
+    runs: dict[str, list[dict]] = {"this": [], commit: []}
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        tree = previous_tree(commit, tmp / "tree")
+        if tree is None:
+            raise SystemExit(f"git cannot give commit {commit}")
+        for r in range(repeats):
+            for name, path in (("this", ROOT), (commit, tree)):
+                env = this_env(r, tmp) if this_env is not None and name == "this" else None
+                runs[name].append(in_fresh_process(module, args, tmp, path, env))
+                if report is not None:
+                    report(r, name, runs[name][-1])
+    return runs
 
 
 def default_fit(fit: str):

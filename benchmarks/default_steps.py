@@ -16,14 +16,11 @@ Writes results/default_steps.json and .md. Usage::
 import argparse
 import os
 import statistics
-import tempfile
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process, write_json
-from benchmarks.speed import ROOT, previous_tree
+from benchmarks._common import RESULTS, against_commit, write_json
 
 STEPS = ("local_models", "clustering", "submodels", "regions")
 
@@ -34,18 +31,10 @@ def main(argv=None) -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
     load_start = os.getloadavg()[0]
-    runs: dict[str, list[dict]] = {"this": [], args.against: []}
-    with tempfile.TemporaryDirectory() as tmp_name:
-        tmp = Path(tmp_name)
-        old = previous_tree(args.against, tmp / "against")
-        if old is None:
-            raise SystemExit(f"git cannot give {args.against}")
-        for i in range(args.repeats):
-            for name, tree in (("this", ROOT), (args.against, old)):
-                res = in_fresh_process("benchmarks.speed", ["default"], tmp, tree)
-                runs[name].append(res)
-                print(f"run {i + 1}, {name}: {res['seconds']:.2f} s wall, "
-                      f"{res['cpu_seconds']:.2f} s CPU", flush=True)
+    runs = against_commit("benchmarks.speed", ["default"], args.against, args.repeats,
+                          report=lambda i, name, res: print(
+                              f"run {i + 1}, {name}: {res['seconds']:.2f} s wall, "
+                              f"{res['cpu_seconds']:.2f} s CPU", flush=True))
     load_end = os.getloadavg()[0]
     rows = []
     for what, wall, cpu in [("fit", "seconds", "cpu_seconds")] + [

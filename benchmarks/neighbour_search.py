@@ -21,14 +21,12 @@ import hashlib
 import json
 import os
 import statistics
-import tempfile
 import time
 from pathlib import Path
 
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process, write_json
-from benchmarks.speed import previous_tree
+from benchmarks._common import RESULTS, against_commit, write_json
 
 
 def worker(k: str, out: str) -> None:
@@ -69,20 +67,10 @@ def main(argv=None) -> None:
         worker(*args.worker)
         return
     load_start = os.getloadavg()[0]
-    runs: dict[str, list[dict]] = {"this": [], args.against: []}
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        tree = previous_tree(args.against, tmp / "tree")
-        if tree is None:
-            raise SystemExit(f"git cannot give commit {args.against}")
-        for r in range(args.repeats):
-            if args.cold_cache:
-                os.environ["NUMBA_CACHE_DIR"] = str(tmp / f"numba-cache-{r}")
-            runs["this"].append(in_fresh_process("benchmarks.neighbour_search", [str(args.k)],
-                                                 tmp))
-            os.environ.pop("NUMBA_CACHE_DIR", None)
-            runs[args.against].append(in_fresh_process("benchmarks.neighbour_search",
-                                                       [str(args.k)], tmp, tree))
+    cold = (lambda r, tmp: {"NUMBA_CACHE_DIR": str(tmp / f"numba-cache-{r}")}) \
+        if args.cold_cache else None
+    runs = against_commit("benchmarks.neighbour_search", [str(args.k)], args.against,
+                          args.repeats, this_env=cold)
     load_end = os.getloadavg()[0]
     rows = [{"version": v, "median first search s": statistics.median(r["first"] for r in rs),
              "median second search s": statistics.median(r["second"] for r in rs),

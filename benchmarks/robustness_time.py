@@ -26,9 +26,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks._common import RESULTS, default_fit, in_fresh_process, write_json
+from benchmarks._common import RESULTS, default_fit, in_fresh_process, previous_tree, write_json
 from benchmarks.robustness import FIRST_SEED
-from benchmarks.speed import previous_tree
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -31,17 +31,14 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
-import tarfile
 import tempfile
 import time
-from io import BytesIO
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process, write_json
+from benchmarks._common import RESULTS, in_fresh_process, previous_tree, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("default", "default, n_rho=61", "paper", "plain steps 1-4")
@@ -105,19 +102,6 @@ def worker(variant: str, out: str) -> None:
 
     result.update(peak_mb=peak_rss_mb(), before_mb=before, package=pwa_pipeline.__file__)
     Path(out).write_text(json.dumps(result))
-
-
-def previous_tree(commit: str, into: Path) -> Path | None:
-    """The package at ``commit``, unpacked under ``into`` (None if git cannot give it)."""
-    try:
-        blob = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "pwa_pipeline",
-                               "data"], check=True, capture_output=True).stdout
-    except (OSError, subprocess.CalledProcessError) as exc:
-        print(f"previous implementation unavailable: {exc}")
-        return None
-    with tarfile.open(fileobj=BytesIO(blob)) as tar:
-        tar.extractall(into, filter="data")
-    return into
 
 
 def crammer_singer_objective(svm: "CrammerSinger", z: np.ndarray, labels: np.ndarray) -> float:
