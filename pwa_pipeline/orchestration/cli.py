@@ -9,12 +9,11 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 
 import argparse
 import sys
-import threading
 import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .instance import prepare_instance
-from .parallel_runs import default_jobs, was_interrupted
+from .parallel_runs import default_jobs, run_resources, was_interrupted
 from .paths import (
     MLFLOW_TRAINING_VIEW,
     default_datasets_path,
@@ -34,7 +33,6 @@ def run(args: argparse.Namespace) -> int:
     from .jobs import LEADERBOARD, SWEEP_SELECTION
     from .partitions import DEFAULT_SETS, check_keys, runnable_keys
     from .reporting import leaderboard_markdown
-    from .resources import MLflowTracker
 
     defs = build_definitions()  # read now: a data set may have been registered since import
     partitions_def = partitions_of(defs)
@@ -48,9 +46,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {what} left out: {reason}", file=sys.stderr)
     instance = prepare_instance()
     home = instance.root_directory
-    resources = dict(defs.resources)
-    if args.tracking_uri:
-        resources["mlflow"] = MLflowTracker(tracking_uri=args.tracking_uri)
+    resources = run_resources(defs, args.tracking_uri)
     uri = mask_credentials(resources["mlflow"].uri())
     # INFO shows each step's one-line summary; Dagster's own events are DEBUG
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
@@ -61,15 +57,15 @@ def run(args: argparse.Namespace) -> int:
             ended.append(key)
             if not result.success:
                 failed.append(key)
-                if was_interrupted(result):
-                    interrupted.append(key)
-                how = "INTERRUPTED" if interrupted[-1:] == [key] else "FAILED"
-                summaries.append(f"{key}: {how} after {seconds:.1f} s (run {result.run_id} "
-                                 f"in the Dagster UI)")
+                stopped = was_interrupted(result)
+                summaries.append(f"{key}: {'INTERRUPTED' if stopped else 'FAILED'} after "
+                                 f"{seconds:.1f} s (run {result.run_id} in the Dagster UI)")
                 print(summaries[-1])
-                if interrupted == [key]:
+                if stopped and not interrupted:
                     print("interrupted: no further partition starts; the runs in flight end",
                           flush=True)
+                if stopped:
+                    interrupted.append(key)
                 continue
             table = result.output_for_node("comparison")
             print(f"\n{key}: mean over the outputs\n\n"
@@ -131,7 +127,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
         if jobs > 1:
             yield from partition_runs_at_once(keys, jobs, run_here, run_config,
                                               args.tracking_uri, resources["io_manager"],
-                                              announce, threading.Event())
+                                              announce)
             return
         for key in keys:
             announce(key)

@@ -63,6 +63,17 @@ def was_interrupted(result) -> bool:
                for e in result.all_events)
 
 
+def run_resources(defs: dg.Definitions, tracking_uri: str = "") -> dict:
+    """The resources of a partition's run: the code location's, with the MLflow store at
+    ``tracking_uri`` when given (the command line's ``--tracking-uri``)."""
+    from .resources import MLflowTracker
+
+    resources = dict(defs.resources)
+    if tracking_uri:
+        resources["mlflow"] = MLflowTracker(tracking_uri=tracking_uri)
+    return resources
+
+
 def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
                           instance: dg.DagsterInstance, run_config: dict, selection
                           ) -> dg.ExecuteInProcessResult:
@@ -82,14 +93,11 @@ def _worker_run(key: str, run_config: dict, tracking_uri: str) -> tuple[bool, st
     from .definitions import build_definitions
     from .instance import prepare_instance
     from .jobs import SWEEP_SELECTION
-    from .resources import MLflowTracker
 
     if not _WORKER:
         defs = build_definitions()
-        resources = dict(defs.resources)
-        if tracking_uri:
-            resources["mlflow"] = MLflowTracker(tracking_uri=tracking_uri)
-        _WORKER.update(defs=defs, resources=resources, instance=prepare_instance())
+        _WORKER.update(defs=defs, resources=run_resources(defs, tracking_uri),
+                       instance=prepare_instance())
     result = materialize_partition(_WORKER["defs"], key, _WORKER["resources"],
                                    _WORKER["instance"], run_config, SWEEP_SELECTION)
     return result.success, result.run_id, was_interrupted(result)
@@ -103,11 +111,10 @@ def _warm_up() -> None:
 def partition_runs_at_once(keys: list[str], jobs: int, run_here: Callable[[str], object],
                            run_config: dict, tracking_uri: str,
                            io_manager: PartitionedFileIOManager,
-                           announce: Callable[[str], None], stop: threading.Event
+                           announce: Callable[[str], None]
                            ) -> Iterator[tuple[str, object, float]]:
     """``(key, result, seconds)`` of every partition started, in the order they end; none
-    is started once ``stop`` is set, as it is when a run was interrupted (the runs in
-    flight end and are yielded).
+    is started once a run was interrupted (the runs in flight end and are yielded).
 
     ``run_here(key)`` runs a partition in this process; ``jobs − 1`` worker processes run
     the others with ``run_config`` and ``tracking_uri`` (empty: the default store), their
@@ -117,7 +124,7 @@ def partition_runs_at_once(keys: list[str], jobs: int, run_here: Callable[[str],
     the partition it ran (:class:`LostRun`); this process runs the partitions still waiting.
     """
     waiting = deque(keys)
-    lock = threading.Lock()
+    lock, stop = threading.Lock(), threading.Event()
     finished: queue.Queue = queue.Queue()
 
     def take() -> str | None:
