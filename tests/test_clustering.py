@@ -5,7 +5,7 @@ from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import InvalidParameterError
 
 from pwa_pipeline._arrays import relabel_by_size
-from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
+from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, clustering
 from pwa_pipeline.pwa.clustering import (
     cluster_local_models,
     confident_models,
@@ -70,14 +70,24 @@ def _counts_on_the_radius_graph(x, grid, min_pts):
             for e in grid]
 
 
-@pytest.mark.parametrize(("seed", "dims", "min_pts"), [
-    (0, 1, 3), (1, 2, 8), (2, 2, 1), (3, 3, 12), (4, 8, 5), (5, 15, 20)])
-def test_cluster_counts_are_scikit_learns_at_every_candidate_eps(seed, dims, min_pts):
-    # Blobs and noise on a 0.1 grid (many distances tie), candidates at the k-distance
-    # quantiles as k_distance_eps takes them: pairs at exactly a candidate ε occur.
+@pytest.mark.parametrize("dense", [True, False], ids=["all distances", "by point"])
+@pytest.mark.parametrize(("seed", "dims", "min_pts", "on_grid"), [
+    (0, 1, 3, True), (1, 2, 8, True), (2, 2, 1, True), (3, 3, 12, True), (4, 8, 5, True),
+    (5, 15, 20, True), (6, 20, 10, False)])
+def test_cluster_counts_are_scikit_learns_at_every_candidate_eps(seed, dims, min_pts,
+                                                                 on_grid, dense,
+                                                                 monkeypatch):
+    # Blobs and noise, up to 15 dimensions on a 0.1 grid (many distances tie), candidates
+    # at the k-distance quantiles as k_distance_eps takes them: pairs at exactly a
+    # candidate ε occur. Above 15 dimensions (scikit-learn's brute force, rounded by BLAS)
+    # off the grid. Both ways of computing the distances.
+    if not dense:
+        monkeypatch.setattr(clustering, "_DENSE", 0)
     rng = np.random.default_rng(seed)
-    x = np.round(np.vstack([rng.normal(rng.uniform(-5, 5, dims), 0.5, (150, dims))
-                            for _ in range(3)] + [rng.uniform(-8, 8, (60, dims))]), 1)
+    x = np.vstack([rng.normal(rng.uniform(-5, 5, dims), 0.5, (150, dims))
+                   for _ in range(3)] + [rng.uniform(-8, 8, (60, dims))])
+    if on_grid:
+        x = np.round(x, 1)
     grid = np.unique(np.maximum(
         np.quantile(k_distances(x, min_pts), np.linspace(0.02, 0.6, 20)), 1e-6))
     counts = dbscan_cluster_counts(x, grid, min_pts)

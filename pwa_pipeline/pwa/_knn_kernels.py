@@ -75,7 +75,7 @@ def kth_smallest_rows(d2: np.ndarray, k: int) -> np.ndarray:
             if (0 if b >> 31 else b >> 19) == h:
                 bucket[size] = max(d2[r, s], np.float32(0.0))
                 size += 1
-        out[r] = _kth_smallest(bucket[:size], k - 1 - below)
+        out[r] = kth_smallest(bucket[:size], k - 1 - below)
     return out
 
 
@@ -188,7 +188,7 @@ def select_nearest(row: np.ndarray, col: np.ndarray, val: np.ndarray, x: np.ndar
         if len(vals) < k:  # cannot happen with valid bounds; guards the reads below
             raise RuntimeError("a row has fewer than k candidates")
         work[:len(vals)] = vals
-        kth = np.float64(_kth_smallest(work[:len(vals)], k - 1))
+        kth = np.float64(kth_smallest(work[:len(vals)], k - 1))
         high = kth + band[r]
         n = 0  # those surely among the k nearest and the band: by exact distance
         for t in range(len(vals)):
@@ -239,7 +239,7 @@ def _before(d1: float, i1: int, d2: float, i2: int) -> bool:
 
 
 @njit(nogil=True, cache=True)
-def _kth_smallest(a: np.ndarray, kth: int) -> float:
+def kth_smallest(a: np.ndarray, kth: int) -> float:
     """The ``kth`` smallest (from 0) of ``a``, which it reorders (quickselect)."""
     lo, hi = 0, len(a) - 1
     while lo < hi:

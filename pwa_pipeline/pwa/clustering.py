@@ -8,6 +8,12 @@ from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from .._arrays import column_rms, relabel_by_size
+from ._cluster_kernels import (
+    core_distances,
+    spanning_tree_edges,
+    squared_distances,
+    to_distances,
+)
 from .dbscan import dbscan
 from .embedding import EMBEDDINGS
 
@@ -62,28 +68,6 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     return float(grid[best])
 
 
-def _sq_distances(xt: np.ndarray, sq: np.ndarray | None, rows: np.ndarray | slice
-                  ) -> np.ndarray:
-    """Squared distances of the points ``rows`` (indices, or ``slice(None)`` for all) to
-    every point, rounded as scikit-learn's radius search rounds them: its k-d tree's
-    Σ_j (x_pj − x_qj)² summed in feature order when ``sq`` is None, else
-    (‖p‖² − 2 p·q) + ‖q‖² clipped at 0, like its brute force. ``xt`` is the points'
-    transpose (d, n)."""
-    if sq is None:
-        acc = np.subtract(xt[0], xt[0, rows, None])
-        acc *= acc
-        for j in range(1, len(xt)):
-            diff = np.subtract(xt[j], xt[j, rows, None])
-            diff *= diff
-            acc += diff
-        return acc
-    acc = xt[:, rows].T @ xt
-    acc *= -2
-    acc += sq[rows, None]
-    acc += sq
-    return np.maximum(acc, 0, out=acc)
-
-
 def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.ndarray:
     """Number of DBSCAN clusters of ``x`` at every ε of ``grid``, no neighbourhood stored.
 
@@ -91,61 +75,29 @@ def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.n
     (their core distance c_p), and the clusters are the connected components of the core
     points under "within ε": the components of the graph of mutual reachability distances
     max(c_p, c_q, ‖p − q‖) ≤ ε. One minimum spanning tree of that graph (Prim's algorithm,
-    one row of distances at a time) gives them all: clusters(ε) = #{c_p ≤ ε} − #{tree edges
-    ≤ ε}. Distances are rounded as scikit-learn's radius search at the largest ε rounds
-    them (its k-d tree up to 15 dimensions, its brute force above) and compared with ε as
-    its DBSCAN on that precomputed radius graph compares them, so up to 15 dimensions the
+    compiled: :mod:`._cluster_kernels`) gives them all: clusters(ε) = #{c_p ≤ ε} − #{tree
+    edges ≤ ε}. Distances are rounded as scikit-learn's radius search at the largest ε
+    rounds them (its k-d tree up to 15 dimensions: Σ_j (x_pj − x_qj)² in feature order; its
+    brute force above: (‖p‖² − 2 p·q) + ‖q‖² clipped at 0) and compared with ε as its
+    DBSCAN on that precomputed radius graph compares them, so up to 15 dimensions the
     counts are exactly those (tested); above, pairs within ~1e-13 relative of an ε may
-    differ. Time O(n² d); memory n² floats up to n = 4096, O(n) above.
+    differ. Time O(n² d); memory n² floats up to n = 4096 (all distances, above 15
+    dimensions from one symmetric BLAS product), O(n) above (each point's distances
+    computed when needed, twice).
     """
     n = len(x)
     grid = np.asarray(grid, dtype=float)
     r2 = float(grid[-1]) ** 2
-    xt = np.ascontiguousarray(x.T)
+    x = np.ascontiguousarray(x, dtype=float)
     # scikit-learn's NearestNeighbors(radius=...) picks its brute force above 15 dimensions
     # and for tiny sets (5 default neighbours >= n // 2), its k-d tree otherwise
-    sq = np.einsum("ij,ij->i", x, x) if x.shape[1] > 15 or 5 >= n // 2 else None
-
-    def dist(rows: np.ndarray | slice) -> np.ndarray:
-        acc = _sq_distances(xt, sq, rows)
-        far = acc > r2
-        np.sqrt(acc, out=acc)
-        acc[far] = np.inf
-        return acc
-
-    # All distances at once when they fit _DENSE entries (one symmetric BLAS product, the
-    # Gram xᵀx), else by rows.
-    dense = dist(slice(None)) if n * n <= _DENSE else None
-    core = np.zeros(n)
-    step = max(1, (1 << 22) // n)
-    for a in range(0, n if min_pts > 1 else 0, step):
-        rows = np.arange(a, min(n, a + step))
-        d = dense[rows] if dense is not None else dist(rows)  # a copy either way
-        d[np.arange(len(rows)), rows] = np.inf  # the point itself is counted apart
-        if min_pts - 1 < n:
-            d.partition(min_pts - 2, axis=1)  # in place: d is not used after
-            core[rows] = d[:, min_pts - 2]
-        else:
-            core[rows] = np.inf
-    # Prim's algorithm on max(c_p, c_q, d(p, q)); an inf edge starts a new tree.
-    best = np.full(n, np.inf)
-    done = np.zeros(n, bool)
-    left = core.copy()  # c_p of the points not in a tree yet, inf for those in one
-    edges = np.empty(max(n - 1, 0))
-    u = 0
-    for it in range(n):
-        done[u] = True
-        left[u] = np.inf
-        if it:
-            edges[it - 1] = best[u]
-        best[u] = np.inf
-        row = dense[u] if dense is not None else dist(np.array([u]))[0]
-        np.maximum(row, core[u], out=row)
-        np.maximum(row, left, out=row)
-        np.minimum(best, row, out=best)
-        u = int(best.argmin())
-        if best[u] == np.inf:  # no finite edge left: a new tree from any point left
-            u = int(done.argmin())
+    sq = np.einsum("ij,ij->i", x, x) if x.shape[1] > 15 or 5 >= n // 2 else np.empty(0)
+    dense = np.empty((0, 0))
+    if n * n <= _DENSE:
+        dense = x @ x.T if len(sq) else squared_distances(np.ascontiguousarray(x.T))
+        to_distances(dense, sq, r2)
+    core = core_distances(x, sq, dense, r2, min_pts)
+    edges = spanning_tree_edges(x, sq, dense, r2, core)
     core.sort()
     edges.sort()
     return np.searchsorted(core, grid, "right") - np.searchsorted(edges, grid, "right")
