@@ -9,6 +9,7 @@ each tile once to keep its candidates and rank each row's.
 """
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -137,18 +138,23 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         return kth_smallest_rows(d2, k) + 2 * err[a:b]
 
     found: list[list] = [[] for _ in blocks]
+    buffers = threading.local()  # each thread's room for one tile's candidates
 
-    def tile(pair):  # one tile, for the rows of both of its blocks
-        i, j = pair
-        (a, b), (c, e) = blocks[i], blocks[j]
-        d2 = left[a:b] @ right[c:e].T
-        row_side, col_side = np.empty((2, d2.size, 2), dtype=np.int32)
-        row_dist, col_dist = np.empty((2, d2.size), dtype=np.float32)
-        n_row, n_col = tile_candidates(d2, thr32[a:b], thr32[c:e], i == j, row_side,
-                                       row_dist, col_side, col_dist)
-        found[i].append((row_side[:n_row] + (0, c), row_dist[:n_row].copy()))
-        if i != j:
-            found[j].append((col_side[:n_col] + (0, a), col_dist[:n_col].copy()))
+    def row_of_tiles(i):  # the tiles of block i's rows against blocks i, i + 1, …
+        if not hasattr(buffers, "side"):
+            buffers.side = np.empty((2, _BLOCK * _BLOCK, 2), dtype=np.int32)
+            buffers.dist = np.empty((2, _BLOCK * _BLOCK), dtype=np.float32)
+        row_side, col_side = buffers.side
+        row_dist, col_dist = buffers.dist
+        a, b = blocks[i]
+        for j in range(i, len(blocks)):
+            c, e = blocks[j]
+            d2 = left[a:b] @ right[c:e].T
+            n_row, n_col = tile_candidates(d2, thr32[a:b], thr32[c:e], i == j, row_side,
+                                           row_dist, col_side, col_dist)
+            found[i].append((row_side[:n_row] + (0, c), row_dist[:n_row].copy()))
+            if i != j:
+                found[j].append((col_side[:n_col] + (0, a), col_dist[:n_col].copy()))
 
     out = np.empty((n, k), dtype=np.intp)
     out_sq = np.empty((n, k))
@@ -164,8 +170,7 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
         thr = np.concatenate(list(pool.map(bound, blocks)))
         thr32 = thr.astype(np.float32)
         np.nextafter(thr32, np.float32(np.inf), out=thr32)  # float32 never below the bound
-        pairs = [(i, j) for i in range(len(blocks)) for j in range(i, len(blocks))]
-        list(pool.map(tile, pairs))
+        list(pool.map(row_of_tiles, range(len(blocks))))  # the longest rows first
         list(pool.map(select, range(len(blocks))))
     back = np.empty(n, dtype=np.intp)
     back[order] = np.arange(n)
