@@ -125,3 +125,42 @@ def test_rank_deficient_sets_match_the_pseudo_inverse_of_the_local_matrix():
         np.testing.assert_allclose(local.theta_[k] * scale[:, None], th, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(local.residual_var_[k], ((t - p @ th) ** 2).sum(0) / 9,
                                    rtol=1e-9)
+
+
+def test_ill_conditioned_local_sets_are_solved_to_their_conditioning():
+    # Lagged outputs of a slow signal are nearly collinear (condition numbers up to 7e8 on
+    # the robot): θ_k must agree with an SVD-based solve to about κ · rounding.
+    from pwa_pipeline._arrays import column_rms
+    from pwa_pipeline.pwa.local_models import local_least_squares
+
+    rng = np.random.default_rng(5)
+    base = rng.normal(size=(400, 1))
+    phi = np.hstack([base, base + 1e-7 * rng.normal(size=(400, 1)), rng.normal(size=(400, 3)),
+                     np.ones((400, 1))])
+    target = phi @ rng.normal(size=(6, 2)) + 1e-3 * rng.normal(size=(400, 2))
+    neighbours = np.array([rng.permutation(400)[:30] for _ in range(50)])
+    theta, resvar, scale, degenerate = local_least_squares(phi, target, neighbours)
+    assert not degenerate.any()
+    for k in range(50):
+        p, t = phi[neighbours[k]] / scale, target[neighbours[k]]
+        assert np.linalg.cond(p) > 1e6
+        th = np.linalg.lstsq(p, t, rcond=None)[0] / scale[:, None]
+        np.testing.assert_allclose(theta[k], th, rtol=0, atol=1e-6 * np.abs(th).max())
+        np.testing.assert_allclose(resvar[k], ((t - p @ (th * scale[:, None])) ** 2).sum(0)
+                                   / (30 - 6), rtol=1e-6)
+    assert np.array_equal(scale, column_rms(phi))
+
+
+def test_a_nearly_triangular_local_set_keeps_its_accuracy():
+    # Columns nearly along the first unit vectors: a reflection of the wrong sign would
+    # cancel (x − ‖x‖e₁ ≈ 0) and lose the digits that the stable choice keeps.
+    from pwa_pipeline.pwa.local_models import local_least_squares
+
+    rng = np.random.default_rng(6)
+    phi = np.vstack([np.triu(rng.uniform(1, 2, (4, 4))), 1e-6 * rng.normal(size=(26, 4))])
+    target = phi @ rng.normal(size=(4, 1)) + 1e-9 * rng.normal(size=(30, 1))
+    theta, resvar, scale, _ = local_least_squares(phi, target, np.arange(30)[None])
+    p = phi / scale
+    th = np.linalg.lstsq(p, target, rcond=None)[0] / scale[:, None]
+    np.testing.assert_allclose(theta[0], th, rtol=1e-9)
+    np.testing.assert_allclose(resvar[0], ((target - phi @ th) ** 2).sum(0) / 26, rtol=1e-6)

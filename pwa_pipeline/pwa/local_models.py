@@ -12,13 +12,13 @@ from sklearn.utils._param_validation import Interval
 from .._arrays import column_rms
 from .._typing import Float2D
 from ._blas import single_threaded_blas
+from ._qr_kernels import local_solve
 from .neighbours import distinct_rows, nearest_neighbours
 
 _RANK_TOL = 1e-10
 _CHUNK = 256
-"""Local sets per block of the solve: 256 × n_ρ × (d + m) floats (4.4 MB on the robot) stay
-nearer the cache than 1,024 did (1.14× the CPU time, ``benchmarks.local_solve``); the
-results do not depend on it, bit for bit."""
+"""Local sets per task of the solve (its θ_k and, where singular, R blocks: 256 × d × (d + m)
+floats each); the results do not depend on it, bit for bit."""
 _CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
 
 
@@ -83,9 +83,10 @@ def local_least_squares(
 
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
     matrix Φ_k with the targets appended as columns, [Φ_k | Y_k] = QR: the leading block
-    R₁₁ is Φ_k's R, θ_k solves R₁₁ θ_k = R₁₂, and the column norms of R₂₂ are the residual
-    norms. Only R is formed (LAPACK ``geqrf`` on blocks of local sets, one thread each, BLAS
-    single-threaded). With ``ridge > 0`` the rows √ridge·I are appended (Tikhonov
+    R₁₁ is Φ_k's R, θ_k solves R₁₁ θ_k = R₁₂, and what the reflections leave below R₁₂
+    has the residual norms. Only R is formed (Householder reflections and the back
+    substitution compiled, :mod:`._qr_kernels`, on blocks of local sets, one thread
+    each). With ``ridge > 0`` the rows √ridge·I are appended (Tikhonov
     regularisation in scaled units). A local set whose Φ_k is rank-deficient (e.g. every
     row inside one hold of a piecewise-constant input) has no unique θ_k: it gets the
     minimum-norm solution (in the unit-RMS columns, so independent of the channels' units)
@@ -118,32 +119,21 @@ def local_least_squares(
     theta = np.empty((n, d, m))
     resvar = np.empty((n, m))
     degenerate = np.zeros(n, bool)
-    damp = np.sqrt(ridge) * np.eye(d) if ridge > 0 else None
 
     def solve(start: int) -> None:
         idx = neighbours[start : start + _CHUNK]
         c, rows = len(idx), slice(start, start + len(idx))
-        a = np.take(both, idx, axis=0)
-        if damp is not None:
-            extra = np.zeros((c, d, d + m))
-            extra[:, :, :d] = damp
-            a = np.concatenate([a, extra], axis=1)
-        r = np.linalg.qr(a, mode="r")
-        diag = np.abs(np.diagonal(r[:, :d, :d], axis1=1, axis2=2))
-        singular = diag.min(axis=1) <= _RANK_TOL * diag.max(axis=1)
-        th = np.empty((c, d, m))
-        ok = ~singular
-        th[ok] = _back_substitute(r[ok, :d, :d], r[ok, :d, d:])
+        th, ssr, singular = np.empty((c, d, m)), np.empty((c, m)), np.empty(c, bool)
+        r11, r12 = np.empty((c, d, d)), np.empty((c, d, m))  # filled where singular
+        local_solve(both, idx, d, np.sqrt(ridge), _RANK_TOL, th, ssr, singular, r11, r12)
         if singular.any():  # minimum norm: Φ_k = Q R₁₁, so pinv(Φ_k) Y_k = pinv(R₁₁) R₁₂
-            th[singular] = np.linalg.pinv(r[singular, :d, :d], rtol=_RANK_TOL) @ \
-                r[singular, :d, d:]
-        if damp is None:  # the column norms of R₂₂ are the residual norms
-            ssr = np.einsum("kij,kij->kj", r[:, d:, d:], r[:, d:, d:])
-            if singular.any():  # plus what R₁₁ θ_k leaves of R₁₂
-                top = r[singular, :d, d:] - r[singular, :d, :d] @ th[singular]
-                ssr[singular] += np.einsum("kij,kij->kj", top, top)
-        else:
-            res = a[:, :n_rho, d:] - a[:, :n_rho, :d] @ th
+            u, rhs = r11[singular], r12[singular]
+            th[singular] = np.linalg.pinv(u, rtol=_RANK_TOL) @ rhs
+            top = rhs - u @ th[singular]  # plus what R₁₁ θ_k leaves of R₁₂
+            ssr[singular] += np.einsum("kij,kij->kj", top, top)
+        if ridge > 0:  # the n_ρ data rows only
+            a = np.take(both, idx, axis=0)
+            res = a[:, :, d:] - a[:, :, :d] @ th
             ssr = np.einsum("kij,kij->kj", res, res)
         degenerate[rows] = singular
         theta[rows] = th / scale[:, None]
@@ -153,20 +143,6 @@ def local_least_squares(
             ThreadPoolExecutor(workers or len(os.sched_getaffinity(0))) as pool:
         list(pool.map(solve, range(0, n, _CHUNK)))
     return theta, resvar, scale, degenerate
-
-
-def _back_substitute(upper: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve upper[k] · x[k] = rhs[k] for a stack of upper-triangular matrices (k, d, d),
-    one row of all of them at a time, from the last: x_j = rhs_j / u_jj, then u_ij x_j is
-    taken from the rows i < j above it. The stack is the last axis while solving, so that
-    each step is two whole-array operations over contiguous memory."""
-    u = np.ascontiguousarray(upper.transpose(1, 2, 0))
-    x = np.ascontiguousarray(rhs.transpose(1, 2, 0))
-    for j in range(u.shape[0] - 1, -1, -1):
-        x[j] /= u[j, j]
-        if j:
-            x[:j] -= u[:j, j, None, :] * x[j]
-    return x.transpose(2, 0, 1)
 
 
 class LocalLeastSquares(BaseEstimator):

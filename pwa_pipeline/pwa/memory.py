@@ -71,7 +71,7 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
             _BLOCK * 6 * n_rho * 24 + _BLOCK * _BLOCK * 24) * workers
     else:  # scikit-learn's tree: distances and indices of every row
         search = n * n_rho * 16
-    solve = workers * _CHUNK * (n_rho + d) * (d + m) * 8 * 3
+    solve = workers * (_CHUNK * d * (d + m) * 8 * 3 + (n_rho + d) * (d + m) * 8)
     out = {"local_models": kept + max(search, solve)}
 
     n_c = n if getattr(clustering, "max_clustered", None) is None else min(
