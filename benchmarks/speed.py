@@ -6,7 +6,10 @@ fresh subprocess (so that its peak resident memory, VmHWM of /proc/self/status, 
 the value just before the fit, with Python, the libraries and the data loaded, is reported
 as the baseline), ``--repeats`` times, the runs of every variant interleaved so that they
 share the machine's load; each fit's wall seconds and CPU seconds (the process time of all
-its threads: the work done, which a loaded machine inflates less than the wall time):
+its threads: the work done, which a loaded machine inflates less than the wall time), and
+the wall seconds of a second fit in the same process (without what a process pays once:
+numba's start, about 0.3 s, thread pools, memory first touched); steps and memory are the
+first fit's:
 
 - ``default``: ``PWARX.default`` (n_rho = 3d = 72, ε from the data), all steps;
 - ``default, n_rho=61``: the same with n_rho = 61 (the setting of benchmarks.identify);
@@ -93,8 +96,11 @@ def worker(variant: str, out: str) -> None:
         before = peak_rss_mb()
         t0, c0 = time.perf_counter(), time.process_time()
         model = est.fit(robot.u_train, robot.y_train)
-        result.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
-                      steps=model.timings_, cpu_steps=cpu_steps,
+        result.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0)
+        first = dict(steps=dict(model.timings_), cpu_steps=dict(cpu_steps))
+        t0 = time.perf_counter()
+        est.fit(robot.u_train, robot.y_train)  # again, without what a process pays once
+        result.update(second_seconds=time.perf_counter() - t0, **first,
                       eps=model.clustering_.eps_, n_submodels=model.n_submodels_,
                       labels=model.clustering_.labels_.tolist(),
                       thetas=model.thetas_.tolist())
@@ -216,6 +222,8 @@ def main(argv=None) -> None:
     for name, res in runs.items():
         row = {"variant": name, "median_seconds": statistics.median(r["seconds"] for r in res),
                "median_cpu_seconds": statistics.median(r["cpu_seconds"] for r in res),
+               "median_second_fit_seconds": statistics.median(
+                   r.get("second_seconds", np.nan) for r in res),
                "runs": [round(r["seconds"], 2) for r in res],
                "peak_mb": max(r["peak_mb"] for r in res),
                "baseline_mb": statistics.median(r["before_mb"] for r in res)}
