@@ -1,6 +1,5 @@
 """Region boundaries placed by the residuals (ResidualRegions, issue 10)."""
 
-import functools
 
 import numpy as np
 import pytest
@@ -88,26 +87,29 @@ def test_the_estimator_passes_the_sub_models_and_uses_the_refitted_ones(sim_30db
     assert type(paper.steps()["regions"]) is SVMRegions
 
 
-def test_the_estimator_fits_step_6_with_blas_on_one_thread(monkeypatch, sim_30db):
-    """Step 6's products are tall and thin; the estimator runs it on one BLAS thread."""
+def test_step_6_fits_its_gate_with_blas_on_one_thread(monkeypatch):
+    """The gate's products are tall and thin; ResidualRegions runs them on one BLAS thread."""
     from threadpoolctl import threadpool_info
+
+    from pwa_pipeline.pwa import boundaries
 
     def blas_threads():
         return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
 
     if blas_threads() == {1}:
         pytest.skip("BLAS runs on one thread here anyway")
-    seen, real = [], ResidualRegions.fit
+    seen, real = [], boundaries.mixture_of_experts
 
-    @functools.wraps(real)  # the estimator reads the signature
-    def spy(self, *args, **kwargs):
-        if "thetas" in kwargs:  # step 6 (step 5's sweeps fit the regions without residuals)
-            seen.append(blas_threads())
-        return real(self, *args, **kwargs)
+    def spy(*args, **kwargs):
+        seen.append(blas_threads())
+        return real(*args, **kwargs)
 
-    monkeypatch.setattr(ResidualRegions, "fit", spy)
-    PWARX(na=1, nb=1).fit(sim_30db.u[:1500], sim_30db.y[:1500])
+    monkeypatch.setattr(boundaries, "mixture_of_experts", spy)
+    sim, reg, _, _ = _hure_vasak_regressors()
+    ResidualRegions().fit(reg.phi, sim.modes[1:], 4, target=reg.target,
+                          thetas=HURE_VASAK_THETAS)
     assert seen == [{1}]
+    assert blas_threads() != {1}  # the limit ends with the fit
 
 
 def test_previous_rows_stop_at_each_experiment():

@@ -10,7 +10,6 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
-from ._blas import single_threaded_blas
 from .arx import ARXModelBase
 from .boundaries import ResidualRegions
 from .clustering import DBSCANClustering
@@ -326,11 +325,8 @@ class PWARX(ARXModelBase):
                                                               reg.phi.shape[1])
             if "experiment" in params and not self.structured:
                 residuals["experiment"] = reg.experiment
-            # step 6's products are n × d by d × s (the gate's L-BFGS objective on every
-            # row): threads only wait, 2–4× the CPU time of one thread on the 20 dB records
-            with single_threaded_blas():
-                return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
-                                sample_weight=subs.weights_, **residuals)
+            return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
+                            sample_weight=subs.weights_, **residuals)
         raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
 
     def assemble(self, reg: Regressors, local_models: BaseEstimator,
