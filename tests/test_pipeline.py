@@ -292,6 +292,10 @@ def test_cli_lists_partitions_and_refuses_a_mistyped_key(capsys, tmp_path, monke
     monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
     assert main(["run", "--partition", "hure_vasak|papr"]) == 2
     assert "error: unknown partition 'hure_vasak|papr'" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:
+        main(["run", "--jobs", "0"])
+    assert exit_.value.code == 2
+    assert "error: --jobs must be at least 1, got 0" in capsys.readouterr().err
     assert not (tmp_path / "home").exists()  # refused before any run
 
 
