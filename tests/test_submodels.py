@@ -557,3 +557,22 @@ def test_the_settle_tolerance_reaches_every_sweep_with_regions(monkeypatch, sim_
     alone = {settle for has_regions, settle in calls if not has_regions}
     assert with_regions == {0.7} and alone == {0.0}
     assert sum(has for has, _ in calls) > 2  # the split search's refines among them
+
+
+def test_prediction_gaps_are_the_mean_over_each_pairs_rows():
+    # The merge statistic of every pair at once, against the pair-by-pair definition; rows
+    # labelled -1 (noise) belong to no pair.
+    from pwa_pipeline.pwa.submodels import _prediction_gaps
+
+    rng = np.random.default_rng(4)
+    phi = rng.normal(size=(300, 3))
+    thetas = rng.normal(size=(5, 3, 2))
+    labels = rng.integers(-1, 5, 300)
+    sigma2 = np.array([0.5, 2.0])
+    gaps = _prediction_gaps(phi, thetas, labels, sigma2)
+    for i in range(5):
+        for j in range(5):
+            both = (labels == i) | (labels == j)
+            diff = phi[both] @ (thetas[i] - thetas[j])
+            assert gaps[i, j] == pytest.approx(np.mean((diff ** 2 / sigma2).sum(axis=1)),
+                                               rel=1e-12, abs=1e-300)

@@ -22,6 +22,30 @@ from ._blas import _controller, single_threaded_blas
 from .neighbours import distinct_rows
 
 
+def _prediction_gaps(phi: Float2D, thetas: np.ndarray, labels: np.ndarray,
+                     sigma2: np.ndarray) -> np.ndarray:
+    """The statistic of :func:`merge_indistinguishable` for every pair of sub-models: entry
+    (i, j) is the mean over the rows labelled i or j of Σ_p (ŷ_i,p − ŷ_j,p)² / σ̂_p², ŷ_i = φᵀθ_i.
+
+    Each sub-model's predictions of every row are formed once, and the sums over each
+    label's rows against every other sub-model at once: time O(s·n·m) where a loop over
+    the pairs was O(s²·n·d·m) with a Python step per pair (7 s of a SISO fit that starts
+    from a hundred clusters).
+    """
+    s = thetas.shape[0]
+    with single_threaded_blas():  # n × d by d × m products: threads only wait
+        pred = np.matmul(phi, thetas)
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(s + 1))
+    within = np.empty((s, s))  # (i, j): the sum over the rows labelled i
+    for i in range(s):
+        rows = order[bounds[i]:bounds[i + 1]]
+        gap = pred[:, rows] - pred[i, rows]
+        within[i] = _cost(np.square(gap, out=gap), sigma2).sum(axis=1)
+    sizes = np.diff(bounds)
+    return (within + within.T) / np.maximum(sizes[:, None] + sizes[None, :], 1)
+
+
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """The paper's sub-models: the mean local θ_k of each cluster (step 5)."""
     s = int(labels.max()) + 1
@@ -222,12 +246,8 @@ def merge_indistinguishable(
         rows = labels >= 0
         sq = _sq_residuals(phi[rows], target[rows], thetas)
         sigma2 = robust_noise_var(sq[labels[rows], np.arange(rows.sum())])
-        stats = []
-        for i in range(s):
-            for j in range(i + 1, s):
-                both = (labels == i) | (labels == j)
-                diff = phi[both] @ (thetas[i] - thetas[j])
-                stats.append((float(np.mean((diff**2 / sigma2).sum(axis=1))), i, j))
+        stat = _prediction_gaps(phi, thetas, labels, sigma2)
+        stats = [(float(stat[i, j]), i, j) for i in range(s) for j in range(i + 1, s)]
         # The mergeable pair with the smallest statistic is the first mergeable one in this
         # order, so the SVM runs only on pairs closer than that one, and once per pair of
         # row sets: linear in the merges, where testing every pair at every merge was cubic.
