@@ -576,3 +576,22 @@ def test_prediction_gaps_are_the_mean_over_each_pairs_rows():
             diff = phi[both] @ (thetas[i] - thetas[j])
             assert gaps[i, j] == pytest.approx(np.mean((diff ** 2 / sigma2).sum(axis=1)),
                                                rel=1e-12, abs=1e-300)
+
+
+def test_refit_takes_a_row_sets_fit_from_its_memo():
+    # The memo is keyed by the rows, not the label: relabelled groups reuse their fits, and
+    # what it returns is what a fresh refit gives, bit for bit.
+    rng = np.random.default_rng(8)
+    phi, target = rng.normal(size=(200, 3)), rng.normal(size=(200, 2))
+    labels = rng.integers(0, 4, 200)
+    memo = {}
+    first = refit(phi, target, labels, 4, memo)
+    assert len(memo) == 4
+    swapped = np.array([1, 0, 2, 3])[labels]
+    second = refit(phi, target, swapped, 4, memo)
+    np.testing.assert_array_equal(second, first[[1, 0, 2, 3]])
+    assert len(memo) == 4  # nothing refitted
+    np.testing.assert_array_equal(second, refit(phi, target, swapped, 4))
+    merged = np.where(labels == 3, 2, labels)
+    refit(phi, target, merged, 3, memo)
+    assert len(memo) == 5  # only the merged group is new

@@ -52,10 +52,13 @@ def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return np.stack([local_theta[labels == i].mean(axis=0) for i in range(s)])
 
 
-def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarray:
+def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int,
+          memo: dict | None = None) -> np.ndarray:
     """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows).
 
-    Each θ_i is :func:`least_squares` of its rows.
+    Each θ_i is :func:`least_squares` of its rows. With ``memo`` (a dict kept over calls on
+    the same ``phi`` and ``target``) each row set's θ is stored under a hash of its rows and
+    taken from there when the rows come again (the sub-models a merge leaves as they were).
     """
     d, m = phi.shape[1], target.shape[1]
     thetas = np.full((s, d, m), np.nan)
@@ -64,10 +67,16 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int) -> np.ndarr
     with single_threaded_blas():  # tall, thin solves: threads only wait
         for i in range(s):
             rows = order[bounds[i]:bounds[i + 1]]
+            key = None if memo is None else hashlib.blake2b(rows.tobytes()).digest()
+            if key is not None and key in memo:
+                thetas[i] = memo[key]
+                continue
             if len(rows) == len(labels):  # one label: every row, no copy
                 thetas[i] = least_squares(phi, target)
             elif len(rows) >= d:
                 thetas[i] = least_squares(phi[rows], target[rows])
+            if key is not None:
+                memo[key] = thetas[i].copy()
     return thetas
 
 
@@ -239,8 +248,9 @@ def merge_indistinguishable(
     labels = relabel_by_size(labels)
     n_merged = 0
     verdicts: dict[tuple[bytes, bytes], bool] = {}  # separable(), by the rows of each pair
+    fits: dict[bytes, np.ndarray] = {}  # refit()'s θ, by rows: a merge changes one
     while (s := int(labels.max()) + 1) > 1:
-        thetas = refit(phi, target, labels, s)
+        thetas = refit(phi, target, labels, s, fits)
         if np.isnan(thetas).any():
             break
         rows = labels >= 0
