@@ -559,10 +559,15 @@ def test_the_settle_tolerance_reaches_every_sweep_with_regions(monkeypatch, sim_
     assert sum(has for has, _ in calls) > 2  # the split search's refines among them
 
 
-def test_prediction_gaps_are_the_mean_over_each_pairs_rows():
+@pytest.mark.parametrize("entries", [1 << 22, 100], ids=["at once", "in groups"])
+def test_prediction_gaps_are_the_mean_over_each_pairs_rows(entries, monkeypatch):
     # The merge statistic of every pair at once, against the pair-by-pair definition; rows
-    # labelled -1 (noise) belong to no pair.
+    # labelled -1 (noise) belong to no pair. Also with the predictions in groups of
+    # sub-models (a bound of 100 entries: one sub-model at a time for most labels).
+    from pwa_pipeline.pwa import submodels
     from pwa_pipeline.pwa.submodels import _prediction_gaps
+
+    monkeypatch.setattr(submodels, "_GAP_ENTRIES", entries)
 
     rng = np.random.default_rng(4)
     phi = rng.normal(size=(300, 3))

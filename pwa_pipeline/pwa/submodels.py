@@ -27,23 +27,30 @@ def _prediction_gaps(phi: Float2D, thetas: np.ndarray, labels: np.ndarray,
     """The statistic of :func:`merge_indistinguishable` for every pair of sub-models: entry
     (i, j) is the mean over the rows labelled i or j of Σ_p (ŷ_i,p − ŷ_j,p)² / σ̂_p², ŷ_i = φᵀθ_i.
 
-    Each sub-model's predictions of every row are formed once, and the sums over each
-    label's rows against every other sub-model at once: time O(s·n·m) where a loop over
-    the pairs was O(s²·n·d·m) with a Python step per pair (7 s of a SISO fit that starts
-    from a hundred clusters).
+    Each label's rows are predicted by every sub-model at once (in groups of sub-models that
+    keep the predictions within :data:`_GAP_ENTRIES`) and summed against their own
+    sub-model's: time O(s·n·d·m) with a Python step per label, where a loop over the pairs
+    took a step per pair (7 s of a SISO fit that starts from a hundred clusters).
     """
-    s = thetas.shape[0]
-    with single_threaded_blas():  # n × d by d × m products: threads only wait
-        pred = np.matmul(phi, thetas)
+    s, m = thetas.shape[0], thetas.shape[2]
     order = np.argsort(labels, kind="stable")
     bounds = np.searchsorted(labels[order], np.arange(s + 1))
     within = np.empty((s, s))  # (i, j): the sum over the rows labelled i
-    for i in range(s):
-        rows = order[bounds[i]:bounds[i + 1]]
-        gap = pred[:, rows] - pred[i, rows]
-        within[i] = _cost(np.square(gap, out=gap), sigma2).sum(axis=1)
+    with single_threaded_blas():  # n × d by d × m products: threads only wait
+        for i in range(s):
+            x = phi[order[bounds[i]:bounds[i + 1]]]
+            own = x @ thetas[i]
+            step = max(1, _GAP_ENTRIES // max(x.shape[0] * m, 1))
+            for j in range(0, s, step):
+                gap = np.matmul(x, thetas[j:j + step])
+                gap -= own
+                within[i, j:j + step] = _cost(np.square(gap, out=gap), sigma2).sum(axis=1)
     sizes = np.diff(bounds)
     return (within + within.T) / np.maximum(sizes[:, None] + sizes[None, :], 1)
+
+
+_GAP_ENTRIES = 1 << 22
+"""Largest number of predictions :func:`_prediction_gaps` holds at once (32 MB)."""
 
 
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
