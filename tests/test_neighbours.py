@@ -113,3 +113,29 @@ def test_non_finite_points():
     x[2, 3] = np.nan
     with pytest.raises(ValueError, match="NaN or infinite"):
         nearest_neighbours(x, 2)
+
+
+def test_an_interrupted_map_drops_the_tasks_not_started():
+    # Ctrl-C while the search's threads work: the waiting thread gets KeyboardInterrupt, and
+    # leaving the pool must not first run every block still queued.
+    import threading
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pwa_pipeline.pwa._threads import map_in_threads
+
+    ran, lock = [], threading.Lock()
+
+    def task(i):
+        if i == 0:
+            raise KeyboardInterrupt
+        time.sleep(0.05)
+        with lock:
+            ran.append(i)
+
+    with pytest.raises(KeyboardInterrupt):
+        with ThreadPoolExecutor(1) as pool:
+            map_in_threads(pool, task, range(20))
+    assert len(ran) <= 2  # the one that started while the interrupt reached the caller
+    with ThreadPoolExecutor(2) as pool:
+        assert map_in_threads(pool, lambda i: i * i, range(5)) == [0, 1, 4, 9, 16]

@@ -74,13 +74,21 @@ def test_an_interrupt_ends_the_runs_in_flight_and_starts_no_other(tmp_path, mlfl
                                                                     robot):
     """Ctrl-C (SIGINT to the command's process group, as a terminal sends it) while two
     partitions run: both end as interrupted runs, the third never starts, exit status 130,
-    and no run is left STARTED. The two in flight are the robot's (tens of seconds each),
-    so that neither can end between their first steps and the signal."""
+    and no run is left STARTED. The two in flight are robot sets with local sets of 400 and
+    500 rows (their local models alone take far longer than a worker process takes to start
+    and log its first step), so that neither can end before the signal: with the default
+    sets, the partition of this process could end while the worker was still starting."""
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    (tmp_path / "hparams.toml").write_text(
+        '[long.kuka_robot]\npreset = "default"\nna = 2\nnb = 2\nlocal_models.n_rho = 400\n\n'
+        '[longer.kuka_robot]\npreset = "default"\nna = 2\nnb = 2\n'
+        'local_models.n_rho = 500\n\n'
+        '[quick.hure_vasak]\npreset = "default"\nna = 1\nnb = 1\n')
     env = {k: v for k, v in os.environ.items()
            if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
     env["PWA_PIPELINE_HOME"] = str(tmp_path)
-    keys = ["kuka_robot|paper", "kuka_robot|default", "hure_vasak|paper"]
+    env["PWA_HPARAMS"] = str(tmp_path / "hparams.toml")
+    keys = ["kuka_robot|long", "kuka_robot|longer", "hure_vasak|quick"]
     out = tmp_path / "out.txt"
     with open(out, "w") as sink:
         proc = subprocess.Popen(
@@ -94,13 +102,18 @@ def test_an_interrupt_ends_the_runs_in_flight_and_starts_no_other(tmp_path, mlfl
         assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
         time.sleep(0.2)
     os.killpg(proc.pid, signal.SIGINT)
-    assert proc.wait(timeout=60) == 130
+    try:
+        status = proc.wait(timeout=60)
+    except subprocess.TimeoutExpired:  # what each process was doing goes into the failure
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("not ended 60 s after Ctrl-C:\n" + out.read_text()[-6000:])
+    assert status == 130
     text = out.read_text()
     summary = text.split("\nSummary\n")[1]
     for key in keys[:2]:
         assert f"  {key}: INTERRUPTED after" in summary
-    assert "  not run to the end: hure_vasak|paper" in summary
-    assert "=== materialising hure_vasak|paper ===" not in text
+    assert f"  not run to the end: {keys[2]}" in summary
+    assert f"=== materialising {keys[2]} ===" not in text
     os.environ["DAGSTER_HOME"] = str(tmp_path / ".dagster_home")
     try:
         with dg.DagsterInstance.get() as instance:

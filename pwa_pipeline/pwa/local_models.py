@@ -13,6 +13,7 @@ from .._arrays import column_rms
 from .._typing import Float2D
 from ._blas import single_threaded_blas
 from ._qr_kernels import local_solve
+from ._threads import map_in_threads
 from .neighbours import distinct_rows, nearest_neighbours
 
 _RANK_TOL = 1e-10
@@ -141,7 +142,7 @@ def local_least_squares(
 
     with single_threaded_blas(), \
             ThreadPoolExecutor(workers or len(os.sched_getaffinity(0))) as pool:
-        list(pool.map(solve, range(0, n, _CHUNK)))
+        map_in_threads(pool, solve, range(0, n, _CHUNK))
     return theta, resvar, scale, degenerate
 
 

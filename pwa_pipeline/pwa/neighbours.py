@@ -17,6 +17,7 @@ import numpy as np
 from .._typing import Float2D
 from ._blas import single_threaded_blas
 from ._knn_kernels import kth_smallest_rows, select_nearest, tile_candidates
+from ._threads import map_in_threads
 
 _BLOCK = 512
 """Rows of a block; a tile is one block of rows against one block of columns."""
@@ -167,11 +168,11 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
                        out_sq[a:b])
 
     with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
-        thr = np.concatenate(list(pool.map(bound, blocks)))
+        thr = np.concatenate(map_in_threads(pool, bound, blocks))
         thr32 = thr.astype(np.float32)
         np.nextafter(thr32, np.float32(np.inf), out=thr32)  # float32 never below the bound
-        list(pool.map(row_of_tiles, range(len(blocks))))  # the longest rows first
-        list(pool.map(select, range(len(blocks))))
+        map_in_threads(pool, row_of_tiles, range(len(blocks)))  # the longest rows first
+        map_in_threads(pool, select, range(len(blocks)))
     back = np.empty(n, dtype=np.intp)
     back[order] = np.arange(n)
     return out[back], out_sq[back]
