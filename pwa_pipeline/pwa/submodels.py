@@ -33,24 +33,35 @@ def _prediction_gaps(phi: Float2D, thetas: np.ndarray, labels: np.ndarray,
     took a step per pair (7 s of a SISO fit that starts from a hundred clusters).
     """
     s, m = thetas.shape[0], thetas.shape[2]
-    order = np.argsort(labels, kind="stable")
-    bounds = np.searchsorted(labels[order], np.arange(s + 1))
+    groups = _rows_by_label(labels, s)
     within = np.empty((s, s))  # (i, j): the sum over the rows labelled i
     with single_threaded_blas():  # n × d by d × m products: threads only wait
-        for i in range(s):
-            x = phi[order[bounds[i]:bounds[i + 1]]]
+        for i, rows in enumerate(groups):
+            x = phi[rows]
             own = x @ thetas[i]
             step = max(1, _GAP_ENTRIES // max(x.shape[0] * m, 1))
             for j in range(0, s, step):
                 gap = np.matmul(x, thetas[j:j + step])
                 gap -= own
                 within[i, j:j + step] = _cost(np.square(gap, out=gap), sigma2).sum(axis=1)
-    sizes = np.diff(bounds)
+    sizes = np.array([len(rows) for rows in groups])
     return (within + within.T) / np.maximum(sizes[:, None] + sizes[None, :], 1)
 
 
 _GAP_ENTRIES = 1 << 22
 """Largest number of predictions :func:`_prediction_gaps` holds at once (32 MB)."""
+
+
+def _rows_by_label(labels: np.ndarray, s: int) -> list[np.ndarray]:
+    """The rows labelled i, in row order, for i = 0 … s−1 (rows labelled −1 in none)."""
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(s + 1))
+    return [order[bounds[i]:bounds[i + 1]] for i in range(s)]
+
+
+def _row_set_key(rows: np.ndarray) -> bytes:
+    """A key of a set of row indices (in row order), for the memos kept over one fit."""
+    return hashlib.blake2b(rows.tobytes()).digest()
 
 
 def cluster_centres(local_theta: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -69,12 +80,9 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int,
     """
     d, m = phi.shape[1], target.shape[1]
     thetas = np.full((s, d, m), np.nan)
-    order = np.argsort(labels, kind="stable")  # each label's rows, in row order
-    bounds = np.searchsorted(labels[order], np.arange(s + 1))
     with single_threaded_blas():  # tall, thin solves: threads only wait
-        for i in range(s):
-            rows = order[bounds[i]:bounds[i + 1]]
-            key = None if memo is None else hashlib.blake2b(rows.tobytes()).digest()
+        for i, rows in enumerate(_rows_by_label(labels, s)):
+            key = None if memo is None else _row_set_key(rows)
             if key is not None and key in memo:
                 thetas[i] = memo[key]
                 continue
@@ -275,8 +283,7 @@ def merge_indistinguishable(
                 break
             if copy_tol is None or stat >= copy_tol:
                 break
-            key = tuple(hashlib.blake2b(np.flatnonzero(labels == g).tobytes()).digest()
-                        for g in (i, j))
+            key = tuple(_row_set_key(np.flatnonzero(labels == g)) for g in (i, j))
             if key not in verdicts:
                 both = (labels == i) | (labels == j)
                 verdicts[key] = separable(phi[both], labels[both] == i, regions)
@@ -873,7 +880,7 @@ class RefinedSubModels(BaseEstimator):
             if tried == SPLIT_CANDIDATES:
                 break
             rows = np.flatnonzero(labels == i)
-            key = hashlib.blake2b(rows.tobytes()).digest()
+            key = _row_set_key(rows)
             if key in split_once:
                 continue
             tried += 1
