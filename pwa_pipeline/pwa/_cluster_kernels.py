@@ -49,9 +49,19 @@ def to_distances(d2: np.ndarray, sq: np.ndarray, r2: float) -> None:
     for p in range(n):
         for q in range(n):
             s = d2[p, q]
-            if len(sq):
-                s = max((sq[p] - 2 * s) + sq[q], 0.0)
-            d2[p, q] = np.sqrt(s) if s <= r2 else np.inf
+            d2[p, q] = _distance(_from_gram(s, sq[p], sq[q]) if len(sq) else s, r2)
+
+
+@njit(nogil=True, cache=True)
+def _from_gram(dot: float, sq_p: float, sq_q: float) -> float:
+    """(‖p‖² − 2 p·q) + ‖q‖² clipped at 0, rounded as scikit-learn's brute force rounds it."""
+    return max((sq_p - 2 * dot) + sq_q, 0.0)
+
+
+@njit(nogil=True, cache=True)
+def _distance(s: float, r2: float) -> float:
+    """A squared distance as a distance where it is at most ``r2``, inf beyond."""
+    return np.sqrt(s) if s <= r2 else np.inf
 
 
 @njit(nogil=True, cache=True)
@@ -67,13 +77,13 @@ def _row(x: np.ndarray, sq: np.ndarray, dense: np.ndarray, r2: float, u: int,
             s = 0.0
             for j in range(d):
                 s += x[u, j] * x[q, j]
-            s = max((sq[u] - 2 * s) + sq[q], 0.0)
+            s = _from_gram(s, sq[u], sq[q])
         else:
             s = (x[q, 0] - x[u, 0]) * (x[q, 0] - x[u, 0])
             for j in range(1, d):
                 v = x[q, j] - x[u, j]
                 s += v * v
-        out[q] = np.sqrt(s) if s <= r2 else np.inf
+        out[q] = _distance(s, r2)
 
 
 @njit(nogil=True, cache=True)
