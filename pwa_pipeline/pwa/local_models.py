@@ -128,14 +128,14 @@ def local_least_squares(
         r11, r12 = np.empty((c, d, d)), np.empty((c, d, m))  # filled where singular
         local_solve(both, idx, d, np.sqrt(ridge), _RANK_TOL, th, ssr, singular, r11, r12)
         if singular.any():  # minimum norm: Φ_k = Q R₁₁, so pinv(Φ_k) Y_k = pinv(R₁₁) R₁₂
-            u, rhs = r11[singular], r12[singular]
-            th[singular] = np.linalg.pinv(u, rtol=_RANK_TOL) @ rhs
-            top = rhs - u @ th[singular]  # plus what R₁₁ θ_k leaves of R₁₂
-            ssr[singular] += np.einsum("kij,kij->kj", top, top)
+            th[singular] = np.linalg.pinv(r11[singular], rtol=_RANK_TOL) @ r12[singular]
         if ridge > 0:  # the n_ρ data rows only
             a = np.take(both, idx, axis=0)
             res = a[:, :, d:] - a[:, :, :d] @ th
             ssr = np.einsum("kij,kij->kj", res, res)
+        elif singular.any():  # plus what R₁₁ θ_k leaves of R₁₂
+            top = r12[singular] - r11[singular] @ th[singular]
+            ssr[singular] += np.einsum("kij,kij->kj", top, top)
         degenerate[rows] = singular
         theta[rows] = th / scale[:, None]
         resvar[rows] = ssr / (n_rho - d)
