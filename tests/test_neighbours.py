@@ -139,3 +139,17 @@ def test_an_interrupted_map_drops_the_tasks_not_started():
     assert len(ran) <= 2  # the one that started while the interrupt reached the caller
     with ThreadPoolExecutor(2) as pool:
         assert map_in_threads(pool, lambda i: i * i, range(5)) == [0, 1, 4, 9, 16]
+
+
+@pytest.mark.parametrize("duplicates", [0, 120])
+def test_queried_rows_get_the_neighbours_of_the_full_search(duplicates):
+    # a subset of rows (any order, spread over the spatial order) searched against every row
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(600, 20)) @ rng.normal(size=(20, 20))
+    x = np.vstack([x, x[rng.integers(0, 600, duplicates)]])[rng.permutation(600 + duplicates)]
+    full = nearest_neighbours(x, 40)
+    for q in (rng.choice(len(x), 150, replace=False), np.array([len(x) - 1, 3, 3])):
+        got = nearest_neighbours(x, 40, queries=q)
+        assert got.shape == (len(q), 40)
+        np.testing.assert_array_equal(got, full[q])
+        np.testing.assert_array_equal(got, reference(x, 40)[q])

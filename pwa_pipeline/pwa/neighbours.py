@@ -26,8 +26,10 @@ _WINDOW = 2048
 """Columns, near a block in the spatial order, whose k-th nearest bounds each row's k-th."""
 
 
-def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.ndarray:
-    """Indices of the k nearest points of every point (Euclidean), the point itself included.
+def nearest_neighbours(x: Float2D, k: int, workers: int | None = None,
+                       queries: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the k nearest points of every point (Euclidean), the point itself included,
+    or of the points ``queries`` only.
 
     Each row is sorted by distance, equal distances by index; a point's own index comes
     first unless other points coincide with it (those of lower index then come first).
@@ -48,6 +50,10 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     float64 distances Σ_j (x_pj − x_qj)², then by index.
     Coinciding points are searched once, with their multiplicity.
 
+    With ``queries``, only the tiles of the queried points (in the same spatial order)
+    against every point are computed: q·n·(d + 2)·2 operations for q queried points, where
+    every point's search shares each tile between its two row blocks.
+
     Memory: the candidates (12 bytes each, a few hundred a point) and one tile with room for
     all its entries as candidates (24 bytes each) per thread; time n²·(d + 2)·2
     floating-point operations over 2 (symmetry).
@@ -59,10 +65,12 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
         1 ≤ k ≤ n.
     workers : int, optional
         Threads (default: the CPUs this process may use); BLAS runs single-threaded inside.
+    queries : ndarray of shape (q,), int, optional
+        Rows of ``x`` whose neighbours are sought (among all points). None: every row.
 
     Returns
     -------
-    ndarray of shape (n, k), int64
+    ndarray of shape (n, k) or (q, k), int64
     """
     x = np.asarray(x, dtype=float)
     n = x.shape[0]
@@ -74,9 +82,11 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     # Coinciding points: search the distinct ones, then expand by multiplicity.
     first, inverse = distinct_rows(x)
     if len(first) == n:
-        return _distinct(x, k, workers)[0]
+        return _distinct(x, k, workers, queries)[0]
     counts = np.bincount(inverse, minlength=len(first))
-    idx, sq = _distinct(x[first], min(k, len(first)), workers)
+    sought, back = (None, inverse) if queries is None else np.unique(
+        inverse[queries], return_inverse=True)
+    idx, sq = _distinct(x[first], min(k, len(first)), workers, sought)
     # Rows of each distinct point, by index; the k nearest rows are the first k of the
     # distinct neighbours' rows in order of (distance, row index).
     members = np.argsort(inverse, kind="stable")
@@ -93,7 +103,7 @@ def nearest_neighbours(x: Float2D, k: int, workers: int | None = None) -> np.nda
     srt = np.lexsort((rows, dist, owner))
     owned = np.bincount(owner, minlength=len(idx))
     out = rows[srt][(np.cumsum(owned) - owned)[:, None] + np.arange(k)]
-    return out[inverse]
+    return out[back]
 
 
 def distinct_rows(x: Float2D) -> tuple[np.ndarray, np.ndarray]:
@@ -115,20 +125,13 @@ def distinct_rows(x: Float2D) -> tuple[np.ndarray, np.ndarray]:
     return first[order], rank[inverse.ravel()]
 
 
-def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]:
+def _distinct(x: Float2D, k: int, workers: int, queries: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`nearest_neighbours` of distinct points, and their exact squared distances."""
-    n, d = x.shape
-    x = x - x.mean(axis=0)
-    order = _spatial_order(x, leaf=_BLOCK // 2)  # finer splits only reorder within blocks
-    xs = np.ascontiguousarray(x[order])
-    sq = np.einsum("ij,ij->i", xs, xs)
-    norm = np.sqrt(sq)
-    # d² = [p, ‖p‖², 1]·[−2q, 1, ‖q‖²]; its float32 rounding is at most err_p for a row p
-    left = np.empty((n, d + 2), dtype=np.float32)
-    left[:, :d], left[:, d], left[:, d + 1] = xs, sq, 1
-    right = np.empty_like(left)
-    right[:, :d], right[:, d], right[:, d + 1] = -2 * xs, 1, sq
-    err = 2 * (d + 4) * float(np.finfo(np.float32).eps) * (norm + norm.max()) ** 2
+    if queries is not None:
+        return _queried(x, k, workers, queries)
+    n = x.shape[0]
+    order, xs, left, right, err = _tile_factors(x)
     blocks = [(a, min(n, a + _BLOCK)) for a in range(0, n, _BLOCK)]
     window = min(n, max(_WINDOW, 2 * k))
 
@@ -168,13 +171,87 @@ def _distinct(x: Float2D, k: int, workers: int) -> tuple[np.ndarray, np.ndarray]
                        out_sq[a:b])
 
     with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
-        thr = np.concatenate(map_in_threads(pool, bound, blocks))
-        thr32 = thr.astype(np.float32)
-        np.nextafter(thr32, np.float32(np.inf), out=thr32)  # float32 never below the bound
+        thr32 = _bound32(np.concatenate(map_in_threads(pool, bound, blocks)))
         map_in_threads(pool, row_of_tiles, range(len(blocks)))  # the longest rows first
         map_in_threads(pool, select, range(len(blocks)))
     back = np.empty(n, dtype=np.intp)
     back[order] = np.arange(n)
+    return out[back], out_sq[back]
+
+
+def _tile_factors(x: Float2D) -> tuple[np.ndarray, Float2D, np.ndarray, np.ndarray,
+                                       np.ndarray]:
+    """The points centred in their spatial order (``order``, ``xs``), the float32 factors
+    of their squared distances (``left[p] @ right[q]``) and each row's bound on that
+    float32 value's rounding error (``err``)."""
+    n, d = x.shape
+    x = x - x.mean(axis=0)
+    order = _spatial_order(x, leaf=_BLOCK // 2)  # finer splits only reorder within blocks
+    xs = np.ascontiguousarray(x[order])
+    sq = np.einsum("ij,ij->i", xs, xs)
+    norm = np.sqrt(sq)
+    # d² = [p, ‖p‖², 1]·[−2q, 1, ‖q‖²]; its float32 rounding is at most err_p for a row p
+    left = np.empty((n, d + 2), dtype=np.float32)
+    left[:, :d], left[:, d], left[:, d + 1] = xs, sq, 1
+    right = np.empty_like(left)
+    right[:, :d], right[:, d], right[:, d + 1] = -2 * xs, 1, sq
+    err = 2 * (d + 4) * float(np.finfo(np.float32).eps) * (norm + norm.max()) ** 2
+    return order, xs, left, right, err
+
+
+def _bound32(bound: np.ndarray) -> np.ndarray:
+    """Float32 bounds never below the float64 ones."""
+    out = bound.astype(np.float32)
+    return np.nextafter(out, np.float32(np.inf), out=out)
+
+
+def _queried(x: Float2D, k: int, workers: int, queries: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_distinct` of the rows ``queries`` only: each block of them (in the spatial
+    order, so that a block is compact) against every block of points, the rows' side of each
+    tile kept; bounds, candidates and selection as :func:`_distinct`'s."""
+    n = x.shape[0]
+    order, xs, left, right, err = _tile_factors(x)
+    place = np.empty(n, dtype=np.intp)
+    place[order] = np.arange(n)
+    sorter = np.argsort(place[queries], kind="stable")
+    pos = place[queries][sorter]  # the queried rows in the spatial order
+    xq = np.concatenate([xs, xs[pos]])  # each queried row again after the points
+    lq, band = left[pos], 2 * err[pos]
+    q = len(pos)
+    window = min(n, max(_WINDOW, 2 * k))
+    never = np.full(_BLOCK, -np.inf, dtype=np.float32)  # no column's side is kept
+    out = np.empty((q, k), dtype=np.intp)
+    out_sq = np.empty((q, k))
+
+    group = np.r_[0, np.flatnonzero(np.diff(pos // _BLOCK)) + 1, q]
+
+    def bound(g):  # each row's bound from the window of the block it is in, as _distinct's
+        a, b = group[g], group[g + 1]
+        start = pos[a] // _BLOCK * _BLOCK
+        c = min(max(0, (start + min(n, start + _BLOCK) - window) // 2), n - window)
+        return kth_smallest_rows(lq[a:b] @ right[c:c + window].T, k) + band[a:b]
+
+    def search(a):
+        b = min(q, a + _BLOCK)
+        side = np.empty((_BLOCK * _BLOCK, 2), dtype=np.int32)
+        dist = np.empty(_BLOCK * _BLOCK, dtype=np.float32)
+        spare = np.empty((1, 2), dtype=np.int32), np.empty(1, dtype=np.float32)
+        parts = []
+        for c in range(0, n, _BLOCK):
+            e = min(n, c + _BLOCK)
+            n_row = tile_candidates(lq[a:b] @ right[c:e].T, thr32[a:b], never[:e - c], True,
+                                    side, dist, *spare)[0]
+            parts.append((side[:n_row] + (0, c), dist[:n_row].copy()))
+        pairs, val = (np.concatenate(part) for part in zip(*parts))
+        select_nearest(pairs[:, 0], pairs[:, 1], val, xq, n + a, band[a:b], order, out[a:b],
+                       out_sq[a:b])
+
+    with single_threaded_blas(), ThreadPoolExecutor(workers) as pool:
+        thr32 = _bound32(np.concatenate(map_in_threads(pool, bound, range(len(group) - 1))))
+        map_in_threads(pool, search, range(0, q, _BLOCK))
+    back = np.empty(q, dtype=np.intp)
+    back[sorter] = np.arange(q)
     return out[back], out_sq[back]
 
 
