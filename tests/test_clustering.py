@@ -31,6 +31,7 @@ class _Local:
         self.phi_scale_ = np.ones(theta.shape[1])
         self.degenerate_ = np.zeros(len(theta), bool)
         self.n_degenerate_ = 0
+        self.estimated_ = np.ones(len(theta), bool)
         self.original_ = np.arange(len(theta))
 
 

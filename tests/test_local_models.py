@@ -164,3 +164,43 @@ def test_a_nearly_triangular_local_set_keeps_its_accuracy():
     th = np.linalg.lstsq(p, target, rcond=None)[0] / scale[:, None]
     np.testing.assert_allclose(theta[0], th, rtol=1e-9)
     np.testing.assert_allclose(resvar[0], ((target - phi @ th) ** 2).sum(0) / 26, rtol=1e-6)
+
+
+@pytest.mark.parametrize("dims", [3, 16])  # k-d tree and blocked search
+def test_a_subset_of_local_models_equals_those_of_every_sample(dims):
+    rng = np.random.default_rng(3)
+    phi = rng.normal(size=(900, dims))
+    target = np.tanh(phi[:, :2]) + 0.01 * rng.normal(size=(900, 2))
+    every = LocalLeastSquares(n_rho=3 * dims, max_sets=None).fit(phi, target)
+    some = LocalLeastSquares(n_rho=3 * dims, max_sets=200, random_state=1).fit(phi, target)
+    rows = np.flatnonzero(some.estimated_)
+    assert some.n_estimated_ == len(rows) == 200 and every.estimated_.all()
+    np.testing.assert_array_equal(some.neighbours_[rows], every.neighbours_[rows])
+    np.testing.assert_allclose(some.theta_[rows], every.theta_[rows], rtol=1e-12)
+    np.testing.assert_allclose(some.residual_var_[rows], every.residual_var_[rows], rtol=1e-12)
+    rest = ~some.estimated_
+    assert np.isnan(some.theta_[rest]).all() and np.isnan(some.residual_var_[rest]).all()
+    assert (some.neighbours_[rest] == -1).all() and not some.degenerate_[rest].any()
+    other = LocalLeastSquares(n_rho=3 * dims, max_sets=200, random_state=2).fit(phi, target)
+    assert not np.array_equal(other.estimated_, some.estimated_)  # the seed draws the subset
+
+
+def test_a_tiled_record_draws_the_subset_of_the_record_once():
+    rng = np.random.default_rng(4)
+    phi = rng.normal(size=(400, 5))
+    target = phi @ rng.normal(size=(5, 1))
+    once = LocalLeastSquares(n_rho=20, max_sets=100).fit(phi, target)
+    tiled = LocalLeastSquares(n_rho=20, max_sets=100).fit(np.tile(phi, (3, 1)),
+                                                        np.tile(target, (3, 1)))
+    np.testing.assert_array_equal(tiled.estimated_, np.tile(once.estimated_, 3))
+    np.testing.assert_array_equal(tiled.theta_, np.tile(once.theta_, (3, 1, 1)))
+    assert tiled.n_estimated_ == 300
+    rows = np.flatnonzero(tiled.estimated_)
+    np.testing.assert_array_equal(tiled.neighbours_[rows, 0], rows)
+
+
+def test_the_paper_setting_estimates_every_local_model():
+    from pwa_pipeline import PWARX
+
+    assert PWARX.paper(1, 1, n_rho=18, eps=0.1, min_pts=20).local_models.max_sets is None
+    assert PWARX.default().local_models.max_sets == 5000

@@ -8,6 +8,7 @@ from pwa_pipeline import PWARX
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, RefinedSubModels, SVMRegions
 from pwa_pipeline.pwa.submodels import (
+    _kmeans_start,
     least_squares,
     merge_indistinguishable,
     refine,
@@ -600,3 +601,30 @@ def test_refit_takes_a_row_sets_fit_from_its_memo():
     merged = np.where(labels == 3, 2, labels)
     refit(phi, target, merged, 3, memo)
     assert len(memo) == 5  # only the merged group is new
+
+
+def test_the_k_means_start_places_rows_without_a_local_model_by_their_fit():
+    # two modes far apart in θ: k-means on the estimated local models splits them, and a row
+    # whose local model was not estimated (LocalLeastSquares.max_sets) joins the side whose
+    # least-squares sub-model predicts it better
+    phi, y, mode, thetas = _two_modes(gap=0.0, n=1500, seed=2)
+    y = np.einsum("nd,ndm->nm", phi, np.array([[[0.5], [1.0], [0.0]],
+                                                [[-0.5], [-1.0], [0.5]]])[mode])
+    y += SIGMA * np.random.default_rng(2).normal(size=y.shape)
+    every = LocalLeastSquares(n_rho=30, max_sets=None).fit(phi, y)
+    some = LocalLeastSquares(n_rho=30, max_sets=300).fit(phi, y)
+    far = np.abs(phi[:, 0]) > 0.2  # local sets across the boundary mix the modes
+
+    def agreement(start):
+        agree = np.mean(start[far] == mode[far])
+        return max(agree, 1 - agree)
+
+    assert agreement(_kmeans_start(phi, y, every.theta_, 3)) == 1.0
+    part = _kmeans_start(phi, y, some.theta_, 3)
+    assert agreement(part) > 0.95
+    rest = far & ~some.estimated_
+    agree = np.mean(part[rest] == mode[rest])
+    assert max(agree, 1 - agree) > 0.95  # those without a local model too
+    # too few estimated local models: no k-means start
+    assert _kmeans_start(phi, y, np.where(np.arange(1500)[:, None, None] < 5, every.theta_,
+                                          np.nan), 3) is None

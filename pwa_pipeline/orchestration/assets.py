@@ -73,7 +73,7 @@ from .storage import (
 GROUP = "identification"
 #: Layout of a cached fitted local-model step; raise it when the step's fitted attributes
 #: change, so that entries written by older code are never loaded.
-LOCAL_MODELS_FORMAT = 3
+LOCAL_MODELS_FORMAT = 4
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.
 STEP_ASSETS = {**dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
                           strict=True)), "refinement": "output_error_refinement"}
@@ -199,11 +199,12 @@ def _identification_assets(partitions_def) -> list:
             if settings.cache_local_models:
                 save_object(path, local, signing_key(root))
         context.log.info(
-            f"local models: {len(local.theta_):,} local sets of n_rho = {local.n_rho_}"
-            f"{' from the cache' if cached else ''} ({local.n_degenerate_:,} degenerate) in "
-            f"{time.perf_counter() - t0:.1f} s")
+            f"local models: {local.n_estimated_:,} of {len(local.theta_):,} local sets of "
+            f"n_rho = {local.n_rho_}{' from the cache' if cached else ''} "
+            f"({local.n_degenerate_:,} degenerate) in {time.perf_counter() - t0:.1f} s")
         context.add_output_metadata(rounded({
             "n_rho": local.n_rho_, "from_cache": cached,
+            "estimated_local_sets": local.n_estimated_,
             "degenerate_local_sets": local.n_degenerate_, "seconds": time.perf_counter() - t0,
             "cache_key": key}))
         return local

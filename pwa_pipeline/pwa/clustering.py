@@ -238,8 +238,9 @@ class DBSCANClustering(BaseEstimator):
         Parameters
         ----------
         local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
-            Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_`` and
-            ``original_`` are used; degenerate local models are never clustered, and each
+            Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_``,
+            ``estimated_`` and ``original_`` are used; only estimated local models are
+            clustered, degenerate ones never, and each
             distinct sample is clustered once (MinPts, the confidence median and the subset
             count it once): a repeated sample takes its first occurrence's label, so a
             record repeated r times is clustered as the record once.
@@ -251,10 +252,11 @@ class DBSCANClustering(BaseEstimator):
         self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * theta.shape[1]
         original = local.original_
         distinct = original == np.arange(n)
-        keep = ~local.degenerate_ & distinct
+        estimated = distinct & local.estimated_
+        keep = ~local.degenerate_ & estimated
         if keep.sum() < self.min_pts_:
             raise ValueError(
-                f"{int((local.degenerate_ & distinct).sum())} of {int(distinct.sum())} "
+                f"{int((local.degenerate_ & distinct).sum())} of {int(estimated.sum())} "
                 f"local sets are degenerate (their regressors "
                 f"are linearly dependent, e.g. inputs held constant for longer than a local "
                 f"set): too few left to cluster. Raise local_models__n_rho, lower na/nb, or "

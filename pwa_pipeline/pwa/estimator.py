@@ -40,7 +40,8 @@ class PWARX(ARXModelBase):
 
     The library default (``PWARX()``, the same as :meth:`PWARX.default`) differs from the
     paper where measurement showed the paper's version fails (``shared/paper/NOTES.md``):
-    z-scored neighbour search (:class:`~.local_models.LocalLeastSquares`), unit-free θ_k,
+    z-scored neighbour search and at most 5,000 local models estimated
+    (:class:`~.local_models.LocalLeastSquares`), unit-free θ_k,
     mixed local sets left out and at most 3,000 local models clustered, ε from the k-distance
     curve (:class:`~.clustering.DBSCANClustering`), and sub-models refitted, merged,
     re-assigned by residual and region, with a search for missed modes
@@ -171,16 +172,17 @@ class PWARX(ARXModelBase):
     @classmethod
     def paper(cls, na: int, nb: int, *, n_rho: int, eps: float, min_pts: int,
               affine: bool = False) -> "PWARX":
-        """The paper's setting: raw regressors in the neighbour search, DBSCAN on θ_k as it
-        is with every local model, sub-models as cluster centres, the SVM trained on every
-        clustered row (noise left out; solver tolerance 1e-2, see
-        :class:`~pwa_pipeline.pwa.regions.SVMRegions`).
+        """The paper's setting: raw regressors in the neighbour search, a local model for
+        every sample, DBSCAN on θ_k as it is with every local model, sub-models as cluster
+        centres, the SVM trained on every clustered row (noise left out; solver tolerance
+        1e-2, see :class:`~pwa_pipeline.pwa.regions.SVMRegions`).
 
         The paper gives n_ρ, ε and MinPts per data set and no rule, so they are required;
         its values are in ``data/hparams.toml`` (sets ``paper``).
         """
         return cls(na=na, nb=nb, affine=affine,
-                   local_models=LocalLeastSquares(n_rho=n_rho, standardize=False),
+                   local_models=LocalLeastSquares(n_rho=n_rho, standardize=False,
+                                                  max_sets=None),
                    clustering=DBSCANClustering(eps=eps, min_pts=min_pts, unit_free=False,
                                                confidence=None, max_clustered=None),
                    submodels=ClusterCentres(), regions=SVMRegions(max_rows=None, tol=1e-2))

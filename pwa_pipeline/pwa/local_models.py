@@ -32,8 +32,10 @@ def check_n_rho(n_rho: int, d: int) -> None:
         )
 
 
-def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
-    """Indices of the n_ρ nearest neighbours of every φ(k), φ(k) itself included (step 2).
+def local_sets(phi: Float2D, n_rho: int, standardize: bool, rows: np.ndarray | None = None
+               ) -> np.ndarray:
+    """Indices of the n_ρ nearest neighbours of every φ(k), φ(k) itself included (step 2),
+    or of the rows ``rows`` only (their neighbours among every row).
 
     Parameters
     ----------
@@ -43,6 +45,12 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
     standardize : bool
         Search on z-scored regressors (constant columns dropped) instead of raw ones, so that
         large-valued channels do not dominate the distance.
+    rows : ndarray of shape (q,), int, optional
+        The rows whose local sets are formed. None: every row.
+
+    Returns
+    -------
+    ndarray of shape (n, n_ρ) or (q, n_ρ), int
 
     Above 12 dimensions the search is :func:`~pwa_pipeline.pwa.neighbours.nearest_neighbours`
     (exact, blocked float32 products; equal distances go to the lower row index), below it
@@ -60,19 +68,19 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool) -> np.ndarray:
         if not keep.any():
             raise ValueError(_CONSTANT)
         x = (phi[:, keep] - phi[:, keep].mean(axis=0)) / std[keep]
+    own = np.arange(n) if rows is None else np.asarray(rows)
     if d > 12:  # blocked float32 products (exact); trees lose to brute force there
-        idx = nearest_neighbours(x, n_rho)
+        idx = nearest_neighbours(x, n_rho, queries=rows)
     else:  # a k-d tree, queried on every CPU
-        idx = cKDTree(x).query(x, k=n_rho, workers=-1)[1].reshape(n, n_rho)
+        idx = cKDTree(x).query(x[own], k=n_rho, workers=-1)[1].reshape(len(own), n_rho)
     # Duplicated regressors can put another row first; keep C_k's own row at position 0.
-    own = np.arange(n)
     not_first = idx[:, 0] != own
     if not_first.any():
-        rows = np.nonzero(not_first)[0]
-        has_own = idx[rows] == own[rows, None]
+        at = np.nonzero(not_first)[0]
+        has_own = idx[at] == own[at, None]
         swap = np.where(has_own.any(axis=1), has_own.argmax(axis=1), n_rho - 1)
-        idx[rows, swap] = idx[rows, 0]
-        idx[rows, 0] = rows
+        idx[at, swap] = idx[at, 0]
+        idx[at, 0] = own[at]
     return idx
 
 
@@ -80,7 +88,8 @@ def local_least_squares(
     phi: Float2D, target: Float2D, neighbours: np.ndarray, ridge: float = 0.0,
     workers: int | None = None,
 ) -> tuple[np.ndarray, Float2D, np.ndarray, np.ndarray]:
-    """Least-squares θ_k on every local set, batched over k (eq. 6–7).
+    """Least-squares θ_k on every local set (each row of ``neighbours``), batched over k
+    (eq. 6–7).
 
     Each local problem is solved by a QR factorisation of the column-scaled local regressor
     matrix Φ_k with the targets appended as columns, [Φ_k | Y_k] = QR: the leading block
@@ -93,15 +102,25 @@ def local_least_squares(
     minimum-norm solution (in the unit-RMS columns, so independent of the channels' units)
     and is marked degenerate, never an error.
 
+    Parameters
+    ----------
+    phi : ndarray of shape (n, d)
+    target : ndarray of shape (n, m)
+    neighbours : ndarray of shape (q, n_ρ), int
+        Rows of ``phi`` in each local set.
+    ridge : float
+    workers : int, optional
+        Threads (default: the CPUs this process may use).
+
     Returns
     -------
-    theta : ndarray of shape (n, d, m)
+    theta : ndarray of shape (q, d, m)
         θ_k of eq. (6), in the regressors' own units.
-    residual_var : ndarray of shape (n, m)
+    residual_var : ndarray of shape (q, m)
         SSR / (n_ρ − d) of each local fit, per output (the n_ρ data rows only).
     phi_scale : ndarray of shape (d,)
         Root mean square of each regressor column (the column scaling of the solve).
-    degenerate : ndarray of shape (n,), bool
+    degenerate : ndarray of shape (q,), bool
         Local sets whose (scaled, ridge-extended) Φ_k has a diagonal entry of R at most 1e-10
         of its largest: rank-deficient.
 
@@ -111,15 +130,15 @@ def local_least_squares(
         If n_ρ ≤ d (an exact fit, no least squares).
     """
     n, d = phi.shape
-    n_rho = neighbours.shape[1]
+    q, n_rho = neighbours.shape
     check_n_rho(n_rho, d)
     scale = column_rms(phi)
     m = target.shape[1]
     both = np.empty((n, d + m))
     both[:, :d], both[:, d:] = phi / scale, target
-    theta = np.empty((n, d, m))
-    resvar = np.empty((n, m))
-    degenerate = np.zeros(n, bool)
+    theta = np.empty((q, d, m))
+    resvar = np.empty((q, m))
+    degenerate = np.zeros(q, bool)
 
     def solve(start: int) -> None:
         idx = neighbours[start : start + _CHUNK]
@@ -142,7 +161,7 @@ def local_least_squares(
 
     with single_threaded_blas(), \
             ThreadPoolExecutor(workers or len(os.sched_getaffinity(0))) as pool:
-        map_in_threads(pool, solve, range(0, n, _CHUNK))
+        map_in_threads(pool, solve, range(0, q, _CHUNK))
     return theta, resvar, scale, degenerate
 
 
@@ -164,16 +183,30 @@ class LocalLeastSquares(BaseEstimator):
     ridge : float, default 0
         Tikhonov term in column-scaled units (0: none; a rank-deficient local set then gets
         the minimum-norm solution and is marked in ``degenerate_``).
+    max_sets : int, optional, default 5000
+        Estimate the local models of at most this many distinct samples, a seeded random
+        subset (each local set still holds its n_ρ nearest among every sample); the others
+        get none (``estimated_``). The clustering step uses at most 3,000 local models
+        (``DBSCANClustering.max_clustered``), so on a long record most local models would
+        be estimated only to be left out: on the robot's 39,856 rows this step took 1.8 s
+        for all of them. None (the paper): every sample.
+    random_state : int, default 0
+        Seed of that subset.
 
     Attributes
     ----------
     theta_ : ndarray of shape (n, d, m)
-        θ_k of every local set, in the regressors' own units.
+        θ_k of every local set, in the regressors' own units; NaN for the samples whose local
+        model was not estimated.
     residual_var_ : ndarray of shape (n, m)
-        Residual variance of each local fit, SSR / (n_ρ − d), per output.
+        Residual variance of each local fit, SSR / (n_ρ − d), per output (NaN where not
+        estimated).
     neighbours_ : ndarray of shape (n, n_ρ)
         Row indices of each local set C_k (the row itself first, then first occurrences of
-        distinct samples).
+        distinct samples); −1 where not estimated.
+    estimated_ : ndarray of shape (n,), bool
+        The samples whose local model was estimated (all of them with ``max_sets=None`` or
+        at most ``max_sets`` distinct samples).
     phi_scale_ : ndarray of shape (d,)
         Root mean square of each regressor column (over the distinct rows), used to make θ
         unit-free.
@@ -184,6 +217,8 @@ class LocalLeastSquares(BaseEstimator):
         one hold of a piecewise-constant input): θ_k is not identified there, and the
         clustering step leaves them out.
     n_degenerate_ : int
+    n_estimated_ : int
+        Local models estimated (each repeat of a sample counted).
     original_ : ndarray of shape (n,), int
         The first row with the same (φ(k), y(k)) as row k (k itself for a row met first);
         the clustering step counts each distinct sample once.
@@ -201,12 +236,17 @@ class LocalLeastSquares(BaseEstimator):
         "n_rho": [Interval(Integral, 2, None, closed="left"), None],
         "standardize": ["boolean"],
         "ridge": [Interval(Real, 0, None, closed="left")],
+        "max_sets": [Interval(Integral, 1, None, closed="left"), None],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
     }
 
-    def __init__(self, n_rho: int | None = None, standardize: bool = True, ridge: float = 0.0):
+    def __init__(self, n_rho: int | None = None, standardize: bool = True, ridge: float = 0.0,
+                 max_sets: int | None = 5000, random_state: int = 0):
         self.n_rho = n_rho
         self.standardize = standardize
         self.ridge = ridge
+        self.max_sets = max_sets
+        self.random_state = random_state
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
@@ -220,6 +260,9 @@ class LocalLeastSquares(BaseEstimator):
         distinct rows and every copy gets its original's local set (its own index first),
         θ_k and residual variance: a record repeated r times gives the local models of the
         record once, r times over. Rows with equal φ(k) but different y(k) stay distinct.
+        Above ``max_sets`` distinct samples, the local models of a seeded random
+        ``max_sets`` of them are estimated (drawn among the distinct samples in order of
+        first occurrence, so a record repeated is sampled as the record once).
 
         Parameters
         ----------
@@ -239,17 +282,38 @@ class LocalLeastSquares(BaseEstimator):
             )
         repeats = len(first) < n
         p, t = (phi[first], target[first]) if repeats else (phi, target)
-        idx = local_sets(p, self.n_rho_, self.standardize)
+        sets = None
+        if self.max_sets is not None and len(first) > self.max_sets:
+            sets = np.sort(np.random.default_rng(self.random_state).choice(
+                len(first), self.max_sets, replace=False))
+        idx = local_sets(p, self.n_rho_, self.standardize, sets)
         theta, resvar, self.phi_scale_, degenerate = local_least_squares(p, t, idx, self.ridge)
+        estimated = np.ones(len(first), bool)
+        if sets is not None:  # the samples not in the subset: no local model
+            estimated[:] = False
+            estimated[sets] = True
+            idx, theta, resvar, degenerate = (_spread(a, sets, len(first), fill) for a, fill in
+                                              ((idx, -1), (theta, np.nan), (resvar, np.nan),
+                                               (degenerate, False)))
         if repeats:
-            idx, theta, resvar, degenerate = (first[idx][inverse], theta[inverse],
-                                              resvar[inverse], degenerate[inverse])
-            idx[:, 0] = np.arange(n)
+            idx, theta, resvar, degenerate, estimated = (
+                np.where(idx >= 0, first[idx], -1)[inverse], theta[inverse], resvar[inverse],
+                degenerate[inverse], estimated[inverse])
+            idx[estimated, 0] = np.flatnonzero(estimated)
         self.neighbours_, self.theta_, self.residual_var_ = idx, theta, resvar
         self.degenerate_, self.original_ = degenerate, first[inverse]
+        self.estimated_ = estimated
         self.n_degenerate_ = int(degenerate.sum())
+        self.n_estimated_ = int(estimated.sum())
         return self
 
     def resolved_params(self) -> dict:
         """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
         return {**self.get_params(), "n_rho": self.n_rho_}
+
+
+def _spread(values: np.ndarray, rows: np.ndarray, n: int, fill) -> np.ndarray:
+    """An array of ``n`` rows holding ``values`` at ``rows`` and ``fill`` elsewhere."""
+    out = np.full((n, *values.shape[1:]), fill, dtype=values.dtype)
+    out[rows] = values
+    return out

@@ -488,7 +488,8 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
 
     Three starts, refined by residual and by region (:func:`refine` with ``regions``) so
     that the two parts are the two sides of a hyperplane in φ: the rows' local models θ_k
-    (z-scored) split in two by k-means (two modes of similar size), the rows that one
+    (z-scored) split in two by k-means (two modes of similar size; :func:`_kmeans_start`),
+    the rows that one
     sub-model fitted to all of them leaves unexplained (:func:`robust_noise_var`-normalised
     residual above the χ²(m) 90 % quantile; a small mode inside a large one), and the best
     split at a threshold of one regressor (:func:`_axis_start`; two modes whose local models
@@ -526,14 +527,10 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     n = rows.size
     one = refit(x, t, np.zeros(n, int), 1)[0]
     sq = (t - x @ one) ** 2
-    emb = local_theta[rows].reshape(n, -1)
-    scale = emb.std(axis=0)
-    emb = emb / np.where(scale > 0, scale, 1.0)
-    with _controller().limit(limits=1, user_api="openmp"):
-        # no OpenMP worker threads: GNU OpenMP deadlocks in a child forked after they start
-        kmeans = KMeans(2, n_init=4, random_state=0).fit_predict(emb)
-    starts = [kmeans,
-              (_cost(sq, robust_noise_var(sq)) > chi2.ppf(0.9, m)).astype(int)]
+    starts = [(_cost(sq, robust_noise_var(sq)) > chi2.ppf(0.9, m)).astype(int)]
+    kmeans = _kmeans_start(x, t, local_theta[rows], d)
+    if kmeans is not None:
+        starts.insert(0, kmeans)
     axis = _axis_start(x, t, min_size)
     if axis is not None:
         starts.append(axis)
@@ -553,6 +550,34 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     if n < n_all:
         labels = clone(regions).fit(x, labels, 2).predict(phi) if gain > at_least else None
     return gain, labels
+
+
+def _kmeans_start(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_rows: int
+                  ) -> np.ndarray | None:
+    """0/1 of each row: its local model θ_k's side of a k-means split of the rows' local
+    models (z-scored); a row without a local model (``LocalLeastSquares.max_sets``) takes
+    the side whose rows' least-squares sub-model fits it better. None when fewer than
+    ``min_rows`` rows on a side have a local model."""
+    have = ~np.isnan(local_theta[:, 0, 0])
+    emb = local_theta[have].reshape(int(have.sum()), -1)
+    if len(emb) < 2 * min_rows:
+        return None
+    scale = emb.std(axis=0)
+    emb = emb / np.where(scale > 0, scale, 1.0)
+    with _controller().limit(limits=1, user_api="openmp"):
+        # no OpenMP worker threads: GNU OpenMP deadlocks in a child forked after they start
+        side = KMeans(2, n_init=4, random_state=0).fit_predict(emb)
+    if have.all():
+        return side
+    if np.bincount(side, minlength=2).min() < min_rows:
+        return None
+    two = refit(phi[have], target[have], side, 2)
+    out = np.empty(len(phi), int)
+    out[have] = side
+    rest = ~have
+    out[rest] = (((target[rest] - phi[rest] @ two[1]) ** 2).sum(axis=1)
+                 < ((target[rest] - phi[rest] @ two[0]) ** 2).sum(axis=1))
+    return out
 
 
 def _axis_start(phi: Float2D, target: Float2D, min_size: int,
