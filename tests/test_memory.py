@@ -32,7 +32,8 @@ def test_the_message_names_the_setting_of_the_largest_step(monkeypatch):
     assert max(need, key=need.get) == "clustering"
     with pytest.raises(FitMemoryError, match="clustering__max_clustered"):
         memory.check_fit_memory(10**6, 24, 6, est.steps())
-    default = PWARX.default(2, 2).set_params(regions__max_rows=None, local_models__n_rho=200)
+    default = PWARX.default(2, 2).set_params(regions__max_rows=None, local_models__n_rho=200,
+                                             local_models__max_sets=None)
     need = fit_memory(10**6, 24, 6, default.steps())
     assert max(need, key=need.get) == "local_models"
     with pytest.raises(FitMemoryError, match="local_models__n_rho"):
@@ -54,3 +55,12 @@ def test_estimates_grow_with_the_record_and_the_machine_reports_memory():
     avail = available_memory()
     assert avail is None or avail > 0
     assert np.isfinite(sum(small.values()))
+
+
+def test_the_search_counts_only_the_local_sets_estimated():
+    every = PWARX.default(2, 2).set_params(local_models__max_sets=None).steps()
+    some = PWARX.default(2, 2).steps()  # at most 5,000 local models
+    assert fit_memory(4_000, 24, 6, some) == fit_memory(4_000, 24, 6, every)
+    saved = (fit_memory(400_000, 24, 6, every)["local_models"]
+             - fit_memory(400_000, 24, 6, some)["local_models"])
+    assert saved == (400_000 - 5_000) * 6 * 72 * 12  # the candidates of the rows not searched

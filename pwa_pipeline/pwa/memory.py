@@ -65,12 +65,13 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     n_rho = min(getattr(local, "n_rho", None) or 3 * d, n)
     workers = len(os.sched_getaffinity(0))
     kept = n * (n_rho * 8 + d * m * 8 + m * 8)  # neighbours, θ_k, residual variances
-    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidates a row (12 B each, 24
-        # more while a block of them is selected), a tile's room for candidates per thread
-        search = n * ((d + 2) * 8 + 6 * n_rho * 12) + (
+    sets = n if getattr(local, "max_sets", None) is None else min(n, local.max_sets)
+    if d > 12:  # blocked search: float32 copies and ~6·n_ρ candidates a searched row (12 B
+        # each, 24 more while a block of them is selected), a tile's room per thread
+        search = n * (d + 2) * 8 + sets * 6 * n_rho * 12 + (
             _BLOCK * 6 * n_rho * 24 + _BLOCK * _BLOCK * 24) * workers
-    else:  # scikit-learn's tree: distances and indices of every row
-        search = n * n_rho * 16
+    else:  # scikit-learn's tree: distances and indices of every searched row
+        search = sets * n_rho * 16
     solve = workers * (_CHUNK * d * (d + m) * 8 * 3 + (n_rho + d) * (d + m) * 8)
     out = {"local_models": kept + max(search, solve)}
 
@@ -90,7 +91,8 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     return {step: size + _SLACK for step, size in out.items()}
 
 
-_KNOB = {"local_models": "local_models__n_rho (smaller local sets) or the record's length",
+_KNOB = {"local_models": "local_models__n_rho (smaller local sets), local_models__max_sets "
+                        "(fewer local models) or the record's length",
          "clustering": "clustering__max_clustered (cluster a subset of the local models)",
          "submodels": "the record's length",
          "regions": "regions__max_rows (fit the region SVM on a subset)"}
