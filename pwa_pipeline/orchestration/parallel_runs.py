@@ -29,6 +29,7 @@ from multiprocessing import get_context
 import dagster as dg
 
 from .dask_sweep import PartitionRun
+from .interrupts import interrupts_redelivered
 from .storage import PartitionedFileIOManager
 
 
@@ -77,10 +78,12 @@ def run_resources(defs: dg.Definitions, tracking_uri: str = "") -> dict:
 def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
                           instance: dg.DagsterInstance, run_config: dict, selection
                           ) -> dg.ExecuteInProcessResult:
-    """One partition's run in this process (errors are the run's, not raised)."""
-    return dg.materialize(list(defs.assets), partition_key=key, selection=selection,
-                          resources=resources, instance=instance, run_config=run_config,
-                          raise_on_error=False)
+    """One partition's run in this process (errors are the run's, not raised); a Ctrl-C
+    that leaves it running is sent again (:func:`~.interrupts.interrupts_redelivered`)."""
+    with interrupts_redelivered():
+        return dg.materialize(list(defs.assets), partition_key=key, selection=selection,
+                              resources=resources, instance=instance, run_config=run_config,
+                              raise_on_error=False)
 
 
 _WORKER: dict = {}

@@ -1,0 +1,62 @@
+"""Ctrl-C that reaches a run even where a library lets it pass.
+
+Dagster stops a run on SIGINT by raising ``DagsterExecutionInterruptedError`` from its signal
+handler, in whatever the main thread is running at that moment. A handler that raises inside
+code which catches and drops the error (a finaliser, a library's clean-up) leaves the run
+going: with two partitions at once under load, about one Ctrl-C in ten left one run to
+finish on its own (seen in the MLflow logging of a robot partition, `run --jobs 2`).
+:func:`interrupts_redelivered` notices every SIGINT at the C level, where no handler can
+lose it, and sends it again while the run goes on.
+"""
+
+import os
+import select
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+#: Seconds a run may take to end after a SIGINT before the signal is sent again (a step in
+#: flight may need a few seconds to stop), and how often it is sent again at most.
+GRACE, RESENDS = 5.0, 3
+
+
+@contextmanager
+def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iterator[None]:
+    """While the block runs, a SIGINT to this process that leaves it running ``grace``
+    seconds later is sent again (at most ``resends`` times); the block's own handlers act on
+    it as on the first.
+
+    Every signal writes its number to a pipe (``signal.set_wakeup_fd``, at the C level,
+    whatever the Python handler then does); a thread reads the pipe. In a thread other than
+    the main thread (where signals cannot be observed) the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read, write = os.pipe()
+    os.set_blocking(write, False)
+    previous = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+    done = threading.Event()
+
+    def watch() -> None:
+        sent = 0
+        while not done.is_set():
+            if not select.select([read], [], [], 0.2)[0]:
+                continue
+            if signal.SIGINT not in os.read(read, 512):
+                continue
+            if not done.wait(grace) and sent < resends:
+                sent += 1
+                os.kill(os.getpid(), signal.SIGINT)
+
+    watcher = threading.Thread(target=watch, name="interrupts-redelivered", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watcher.join()
+        signal.set_wakeup_fd(previous)
+        os.close(read)
+        os.close(write)

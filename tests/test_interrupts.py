@@ -1,0 +1,60 @@
+"""A Ctrl-C that a library lets pass is sent again while the run goes on."""
+
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent("""
+    import contextlib, os, signal, threading, time
+    from pwa_pipeline.orchestration.interrupts import interrupts_redelivered
+
+    seen = []
+
+    def swallow_first(signo, frame):  # a library that drops the first interrupt
+        seen.append(time.monotonic())
+        if len(seen) > 1:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, swallow_first)
+    t0 = time.monotonic()
+    try:
+        with {guard}:
+            threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+            while time.monotonic() - t0 < 6:  # the run
+                time.sleep(0.01)
+        print("completed", len(seen))
+    except KeyboardInterrupt:
+        print("interrupted", len(seen), round(seen[1] - seen[0], 1))
+""")
+
+
+def run(guard: str) -> str:
+    return subprocess.run([sys.executable, "-c", SCRIPT.format(guard=guard)],
+                          capture_output=True, text=True, timeout=60, check=True).stdout
+
+
+def test_a_swallowed_interrupt_is_sent_again_after_the_grace():
+    assert run("interrupts_redelivered(grace=1.0)").split() == ["interrupted", "2", "1.0"]
+
+
+def test_without_it_the_run_goes_on():
+    # the same script without the guard: the swallowed signal leaves the run to the end
+    assert run("contextlib.nullcontext()").split() == ["completed", "1"]
+
+
+def test_a_run_that_ends_is_not_signalled_again():
+    script = textwrap.dedent("""
+        import os, signal, time
+        from pwa_pipeline.orchestration.interrupts import interrupts_redelivered
+
+        seen = []
+        signal.signal(signal.SIGINT, lambda *a: seen.append(1))
+        with interrupts_redelivered(grace=0.5):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)  # ends before the grace
+        time.sleep(1.0)
+        print(len(seen), signal.set_wakeup_fd(-1))
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=60, check=True).stdout
+    assert out.split() == ["1", "-1"]  # one signal, and the wakeup fd restored
