@@ -79,7 +79,7 @@ def test_an_interrupt_ends_the_runs_in_flight_and_starts_no_other(tmp_path, mlfl
     log its first step), so that neither can end before the signal: with the default sets,
     the partition of this process could end while the worker was still starting. An
     interrupt can wait for the step in flight to end, and one that a library dropped is sent
-    again 5 s later (before that, about one try in ten under load left one run to its end),
+    again 5 s later (before that, 1 of 26 tries under load left one run to its end),
     so the command is given 150 s to end."""
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
     (tmp_path / "hparams.toml").write_text(
