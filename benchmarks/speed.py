@@ -11,7 +11,11 @@ the wall seconds of a second fit in the same process (without what a process pay
 numba's start, about 0.3 s, thread pools, memory first touched); steps and memory are the
 first fit's:
 
-- ``default``: ``PWARX.default`` (n_rho = 3d = 72, ε from the data), all steps;
+- ``default``: ``PWARX.default`` (n_rho = 3d = 72, ε from the data, the local models of
+  5,000 samples), all steps;
+- ``default, every local model``: the same with ``local_models__max_sets=None`` (the local
+  model of every sample, as the default before; the plain reference's labels are checked
+  against its clustering, and the default's sub-models against its own);
 - ``default, n_rho=61``: the same with n_rho = 61 (the setting of benchmarks.identify);
 - ``paper``: the paper's setting (n_rho = 61, ε = 8, MinPts = 22, every local model
   clustered, the SVM on every clustered row);
@@ -44,7 +48,8 @@ import pandas as pd
 from benchmarks._common import RESULTS, in_fresh_process, previous_tree, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
-VARIANTS = ("default", "default, n_rho=61", "paper", "plain steps 1-4")
+VARIANTS = ("default", "default, every local model", "default, n_rho=61", "paper",
+            "plain steps 1-4")
 PREVIOUS = ("default", "paper")
 
 
@@ -64,6 +69,8 @@ def estimator(variant: str):
     if variant.startswith("paper"):
         return clone(hp.configuration("paper", "kuka_robot").pwa)
     est = clone(hp.configuration("default", "kuka_robot").pwa)
+    if "every" in variant:
+        est.set_params(local_models__max_sets=None)
     return est.set_params(local_models__n_rho=61) if "61" in variant else est
 
 
@@ -194,6 +201,13 @@ def svm_tolerance() -> list[dict]:
     return rows
 
 
+def _difference(a: list, b: list) -> float | str:
+    """Largest absolute difference of two fits' sub-models."""
+    if np.shape(a) != np.shape(b):
+        return "different shapes"
+    return float(np.abs(np.array(a) - np.array(b)).max())
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -244,16 +258,18 @@ def main(argv=None) -> None:
     plain = table.loc["plain steps 1-4", "median_seconds"]
     table["plain_over_this_fit"] = plain / table["median_seconds"]
     table["plain_over_steps_1_4"] = plain / table["steps_1_4"]
+    every = runs["default, every local model"][0]
     checks = {
-        "plain labels == default clustering labels (first run)":
-            runs["plain steps 1-4"][0]["labels"] == runs["default"][0]["labels"]}
+        "plain labels == default (every local model) clustering labels (first run)":
+            runs["plain steps 1-4"][0]["labels"] == every["labels"],
+        "default: largest sub-model difference from every local model": _difference(
+            runs["default"][0]["thetas"], every["thetas"])}
     for name in PREVIOUS:
         if f"previous {name}" in runs:
             a, b = runs[name][0], runs[f"previous {name}"][0]
             checks[f"{name}: same clustering labels as previous"] = a["labels"] == b["labels"]
-            checks[f"{name}: largest sub-model difference from previous"] = float(
-                np.abs(np.array(a["thetas"]) - np.array(b["thetas"])).max()) if (
-                np.shape(a["thetas"]) == np.shape(b["thetas"])) else "different shapes"
+            checks[f"{name}: largest sub-model difference from previous"] = _difference(
+                a["thetas"], b["thetas"])
     svm = svm_tolerance()
     print(table.drop(columns="runs").to_markdown(floatfmt=".3g"))
     print(json.dumps(checks, indent=2))
