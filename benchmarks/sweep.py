@@ -11,8 +11,11 @@ Both give the same sub-models (checked). A set whose ε / MinPts leave DBSCAN wi
 cluster fails at the clustering step and is timed all the same. ``--repeats`` alternating
 runs of both, medians; the 1-minute load average before and after.
 
-Writes results/sweep.json and results/sweep.md.
-Usage: python -m benchmarks.sweep [--repeats 3]
+``--every-local-model``: the same with every local model estimated
+(``local_models__max_sets=None``, the default before the local-model subset).
+
+Writes results/sweep.json and results/sweep.md (sweep_every.* with --every-local-model).
+Usage: python -m benchmarks.sweep [--repeats 3] [--every-local-model]
 """
 
 import argparse
@@ -34,16 +37,18 @@ EPS = (15.0, 20.0, 25.0, 30.0)
 MIN_PTS = (36, 48, 60)
 
 
-def sets():
+def sets(every: bool = False):
     base = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
+    if every:
+        base.set_params(local_models__max_sets=None)
     return [clone(base).set_params(clustering__eps=e, clustering__min_pts=m)
             for e in EPS for m in MIN_PTS]
 
 
-def recompute(u, y) -> tuple[float, list]:
+def recompute(u, y, every: bool) -> tuple[float, list]:
     t0 = time.perf_counter()
     out = []
-    for est in sets():
+    for est in sets(every):
         try:
             out.append(est.fit(u, y).thetas_)
         except ValueError as exc:
@@ -51,9 +56,9 @@ def recompute(u, y) -> tuple[float, list]:
     return time.perf_counter() - t0, out
 
 
-def reuse(u, y) -> tuple[float, list]:
+def reuse(u, y, every: bool) -> tuple[float, list]:
     t0 = time.perf_counter()
-    models = sets()
+    models = sets(every)
     reg = build_regressors(as_experiments(u, y), models[0].na, models[0].nb, models[0].affine)
     local = models[0].fit_step("local_models", reg)
     out = []
@@ -71,14 +76,19 @@ def reuse(u, y) -> tuple[float, list]:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--every-local-model", action="store_true",
+                        help="the default with every local model (local_models__max_sets="
+                             "None), written to sweep_every.*")
     args = parser.parse_args(argv)
+    every = args.every_local_model
+    stem = "sweep_every" if every else "sweep"
     robot = load_kuka()
     load_start = os.getloadavg()[0]
     times: dict[str, list[float]] = {"recompute": [], "reuse": []}
     results = {}
     for i in range(args.repeats):
         for name, fn in (("recompute", recompute), ("reuse", reuse)):
-            seconds, results[name] = fn(robot.u_train, robot.y_train)
+            seconds, results[name] = fn(robot.u_train, robot.y_train, every)
             times[name].append(seconds)
             print(f"run {i + 1}, {name}: {seconds:.1f} s", flush=True)
     load_end = os.getloadavg()[0]
@@ -97,8 +107,9 @@ def main(argv=None) -> None:
                "load_average_1min": {"start": load_start, "end": load_end},
                "cpus": len(os.sched_getaffinity(0))}
     print(summary)
-    write_json({"summary": summary, "sets": per_set}, "sweep")
-    md = [f"12 sets (ε in {EPS} × MinPts in {MIN_PTS}) of the default on the KUKA training "
+    write_json({"summary": summary, "sets": per_set}, stem)
+    md = [f"12 sets (ε in {EPS} × MinPts in {MIN_PTS}) of the default"
+          f"{' with every local model' if every else ''} on the KUKA training "
           f"record; {args.repeats} alternating runs, medians; 1-minute load average "
           f"{load_start:.2f} at the start, {load_end:.2f} at the end, "
           f"{summary['cpus']} CPUs.\n",
@@ -109,7 +120,7 @@ def main(argv=None) -> None:
           f"{', '.join(f'{t:.1f}' for t in times['reuse'])} |\n",
           f"Speed-up {summary['speed_up']:.2f}x; same sub-models in both: {same}.\n",
           pd.DataFrame(per_set).to_markdown(index=False)]
-    (RESULTS / "sweep.md").write_text("\n".join(md) + "\n")
+    (RESULTS / f"{stem}.md").write_text("\n".join(md) + "\n")
 
 
 if __name__ == "__main__":
