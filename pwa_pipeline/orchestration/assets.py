@@ -174,9 +174,10 @@ def _identification_assets(partitions_def) -> list:
     @dg.asset(**part, kinds={"scikit-learn"})
     def local_models(context: dg.AssetExecutionContext, settings: PipelineSettings,
                      configuration: Configuration, regressors: Regressors) -> BaseEstimator | None:
-        """θ_k of every local set of n_ρ neighbours (eq. 6–7), the fitted ``local_models``
-        step; cached across sets whose later steps alone differ. None for a structured set
-        (this and the next steps are then fitted per output group inside ``pwa_model``)."""
+        """θ_k of the local sets of n_ρ neighbours (eq. 6–7; by default of at most 5,000
+        samples, ``local_models.max_sets``), the fitted ``local_models`` step; cached across
+        sets whose later steps alone differ. None for a structured set (this and the next
+        steps are then fitted per output group inside ``pwa_model``)."""
         if (skipped := _skipped(context, configuration)) is not None:
             context.add_output_metadata(skipped)
             return None
