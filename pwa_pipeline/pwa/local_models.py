@@ -188,8 +188,8 @@ class LocalLeastSquares(BaseEstimator):
         subset (each local set still holds its n_ρ nearest among every sample); the others
         get none (``estimated_``). The clustering step uses at most 3,000 local models
         (``DBSCANClustering.max_clustered``), so on a long record most local models would
-        be estimated only to be left out: on the robot's 39,856 rows this step took 1.8 s
-        for all of them. None (the paper): every sample.
+        be estimated only to be left out: estimating all of the robot's 39,856 took 2.6 s
+        of a 3.9 s fit (``benchmarks/results/speed.md``). None (the paper): every sample.
     random_state : int, default 0
         Seed of that subset.
 
