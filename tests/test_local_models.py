@@ -204,3 +204,20 @@ def test_the_paper_setting_estimates_every_local_model():
 
     assert PWARX.paper(1, 1, n_rho=18, eps=0.1, min_pts=20).local_models.max_sets is None
     assert PWARX.default().local_models.max_sets == 5000
+
+
+def test_a_long_record_fits_the_same_model_from_a_subset_of_local_models():
+    # the section 5 system over 12,000 samples: the local models of 5,000 of them (the
+    # default) give the sub-models and regions of every local model's fit
+    from pwa_pipeline import PWARX, make_hure_vasak
+    from pwa_pipeline.scoring.metrics import match_submodels
+
+    data = make_hure_vasak(n_samples=12_000, seed=3)
+    some = PWARX.default().fit(data.u, data.y)
+    every = PWARX.default().set_params(local_models__max_sets=None).fit(data.u, data.y)
+    assert some.local_models_.n_estimated_ == 5000
+    assert every.local_models_.n_estimated_ == len(every.labels_)
+    assert some.n_submodels_ == every.n_submodels_ == 4
+    assert match_submodels(some.thetas_, every.thetas_)[1].max() < 2e-3
+    assert match_submodels(some.thetas_, data.thetas)[1].max() < 0.03
+    assert np.mean(some.labels_ == every.labels_) > 0.995
