@@ -137,7 +137,7 @@ def _distinct(x: Float2D, k: int, workers: int, queries: np.ndarray | None = Non
 
     def bound(block):  # k-th smallest distance among the window's columns, plus rounding
         a, b = block
-        c = min(max(0, (a + b - window) // 2), n - window)
+        c = _window_start(a, b, n, window)
         d2 = left[a:b] @ right[c:c + window].T
         return kth_smallest_rows(d2, k) + 2 * err[a:b]
 
@@ -199,6 +199,12 @@ def _tile_factors(x: Float2D) -> tuple[np.ndarray, Float2D, np.ndarray, np.ndarr
     return order, xs, left, right, err
 
 
+def _window_start(a: int, b: int, n: int, window: int) -> int:
+    """First column of the ``window`` columns centred on the block of rows ``a:b`` (within
+    the n points), whose k-th nearest bounds each of the block's rows' k-th."""
+    return min(max(0, (a + b - window) // 2), n - window)
+
+
 def _bound32(bound: np.ndarray) -> np.ndarray:
     """Float32 bounds never below the float64 ones."""
     out = bound.astype(np.float32)
@@ -229,7 +235,7 @@ def _queried(x: Float2D, k: int, workers: int, queries: np.ndarray
     def bound(g):  # each row's bound from the window of the block it is in, as _distinct's
         a, b = group[g], group[g + 1]
         start = pos[a] // _BLOCK * _BLOCK
-        c = min(max(0, (start + min(n, start + _BLOCK) - window) // 2), n - window)
+        c = _window_start(start, min(n, start + _BLOCK), n, window)
         return kth_smallest_rows(lq[a:b] @ right[c:c + window].T, k) + band[a:b]
 
     def search(a):
