@@ -288,13 +288,12 @@ class LocalLeastSquares(BaseEstimator):
                 len(first), self.max_sets, replace=False))
         idx = local_sets(p, self.n_rho_, self.standardize, sets)
         theta, resvar, self.phi_scale_, degenerate = local_least_squares(p, t, idx, self.ridge)
-        estimated = np.ones(len(first), bool)
+        estimated = np.ones(len(idx), bool)
         if sets is not None:  # the samples not in the subset: no local model
-            estimated[:] = False
-            estimated[sets] = True
-            idx, theta, resvar, degenerate = (_spread(a, sets, len(first), fill) for a, fill in
-                                              ((idx, -1), (theta, np.nan), (resvar, np.nan),
-                                               (degenerate, False)))
+            idx, theta, resvar, degenerate, estimated = (
+                _spread(a, sets, len(first), fill) for a, fill in
+                ((idx, -1), (theta, np.nan), (resvar, np.nan), (degenerate, False),
+                 (estimated, False)))
         if repeats:
             idx, theta, resvar, degenerate, estimated = (
                 np.where(idx >= 0, first[idx], -1)[inverse], theta[inverse], resvar[inverse],
