@@ -556,8 +556,9 @@ def _kmeans_start(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_ro
                   ) -> np.ndarray | None:
     """0/1 of each row: its local model θ_k's side of a k-means split of the rows' local
     models (z-scored); a row without a local model (``LocalLeastSquares.max_sets``) takes
-    the side whose rows' least-squares sub-model fits it better. None when fewer than
-    ``min_rows`` rows on a side have a local model."""
+    the side whose rows' least-squares sub-model fits it better (smaller Σ_p r_p²). None
+    when fewer than 2·``min_rows`` rows have a local model, or, where some rows have none,
+    when a side has fewer than ``min_rows``."""
     have = ~np.isnan(local_theta[:, 0, 0])
     emb = local_theta[have].reshape(int(have.sum()), -1)
     if len(emb) < 2 * min_rows:
@@ -574,9 +575,7 @@ def _kmeans_start(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_ro
     two = refit(phi[have], target[have], side, 2)
     out = np.empty(len(phi), int)
     out[have] = side
-    rest = ~have
-    out[rest] = (((target[rest] - phi[rest] @ two[1]) ** 2).sum(axis=1)
-                 < ((target[rest] - phi[rest] @ two[0]) ** 2).sum(axis=1))
+    out[~have] = _argmin_labels(_sq_residuals(phi[~have], target[~have], two), None)
     return out
 
 
