@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.exceptions import NotFittedError
+from sklearn.svm import LinearSVC
 
 from pwa_pipeline.pwa import PWARX, SVMRegions
 
@@ -39,6 +40,24 @@ def test_hyperplanes_are_mapped_back_to_the_units_of_phi():
     # a hyperplane in φ's units equals the unit-coordinate one divided by the column scale
     np.testing.assert_allclose(reg.coef_ * scale, unit.coef_, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(reg.intercept_, unit.intercept_, rtol=1e-6)
+
+
+def test_two_classes_solve_crammer_and_singers_problem():
+    # overlapping classes (a fifth of the labels flipped), so that C shapes the solution
+    rng = np.random.default_rng(5)
+    phi = rng.normal(size=(800, 3)) * [2.0, 0.5, 1.0] + [1.0, 0.0, -3.0]
+    labels = (phi @ [1.0, -2.0, 0.5] > 0).astype(int)
+    labels[rng.random(800) < 0.2] ^= 1
+    weight = rng.uniform(0.5, 2.0, 800)
+    reg = SVMRegions(C=0.3, tol=1e-8).fit(phi, labels, sample_weight=weight)
+    mean, std = phi.mean(axis=0), phi.std(axis=0)
+    cs = LinearSVC(C=0.3, multi_class="crammer_singer", tol=1e-8, max_iter=10**6)
+    cs.fit((phi - mean) / std, labels, sample_weight=weight)
+    v = cs.coef_[0] / std
+    np.testing.assert_allclose(reg.coef_[1] - reg.coef_[0], v, rtol=1e-4)
+    np.testing.assert_allclose(reg.intercept_[1] - reg.intercept_[0],
+                               cs.intercept_[0] - v @ mean, rtol=1e-4)
+    np.testing.assert_allclose(reg.coef_[0], -reg.coef_[1])
 
 
 def test_a_label_with_no_row_is_never_predicted():
