@@ -11,13 +11,22 @@ at the start and the end. Reported per fit and version: median wall and CPU seco
 the process's, BLAS threads included), the sub-model step's median wall seconds, the number
 of sub-models, and the wall and CPU ratios to the first ``--against`` commit; and the wall
 seconds of the same fit again in the same process and their ratio (without what a process
-pays once, such as numba's start, about 0.3 s, where the version uses it). Then the median
+pays once, such as numba's start, about 0.5 s, where the version uses it). Then the median
 ratio and the number of fits above 2×, for the first and the second fit.
+
+``--parts`` (the checkout only): in the same process, after those two fits, the fit with
+step 6 as the plain region SVM (``regions=SVMRegions()``: no residual gate, issue 10's region
+estimation left out) and the fit without step 5's split search
+(``submodels=RefinedSubModels(split_tol=None)``: what finds modes that moderate noise
+merged), their seconds and sub-model counts, and the second fit's ratio to the first: what
+the region estimation costs, and what the split search does; in the summary, the median of
+each ratio and the fit without the split search against the reference's second fit.
 
 Writes results/robustness_time{suffix}.json and .md. Usage::
 
     python -m benchmarks.robustness_time [--against bc9084d,15191f1] [--repeats 3]
-        [--seeds 2] [--set eval|tune] [--cases paper-20dB] [--no-robot] [--suffix _tune]
+        [--seeds 2] [--set eval|tune] [--cases paper-20dB] [--no-robot] [--parts]
+        [--suffix _tune]
 """
 
 import argparse
@@ -35,20 +44,34 @@ from benchmarks.robustness import FIRST_SEED
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def worker(fit: str, out: str) -> None:
-    """One fit (``case:seed`` or ``robot``) in this process, then the same fit again; their
-    seconds to ``out``."""
+def worker(fit: str, *rest: str) -> None:
+    """One fit (``case:seed`` or ``robot``) in this process, then the same fit again, and with
+    ``parts`` before the output path the two variants of ``--parts``; their seconds to the
+    output path (the last argument)."""
     import time
+
+    from sklearn.base import clone
 
     est, u, y = default_fit(fit)
     t0, cpu0 = time.perf_counter(), time.process_time()
     model = est.fit(u, y)
-    first = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
-             "n_submodels": int(model.n_submodels_),
-             "submodels_seconds": model.timings_["submodels"]}
+    result = {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - cpu0,
+              "n_submodels": int(model.n_submodels_),
+              "submodels_seconds": model.timings_["submodels"]}
     t0 = time.perf_counter()
     est.fit(u, y)
-    Path(out).write_text(json.dumps({**first, "second_seconds": time.perf_counter() - t0}))
+    result["second_seconds"] = time.perf_counter() - t0
+    if rest[:-1] == ("parts",):
+        from pwa_pipeline.pwa import SVMRegions
+        from pwa_pipeline.pwa.submodels import RefinedSubModels
+
+        for name, variant in (("svm_regions", {"regions": SVMRegions()}),
+                              ("no_split", {"submodels": RefinedSubModels(split_tol=None)})):
+            t0 = time.perf_counter()
+            part = clone(est).set_params(**variant).fit(u, y)
+            result.update({f"{name}_seconds": time.perf_counter() - t0,
+                           f"{name}_submodels": int(part.n_submodels_)})
+    Path(rest[-1]).write_text(json.dumps(result))
 
 
 def main(argv=None) -> None:
@@ -62,8 +85,11 @@ def main(argv=None) -> None:
     parser.add_argument("--cases", default="paper-20dB,paper-30dB",
                         help="comma-separated cases of benchmarks.robustness")
     parser.add_argument("--no-robot", action="store_true", help="leave the robot's fit out")
+    parser.add_argument("--parts", action="store_true",
+                        help="also time the checkout without the residual gate and without "
+                             "the split search")
     parser.add_argument("--suffix", default="", help="appended to the result file names")
-    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         worker(*args.worker)
@@ -83,9 +109,10 @@ def main(argv=None) -> None:
         for repeat in range(args.repeats):
             for fit in fits:
                 for version, tree in trees.items():
+                    parts = ["parts"] if args.parts and version == "this" else []
                     rows.append({"fit": fit, "version": version, "repeat": repeat,
                                  **in_fresh_process("benchmarks.robustness_time",
-                                                         [fit], tmp, tree)})
+                                                    [fit, *parts], tmp, tree)})
     load_end = os.getloadavg()[0]
     df = pd.DataFrame(rows)
     table = (df.groupby(["fit", "version"], sort=False)
@@ -94,6 +121,16 @@ def main(argv=None) -> None:
                   second_fit_seconds=("second_seconds", "median"),
                   submodels_seconds=("submodels_seconds", "median"),
                   n_submodels=("n_submodels", statistics.mode)).reset_index())
+    if args.parts:
+        parts = (df[df["version"] == "this"].groupby("fit", sort=False)
+                 .agg(svm_regions_seconds=("svm_regions_seconds", "median"),
+                      svm_regions_submodels=("svm_regions_submodels", statistics.mode),
+                      no_split_seconds=("no_split_seconds", "median"),
+                      no_split_submodels=("no_split_submodels", statistics.mode)))
+        table = table.join(parts, on="fit")
+        table.loc[table["version"] != "this", list(parts.columns)] = float("nan")
+        table["second fit / SVM regions"] = (table["second_fit_seconds"]
+                                             / table["svm_regions_seconds"])
     reference = args.against.split(",")[0]
     ref = table[table["version"] == reference].set_index("fit")["median_seconds"]
     table["ratio_to_" + reference] = table["median_seconds"] / table["fit"].map(ref)
@@ -106,6 +143,14 @@ def main(argv=None) -> None:
                       "fits": len(ours)}
                for name, col in (("first fit", "ratio_to_" + reference),
                                  ("second fit", "second fit ratio"))}
+    if args.parts:
+        summary["second fit / SVM regions"] = {
+            "median": float(ours["second fit / SVM regions"].median()),
+            "above 2": int((ours["second fit / SVM regions"] > 2).sum()), "fits": len(ours)}
+        no_split = ours.set_index("fit")["no_split_seconds"] / second
+        summary["without the split search, to the reference's second fit"] = {
+            "median": float(no_split.median()), "above 2": int((no_split > 2).sum()),
+            "fits": len(ours)}
     meta = {"repeats": args.repeats, "seed set": args.set, "load average at start": load_start,
             "load average at end": load_end, "versions": list(trees)}
     write_json({"meta": meta, "runs": rows, "table": table.to_dict("records"),
