@@ -295,7 +295,7 @@ def _simulation_fit(a: Float2D, c: Float2D, pairs: list) -> tuple[Float2D, Float
     for k in range(big):
         live = (lengths > k)[:, None, None]
         rows = np.zeros((e, m, p))
-        rows[:, :, :n * r] = np.einsum("ij,ejab->eiab", c, sens).reshape(e, m, n * r)
+        rows[:, :, :n * r] = c @ sens.reshape(e, n, n * r)
         d_part = np.zeros((e, m, m, r))
         d_part[:, diag[:m], diag[:m], :] = u[:, k, None, :]
         rows[:, :, n * r:] = d_part.reshape(e, m, m * r)
@@ -303,9 +303,10 @@ def _simulation_fit(a: Float2D, c: Float2D, pairs: list) -> tuple[Float2D, Float
         flat = rows.reshape(-1, p)
         xtx += flat.T @ flat
         xty += flat.T @ y[:, k].ravel()
-        qx += np.einsum("emn,emp->enp", q[:, k], rows)
-        qy += np.einsum("emn,em->en", q[:, k], y[:, k])
-        sens = np.einsum("ij,ejab->eiab", a, sens)
+        qk = q[:, k].transpose(0, 2, 1)  # stacked matrix products (BLAS), not einsum
+        qx += qk @ rows
+        qy += (qk @ y[:, k, :, None])[..., 0]
+        sens = (a @ sens.reshape(e, n, n * r)).reshape(e, n, n, r)
         sens[:, diag[:n], diag[:n], :] += u[:, k, None, :]
     xtx -= np.einsum("enp,enq->pq", qx, qx)
     xty -= np.einsum("enp,en->p", qx, qy)
