@@ -135,10 +135,9 @@ class SVMRegions(BaseEstimator):
         z = (x[:, cols] - mean[cols]) / std[cols]
         # Two classes: Crammer and Singer's problem is the binary hinge-loss SVM with 2C
         # (w_1 = −w_0 = v/2 leaves ¼‖v‖² + C Σ ξ), whose dual solver takes half the time.
-        svm = (LinearSVC(C=2 * self.C, loss="hinge", max_iter=50000, random_state=0,
-                         tol=self.tol) if present.size == 2 else
-               LinearSVC(C=self.C, multi_class="crammer_singer", max_iter=50000,
-                         random_state=0, tol=self.tol))
+        problem = (dict(C=2 * self.C, loss="hinge") if present.size == 2 else
+                   dict(C=self.C, multi_class="crammer_singer"))
+        svm = LinearSVC(max_iter=50000, random_state=0, tol=self.tol, **problem)
         with warnings.catch_warnings():
             # Where classes overlap (noisy boundaries) the Crammer–Singer dual keeps making tiny
             # updates after the hyperplanes have settled; the regions are scored, not trusted.
