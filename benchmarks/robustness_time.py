@@ -74,6 +74,12 @@ def worker(fit: str, *rest: str) -> None:
     Path(rest[-1]).write_text(json.dumps(result))
 
 
+def _spread(ratios: pd.Series) -> dict:
+    """Median of the fits' ratios, how many exceed 2, and how many fits there are."""
+    return {"median": float(ratios.median()), "above 2": int((ratios > 2).sum()),
+            "fits": len(ratios)}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", default="bc9084d,15191f1",
@@ -139,18 +145,13 @@ def main(argv=None) -> None:
     second = table[table["version"] == reference].set_index("fit")["second_fit_seconds"]
     table["second fit ratio"] = table["second_fit_seconds"] / table["fit"].map(second)
     ours = table[table["version"] == "this"]
-    summary = {name: {"median": float(ours[col].median()), "above 2": int((ours[col] > 2).sum()),
-                      "fits": len(ours)}
+    summary = {name: _spread(ours[col])
                for name, col in (("first fit", "ratio_to_" + reference),
                                  ("second fit", "second fit ratio"))}
     if args.parts:
-        summary["second fit / SVM regions"] = {
-            "median": float(ours["second fit / SVM regions"].median()),
-            "above 2": int((ours["second fit / SVM regions"] > 2).sum()), "fits": len(ours)}
-        no_split = ours.set_index("fit")["no_split_seconds"] / second
-        summary["without the split search, to the reference's second fit"] = {
-            "median": float(no_split.median()), "above 2": int((no_split > 2).sum()),
-            "fits": len(ours)}
+        summary["second fit / SVM regions"] = _spread(ours["second fit / SVM regions"])
+        summary["without the split search, to the reference's second fit"] = _spread(
+            ours.set_index("fit")["no_split_seconds"] / second)
     meta = {"repeats": args.repeats, "seed set": args.set, "load average at start": load_start,
             "load average at end": load_end, "versions": list(trees)}
     write_json({"meta": meta, "runs": rows, "table": table.to_dict("records"),
