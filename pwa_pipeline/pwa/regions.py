@@ -22,8 +22,8 @@ class SVMRegions(BaseEstimator):
     columns such as the affine 1 are dropped; the SVM has its own intercept); its hyperplanes
     are mapped back to φ's units. Two classes are solved as the binary hinge-loss SVM with
     2C, the same problem (tested), in about half the time (``LinearSVC(loss="hinge")``: the
-    two-class SVMs of two 20 dB fits 0.62 s against 1.20 s). Rows labelled −1 (DBSCAN
-    noise) or weighted 0 are left out.
+    two-class SVMs of two 20 dB fits 0.58 s against 1.19 s, ``benchmarks.region_svm``).
+    Rows labelled −1 (DBSCAN noise) or weighted 0 are left out.
 
     Parameters
     ----------
