@@ -84,15 +84,16 @@ def test_the_missed_mode_search_sizes_its_local_sets_by_distinct_rows(sim_30db):
     """Step 5 re-runs steps 2–4 on rows no sub-model explains: a few distinct rows given ten
     times still get local sets (n_ρ from the distinct count, not the rows with copies)."""
     from pwa_pipeline.pwa.regressors import build_regressors
-    from pwa_pipeline.pwa.submodels import _missed_mode_clusters
+    from pwa_pipeline.pwa.submodels import _missed_mode_clusters, _search_steps
 
     reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
     local = LocalLeastSquares().fit(reg.phi, reg.target)
     clustering = DBSCANClustering().fit(local, reg.target)
     assert local.n_rho_ > 10
     rows = np.flatnonzero(clustering.labels_ == 0)[:10]  # 10 distinct rows, fewer than n_ρ
-    once = _missed_mode_clusters(reg.phi[rows], reg.target[rows], local, clustering)
+    steps = _search_steps(local, clustering)
+    once = _missed_mode_clusters(reg.phi[rows], reg.target[rows], *steps)
     tiled = _missed_mode_clusters(np.tile(reg.phi[rows], (10, 1)),
-                                  np.tile(reg.target[rows], (10, 1)), local, clustering)
+                                  np.tile(reg.target[rows], (10, 1)), *steps)
     assert once is not None and tiled is not None
     np.testing.assert_array_equal(tiled, np.tile(once, 10))

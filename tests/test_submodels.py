@@ -628,3 +628,32 @@ def test_the_k_means_start_places_rows_without_a_local_model_by_their_fit():
     # too few estimated local models: no k-means start
     assert _kmeans_start(phi, y, np.where(np.arange(1500)[:, None, None] < 5, every.theta_,
                                           np.nan), 3) is None
+
+
+def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
+    """RefinedSubModels(memory=...) fits steps 2–4 once per consolidated state (step 1's
+    labels, MinPts) and parameters: a clustering with more noise rows that consolidates
+    alike takes them from the cache; another state, another MinPts or another parameter
+    fits them again; every result is the uncached fit's, bit for bit."""
+    import copy
+
+    phi, target, local, absorbed = _four_percent_mode()
+    noisier = copy.copy(absorbed)  # as at a smaller ε: some clustered rows become noise
+    noisier.labels_ = absorbed.labels_.copy()
+    noisier.labels_[np.flatnonzero(absorbed.labels_ >= 0)[::7]] = -1
+    own = DBSCANClustering().fit(local, target)  # the modes as DBSCAN finds them
+    more_pts = copy.copy(noisier)
+    more_pts.min_pts_ = 100  # more than the 4 % mode's rows
+    cases = ((absorbed, {}, 1), (noisier, {}, 1), (own, {}, 2), (more_pts, {}, 3),
+             (absorbed, {"split_tol": None}, 4))
+    for clustering, params, entries in cases:
+        plain = RefinedSubModels(**params).fit(phi, target, local, clustering, SVMRegions())
+        cached = clone(plain).set_params(memory=str(tmp_path)).fit(phi, target, local,
+                                                                  clustering, SVMRegions())
+        assert len(list(tmp_path.rglob("output.pkl"))) == entries
+        for name in ("thetas_", "labels_", "weights_"):
+            np.testing.assert_array_equal(getattr(cached, name), getattr(plain, name))
+        assert [getattr(cached, a) for a in ("n_submodels_", "n_merged_", "n_iter_",
+                                            "n_split_")] == [
+            getattr(plain, a) for a in ("n_submodels_", "n_merged_", "n_iter_", "n_split_")]
+    assert cached.memory == str(tmp_path)

@@ -14,7 +14,8 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import chi2
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.cluster import KMeans
-from sklearn.utils._param_validation import Interval
+from sklearn.utils._param_validation import HasMethods, Interval
+from sklearn.utils.validation import check_memory
 
 from .._arrays import relabel_by_size
 from .._typing import Float2D
@@ -755,6 +756,16 @@ class RefinedSubModels(BaseEstimator):
         and the medians at 0.65× the fit's CPU time, and 2 found 17/20 with the medians
         unchanged; on 10 tuning seeds of every case 2 changed no other mode count or
         median. 0: only when no row moves (or ``split_sweep_tol``).
+    memory : str or object with the joblib.Memory interface, optional
+        Cache of steps 2–4, as scikit-learn's ``Pipeline(memory=...)``: a folder (a
+        ``joblib.Memory`` there) or an object whose ``cache(func)`` returns ``func`` cached.
+        Steps 2–4 are a function of step 1's consolidated labels (with the data, the local
+        models, MinPts and these parameters), and hyper-parameter sets that differ only in ε
+        or MinPts often consolidate alike (on the robot every set of ``benchmarks.sweep``
+        ends step 1 with all rows in one sub-model), so a sweep fits steps 2–4 once per
+        consolidated state. None (default): no caching. The results are the same bit for
+        bit; joblib's cache is not emptied when this library changes (the pipeline's cache
+        is kept per version of the numerical core).
 
     Attributes
     ----------
@@ -781,11 +792,13 @@ class RefinedSubModels(BaseEstimator):
         "n_split": [Interval(Integral, 0, None, closed="left")],
         "split_sweep_tol": [Interval(Real, 0, 1, closed="both")],
         "settle_tol": [Interval(Real, 0, None, closed="left")],
+        "memory": [None, str, HasMethods(["cache"])],
     }
 
     def __init__(self, merge_tol: float = 1.0, copy_tol: float | None = 25.0,
                  n_refine: int = 20, n_search: int = 3, split_tol: float | None = 1.0,
-                 n_split: int = 4, split_sweep_tol: float = 0.0, settle_tol: float = 2.0):
+                 n_split: int = 4, split_sweep_tol: float = 0.0, settle_tol: float = 2.0,
+                 memory=None):
         self.merge_tol = merge_tol
         self.copy_tol = copy_tol
         self.n_refine = n_refine
@@ -794,11 +807,12 @@ class RefinedSubModels(BaseEstimator):
         self.n_split = n_split
         self.split_sweep_tol = split_sweep_tol
         self.settle_tol = settle_tol
+        self.memory = memory
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D, local, clustering, regions
             ) -> "RefinedSubModels":
-        """Steps 1–3 of the class description.
+        """Steps 1–4 of the class description.
 
         Parameters
         ----------
@@ -813,13 +827,11 @@ class RefinedSubModels(BaseEstimator):
         """
         min_pts = clustering.min_pts_
         min_size = max(phi.shape[1] + 1, min_pts)
-        limit = chi2.ppf(0.999, target.shape[1])
         merge = dict(tol=self.merge_tol, copy_tol=self.copy_tol, regions=regions)
         labels = clustering.labels_.copy()
         rows = labels >= 0
         labels[rows], n_merged = merge_indistinguishable(phi[rows], target[rows], labels[rows],
                                                          **merge)
-        n_iter, searches, n_split = 0, 0, 0
         # Consolidate by residual alone first, merging copies: an SVM over many small,
         # overlapping clusters can give all rows to the largest one.
         more, memo = 1, {}
@@ -827,6 +839,25 @@ class RefinedSubModels(BaseEstimator):
             labels = refine(phi, target, labels, min_size, self.n_refine, memo=memo)[1]
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
+        have = np.flatnonzero(~np.isnan(local.theta_[:, 0, 0]))
+        consolidated = check_memory(self.memory).cache(_from_consolidated)
+        (self.thetas_, self.labels_, margin, merged, self.n_iter_,
+         self.n_split_) = consolidated(clone(self).set_params(memory=None), phi, target, labels,
+                                       have, local.theta_[have], min_pts,
+                                       *_search_steps(local, clustering), regions)
+        self.weights_ = margin_weights(margin)
+        self.n_submodels_ = self.thetas_.shape[0]
+        self.n_merged_ = n_merged + merged
+        return self
+
+    def _from_consolidated(self, phi, target, labels, local_theta, min_pts, search_local,
+                           search_clustering, regions):
+        """Steps 2–4 from the consolidated ``labels``: the sub-models, every row's label and
+        margin (:func:`refine`), the merges, sweeps and splits done."""
+        min_size = max(phi.shape[1] + 1, min_pts)
+        limit = chi2.ppf(0.999, target.shape[1])
+        merge = dict(tol=self.merge_tol, copy_tol=self.copy_tol, regions=regions)
+        n_iter, searches, n_split, n_merged, memo = 0, 0, 0, 0, {}
         best, searched, split_once = None, {}, set()
         # The missed-mode search (4. above: local models and clusters, no SVM) runs in a
         # second thread beside the split search (3., whose SVMs stay in this thread:
@@ -848,10 +879,10 @@ class RefinedSubModels(BaseEstimator):
                 # the search did not explain more rows: the previous state is kept
                 better = best is None or poor.sum() < best[0]
                 search = better and searches < self.n_search and poor.sum() >= min_pts
-                found = beside.submit(_missed_mode_clusters, phi[poor], target[poor], local,
-                                      clustering) if search else None
+                found = beside.submit(_missed_mode_clusters, phi[poor], target[poor],
+                                      search_local, search_clustering) if search else None
                 if self.split_tol is not None and n_split < self.n_split:
-                    split = self._best_split(phi, target, labels, local.theta_, min_size,
+                    split = self._best_split(phi, target, labels, local_theta, min_size,
                                              regions, searched, split_once)
                     if split is not None:
                         if found is not None:
@@ -870,12 +901,8 @@ class RefinedSubModels(BaseEstimator):
                 labels = labels.copy()
                 joins = extra >= 0
                 labels[np.nonzero(poor)[0][joins]] = thetas.shape[0] + extra[joins]
-        self.thetas_, self.labels_, margin, sweeps = best[1]  # the state kept, polished
-        self.weights_ = margin_weights(margin)
-        self.n_submodels_ = self.thetas_.shape[0]
-        self.n_merged_, self.n_iter_ = n_merged, n_iter + sweeps
-        self.n_split_ = n_split
-        return self
+        thetas, labels, margin, sweeps = best[1]  # the state kept, polished
+        return thetas, labels, margin, n_merged, n_iter + sweeps, n_split
 
     def _best_split(self, phi, target, labels, local_theta, min_size, regions, searched,
                     split_once):
@@ -923,17 +950,37 @@ class RefinedSubModels(BaseEstimator):
         return best[1]
 
 
+def _search_steps(local, clustering) -> tuple[BaseEstimator, BaseEstimator]:
+    """The unfitted steps 2–4 of the missed-mode search (:func:`_missed_mode_clusters`): the
+    fitted ``local`` step's with its n_ρ, and the fitted ``clustering``'s with its MinPts and
+    ε from the data."""
+    return (clone(local).set_params(n_rho=local.n_rho_),
+            clone(clustering).set_params(eps=None, min_pts=clustering.min_pts_))
+
+
 def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
                           ) -> np.ndarray | None:
-    """Steps 2–4 again on the rows no sub-model explains: the cluster label of each row, or
-    None when there are too few rows or no cluster."""
+    """Steps 2–4 again on the rows no sub-model explains, with the unfitted steps ``local``
+    and ``clustering`` (:func:`_search_steps`): the cluster label of each row, or None when
+    there are too few rows or no cluster."""
     n_distinct = len(distinct_rows(np.hstack([phi, target]))[0])  # as step 2 counts them
-    n_rho = min(local.n_rho_, n_distinct - 1)
+    n_rho = min(local.n_rho, n_distinct - 1)
     if n_rho <= phi.shape[1]:
         return None
     try:
         sub_local = clone(local).set_params(n_rho=n_rho).fit(phi, target)
-        sub = clone(clustering).set_params(eps=None, min_pts=clustering.min_pts_)
-        return sub.fit(sub_local, target).labels_
+        return clone(clustering).fit(sub_local, target).labels_
     except ValueError:
         return None
+
+
+def _from_consolidated(step: RefinedSubModels, phi: Float2D, target: Float2D,
+                       labels: np.ndarray, have: np.ndarray, have_theta: np.ndarray,
+                       min_pts: int, search_local, search_clustering, regions) -> tuple:
+    """:meth:`RefinedSubModels._from_consolidated` of ``step`` (no ``memory``), the local
+    models θ_k given for the rows ``have`` only (the others have none): a function of its
+    arguments alone, for ``RefinedSubModels.memory`` to cache."""
+    local_theta = np.full((phi.shape[0], *have_theta.shape[1:]), np.nan)
+    local_theta[have] = have_theta
+    return step._from_consolidated(phi, target, labels, local_theta, min_pts, search_local,
+                                   search_clustering, regions)
