@@ -209,6 +209,32 @@ def test_local_models_are_reused_when_only_eps_changes(resources, tmp_path):
     np.testing.assert_array_equal(local[0].theta_, local[1].theta_)
 
 
+def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resources, tmp_path):
+    """Two default sets that differ only in ε, whose clusterings (3 clusters, other noise
+    rows) consolidate to the same sub-models: the second takes step 5's steps 2–4 from the
+    signed cache, with the first's results; the stored steps hold no cache."""
+    path = tmp_path / "eps.toml"
+    path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"default\"\nna = 1\nnb = 1\n"
+                            f"clustering.eps = {eps}\n" for i, eps in enumerate((0.22, 0.25))))
+    sweep = build_definitions(path)
+    steps = [a for a in sweep.assets if a.key.to_user_string() in
+             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters",
+              "sub_models")]
+    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
+    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+            for i in (0, 1)]
+    meta = [r.asset_materializations_for_node("sub_models")[0].metadata for r in runs]
+    assert [m["from_cache"].value for m in meta] == [False, True]
+    clusters = [r.output_for_node("clusters") for r in runs]
+    assert not np.array_equal(clusters[0].labels_, clusters[1].labels_)
+    subs = [r.output_for_node("sub_models") for r in runs]
+    for name in ("thetas_", "labels_", "weights_"):
+        np.testing.assert_array_equal(getattr(subs[0], name), getattr(subs[1], name))
+    assert subs[1].memory is None and subs[0].n_submodels_ == 4
+    cache = Path(resources["settings"].cache_root()) / "sub_models"
+    assert len(list(cache.glob("*.pkl"))) == 1
+
+
 def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, tmp_path):
     resources["mlflow"] = MLflowTracker(tracking_uri="http://127.0.0.1:9", timeout_seconds=1)
     result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources,

@@ -13,10 +13,12 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import dagster as dg
+import numpy as np
 import pandas as pd
 import pytest
 
 from pwa_pipeline.definitions import defs
+from pwa_pipeline.orchestration import storage
 from pwa_pipeline.orchestration.resources import (
     MLflowTracker,
     PipelineSettings,
@@ -25,6 +27,7 @@ from pwa_pipeline.orchestration.resources import (
 )
 from pwa_pipeline.orchestration.storage import (
     PartitionedFileIOManager,
+    SignedMemory,
     UnsignedFileError,
     inside,
     load_object,
@@ -133,6 +136,66 @@ def test_bad_cache_entries_are_recomputed_with_a_warning(tmp_path, settings):
     again = dg.materialize(_assets(IDENTIFICATION), partition_key="hure_vasak|paper",
                            resources=resources)
     assert again.asset_materializations_for_node("local_models")[0].metadata["from_cache"].value
+
+
+def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_path,
+                                                                          monkeypatch):
+    """SignedMemory computes a call once per function, arguments and numerical-core source,
+    and reads it back signed; a step holding it clones to the same handle."""
+    import copy
+
+    from sklearn.base import clone
+
+    from pwa_pipeline.pwa import RefinedSubModels
+
+    calls = []
+
+    def scaled(a, factor=1.0):
+        calls.append(factor)
+        return np.asarray(a) * factor
+
+    memory = SignedMemory(tmp_path, "m")
+    cached = memory.cache(scaled)
+    for factor, computed in ((1.0, 1), (1.0, 1), (2.0, 2), (1.0, 2)):
+        np.testing.assert_array_equal(cached(np.arange(3.0), factor=factor),
+                                      np.arange(3.0) * factor)
+        assert len(calls) == computed
+    assert (memory.hits, memory.misses) == (2, 2)
+    np.testing.assert_array_equal(cached(np.arange(4.0)), np.arange(4.0))  # other data
+    monkeypatch.setattr(storage, "core_fingerprint", lambda: "other code")
+    cached(np.arange(3.0), factor=1.0)
+    assert len(calls) == 4 and len(list((tmp_path / "m").glob("*.pkl"))) == 4
+    assert copy.deepcopy(memory) is memory
+    assert clone(RefinedSubModels(memory=memory)).memory is memory
+
+
+def test_bad_sub_model_cache_entries_are_recomputed_with_a_warning(tmp_path, settings):
+    """Step 5's cache (``SignedMemory``) as the local models': a planted or truncated entry
+    is never unpickled, the run recomputes it and says so, and the next run reads it."""
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "store")),
+                 "settings": settings}
+    instance = dg.DagsterInstance.ephemeral()
+    names = [*IDENTIFICATION, "clusters", "sub_models"]
+    first = dg.materialize(_assets(names), partition_key="hure_vasak|default",
+                           resources=resources, instance=instance)
+    [entry] = (tmp_path / "cache" / "sub_models").glob("*.pkl")
+    thetas = first.output_for_node("sub_models").thetas_
+    marker = tmp_path / "marker"
+    for damage in (lambda: entry.write_bytes(pickle.dumps(_Planted(marker))),
+                   lambda: entry.write_bytes(entry.read_bytes()[:100])):
+        damage()
+        result = dg.materialize(_assets(names), partition_key="hure_vasak|default",
+                                resources=resources, instance=instance)
+        meta = result.asset_materializations_for_node("sub_models")[0].metadata
+        assert result.success and not meta["from_cache"].value
+        logged = [e.user_message for e in instance.all_logs(result.run_id)]
+        assert any(f"cache entry {entry} unusable" in m for m in logged)
+        assert not marker.exists()
+        assert (result.output_for_node("sub_models").thetas_ == thetas).all()
+    again = dg.materialize(_assets(names), partition_key="hure_vasak|default",
+                           resources=resources)
+    assert again.asset_materializations_for_node("sub_models")[0].metadata["from_cache"].value
+    assert (again.output_for_node("sub_models").thetas_ == thetas).all()
 
 
 def test_stale_temporary_files_are_swept_fresh_ones_kept(tmp_path):

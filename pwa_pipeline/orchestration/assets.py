@@ -62,6 +62,7 @@ from .reporting import (
 from .resources import MLflowTracker, PipelineSettings
 from .storage import (
     ALL_PARTITIONS,
+    SignedMemory,
     UnsignedFileError,
     cache_key,
     inside,
@@ -71,9 +72,6 @@ from .storage import (
 )
 
 GROUP = "identification"
-#: Layout of a cached fitted local-model step; raise it when the step's fitted attributes
-#: change, so that entries written by older code are never loaded.
-LOCAL_MODELS_FORMAT = 4
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.
 STEP_ASSETS = {**dict(zip(STEPS, ("local_models", "clusters", "sub_models", "svm_regions"),
                           strict=True)), "refinement": "output_error_refinement"}
@@ -184,7 +182,7 @@ def _identification_assets(partitions_def) -> list:
         step = configuration.pwa.steps()["local_models"]
         t0 = time.perf_counter()
         key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
-                        format=LOCAL_MODELS_FORMAT, **step.get_params())
+                        **step.get_params())
         root = settings.cache_root()
         path = inside(root, "local_models", f"{key}.pkl")
         local = None
@@ -234,27 +232,42 @@ def _identification_assets(partitions_def) -> list:
         yield from cluster_results(step, str(context.partition_key))
 
     @dg.asset(**part, kinds={"numpy"}, check_specs=SUB_MODEL_CHECKS)
-    def sub_models(context: dg.AssetExecutionContext, configuration: Configuration,
-                   raw_benchmark: Dataset,
+    def sub_models(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                   configuration: Configuration, raw_benchmark: Dataset,
                    regressors: Regressors, local_models: BaseEstimator | None,
                    clusters: BaseEstimator | None):
         """One parameter matrix θ_i per cluster (step 5), the fitted ``submodels`` step; None
-        for a structured set, whose checks then pass as not applicable."""
+        for a structured set, whose checks then pass as not applicable. A step with a
+        ``memory`` parameter (``RefinedSubModels``) left None caches its steps 2–4 in the
+        store's cache (``cache_sub_models``): sets whose clusterings consolidate alike share
+        them."""
         if (skipped := _skipped(context, configuration)) is not None:
             yield dg.Output(None, metadata=skipped)
             yield from not_applicable(SUB_MODEL_CHECKS, str(context.partition_key),
                                       STRUCTURED_SKIP)
             return
         t0 = time.perf_counter()
-        step = configuration.pwa.fit_step("submodels", regressors, local_models=local_models,
-                                          clustering=clusters)
+        pwa = configuration.pwa
+        step = pwa.steps()["submodels"]
+        params = step.get_params()
+        memory = None
+        if settings.cache_sub_models and "memory" in params and params["memory"] is None:
+            memory = SignedMemory(settings.cache_root(), "sub_models", warn=context.log.warning)
+            pwa = clone(pwa).set_params(submodels=clone(step).set_params(memory=memory))
+        step = pwa.fit_step("submodels", regressors, local_models=local_models,
+                            clustering=clusters)
+        cached = memory is not None and memory.hits > 0
+        if memory is not None:
+            step.set_params(memory=None)  # the stored step is the configured one
         context.log.info(f"sub-models: {step.n_submodels_} ({step.n_merged_} merges, "
-                         f"{step.n_iter_} sweeps) in {time.perf_counter() - t0:.1f} s")
+                         f"{step.n_iter_} sweeps{', steps 2-4 from the cache' if cached else ''})"
+                         f" in {time.perf_counter() - t0:.1f} s")
         table = theta_table(step.thetas_, _phi_names(configuration.pwa, raw_benchmark),
                             raw_benchmark.y_names)
         yield dg.Output(step, metadata=rounded({
             "n_submodels": step.n_submodels_, "merged": step.n_merged_,
-            "refinement_sweeps": step.n_iter_, "seconds": time.perf_counter() - t0,
+            "refinement_sweeps": step.n_iter_, "from_cache": cached,
+            "seconds": time.perf_counter() - t0,
             "parameters": markdown(table)}))
         yield from sub_model_results(step, str(context.partition_key))
 

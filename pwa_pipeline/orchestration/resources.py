@@ -76,9 +76,12 @@ class PipelineSettings(dg.ConfigurableResource):
         ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
         ``<project>/storage/datasets.json``.
     cache_dir : str
-        Local-model cache; empty: ``<project>/storage/cache``.
+        Cache of local models and of step 5; empty: ``<project>/storage/cache``.
     cache_local_models : bool
         Reuse local models across hyper-parameter sets that differ only in later steps.
+    cache_sub_models : bool
+        Reuse step 5's refinement (``RefinedSubModels(memory=...)``) across sets whose
+        clusterings consolidate to the same sub-models (e.g. sets that differ only in ε).
     """
 
     kuka_path: str = ""
@@ -86,6 +89,7 @@ class PipelineSettings(dg.ConfigurableResource):
     datasets_path: str = ""
     cache_dir: str = ""
     cache_local_models: bool = True
+    cache_sub_models: bool = True
 
     def with_files(self, hparams_path: str | os.PathLike,
                    datasets_path: str | os.PathLike) -> "PipelineSettings":
@@ -119,7 +123,7 @@ class PipelineSettings(dg.ConfigurableResource):
         return self.hparams().configuration(hparams, dataset, orders)
 
     def cache_root(self) -> Path:
-        """The local-model cache folder."""
+        """The cache folder (local models, step 5)."""
         return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"
 
 

@@ -1,4 +1,5 @@
-"""Files: atomic writes, signed pickles, the partitioned IO manager, and the local-model cache.
+"""Files: atomic writes, signed pickles, the partitioned IO manager, and the caches of the
+local models and of step 5.
 
 Format. A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step
 objects and estimators, the core's frozen dataclasses) as a signed pickle: a header, an
@@ -17,8 +18,10 @@ keep the store private. A file without a valid signature (planted, copied from a
 truncated) is refused with its path; a cache entry is then recomputed.
 """
 
+import functools
 import hashlib
 import hmac
+import logging
 import os
 import pickle
 import secrets
@@ -27,6 +30,7 @@ import time
 from pathlib import Path
 
 import dagster as dg
+import joblib
 import numpy as np
 import pandas as pd
 
@@ -200,10 +204,63 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
 
 
 def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:
-    """Content hash of the regressors and the settings local models depend on."""
-    h = hashlib.sha256()
+    """Content hash of the regressors, the numerical core's source (:func:`core_fingerprint`)
+    and the settings local models depend on."""
+    h = hashlib.sha256(core_fingerprint().encode())
     for arr in (phi, target):
         h.update(np.ascontiguousarray(arr).tobytes())
         h.update(str(arr.shape).encode())
     h.update(repr(sorted(settings.items())).encode())
     return h.hexdigest()[:24]
+
+
+@functools.cache
+def core_fingerprint() -> str:
+    """Hash of the numerical core's source (``pwa_pipeline/pwa`` and the modules it shares):
+    part of every cache key, so that entries computed by other code are never loaded."""
+    package = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted([*package.glob("_*.py"), *(package / "pwa").glob("*.py")]):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+class SignedMemory:
+    """The ``joblib.Memory`` interface over this store's signed pickles, for
+    ``RefinedSubModels(memory=...)``: ``cache(func)`` returns ``func`` whose result is kept at
+    ``<root>/<folder>/<key>.pkl``, the key a hash of the function, the numerical core's source
+    (:func:`core_fingerprint`) and the arguments (``joblib.hash``). An entry without a valid
+    signature, or unreadable, is recomputed after ``warn`` (a logging function) names it.
+    ``hits`` and ``misses`` count the calls answered from the cache and computed. A handle on
+    the store: copies (``clone`` of the step holding it) are this object."""
+
+    def __init__(self, root: Path, folder: str, warn=logging.getLogger(__name__).warning):
+        self.root, self.folder, self.warn = Path(root), folder, warn
+        self.hits = self.misses = 0
+
+    def __deepcopy__(self, memo: dict) -> "SignedMemory":
+        return self
+
+    def cache(self, func):
+        def cached(*args, **kwargs):
+            key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(), args,
+                               kwargs))
+            path = inside(self.root, self.folder, f"{key}.pkl")
+            if path.is_file():
+                try:
+                    out = load_object(path, signing_key(self.root))
+                    self.hits += 1
+                    return out
+                except (UnsignedFileError, pickle.UnpicklingError, EOFError,
+                        AttributeError) as exc:
+                    self.warn(f"cache entry {path} unusable ({exc}); recomputing it")
+            out = func(*args, **kwargs)
+            save_object(path, out, signing_key(self.root))
+            self.misses += 1
+            return out
+
+        return cached
+
+    def __repr__(self) -> str:
+        return f"SignedMemory({str(self.root)!r}, {self.folder!r})"
