@@ -30,6 +30,34 @@ def write_json(data: dict, stem: str) -> None:
     (RESULTS / f"{stem}.json").write_text(json.dumps(data, indent=2, default=float) + "\n")
 
 
+def _cpu_ticks() -> list[int]:
+    """The machine's CPU time so far by kind (the first line of /proc/stat, Linux)."""
+    return [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+
+
+class MachineLoad:
+    """How busy the machine was over a benchmark: the 1-minute load average at the start and
+    the end, and the share of the CPU time the hypervisor gave to other machines (steal, the
+    eighth column of /proc/stat's ``cpu`` line) while it ran. A virtual machine's steal
+    slows every timing without showing in the load average."""
+
+    def __init__(self):
+        self.load_start, self._ticks = os.getloadavg()[0], _cpu_ticks()
+
+    def summary(self) -> dict:
+        """``{"start", "end", "steal_share"}`` from the start until now."""
+        delta = [b - a for a, b in zip(self._ticks, _cpu_ticks(), strict=True)]
+        return {"start": self.load_start, "end": os.getloadavg()[0],
+                "steal_share": delta[7] / max(sum(delta), 1)}
+
+
+
+def describe_load(load: dict) -> str:
+    """A :meth:`MachineLoad.summary` in words."""
+    return (f"1-minute load average {load['start']:.2f} at the start, {load['end']:.2f} at "
+            f"the end, {load['steal_share']:.0%} of the CPU time stolen by the hypervisor")
+
+
 class Timer:
     """Context manager measuring wall-clock seconds in ``.seconds``."""
 
