@@ -1,14 +1,17 @@
-"""Pipeline cost: materialising the default partitions, and what the local-model cache saves.
+"""Pipeline cost: materialising the default partitions, and what the caches save in sweeps.
 
 1. Time to materialise every asset of each default partition (hure_vasak and kuka_robot with
    the 'paper' and 'default' sets), in-process with dg.materialize, fresh stores.
-2. A sweep of 12 hyper-parameter sets on the simulated system that differ only in ε and MinPts
-   (paper setting, n_rho = 18): every asset of every set, once with the local-model cache and
-   once without; the saving is the difference (the local_models step's time reported too).
+2. Two sweeps of 12 hyper-parameter sets that differ only in ε and MinPts: the simulated
+   system in the paper setting (n_rho = 18), and the robot with the default (the sets of
+   benchmarks.sweep). Every asset of every set, once with the caches (local models and step
+   5, ``PipelineSettings.cache_local_models`` / ``cache_sub_models``) and once without; the
+   saving is the difference, and each asset's median seconds over the sets are reported.
    A set whose ε / MinPts leave DBSCAN without a cluster fails at `clusters` (as it should)
    and is timed all the same. The sweep's sets are a temporary hyper-parameter file, with
    definitions built for it (pwa_pipeline.orchestration.definitions.build_definitions).
 
+How busy the machine was (``MachineLoad``) is recorded over the whole run.
 Writes results/pipeline.json and results/pipeline.md.
 Usage: python -m benchmarks.pipeline
 """
@@ -22,7 +25,9 @@ import dagster as dg
 import pandas as pd
 from mlflow.tracking import MlflowClient
 
-from benchmarks._common import RESULTS, Timer, write_json
+from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write_json
+from benchmarks.sweep import EPS as ROBOT_EPS
+from benchmarks.sweep import MIN_PTS as ROBOT_MIN_PTS
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
 from pwa_pipeline.orchestration.jobs import SWEEP_SELECTION
 from pwa_pipeline.orchestration.partitions import DEFAULT_SETS, all_keys, runnable_keys
@@ -39,6 +44,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
     resources = {
         "io_manager": PartitionedFileIOManager(base_dir=str(tmp / "storage")),
         "settings": PipelineSettings(cache_dir=str(tmp / "cache"), cache_local_models=cache,
+                                     cache_sub_models=cache,
                                      hparams_path=defs.resources["settings"].hparams_path,
                                      datasets_path=defs.resources["settings"].datasets_path),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),
@@ -52,9 +58,13 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
                                     selection=SWEEP_SELECTION, instance=instance,
                                     run_config=quiet, raise_on_error=False)
         local = result.asset_materializations_for_node("local_models")[0].metadata
+        subs = result.asset_materializations_for_node("sub_models")
         rows.append({"partition": key, "seconds": t.seconds, "success": result.success,
                      "local_models_seconds": local["seconds"].value,
-                     "from_cache": local["from_cache"].value})
+                     "from_cache": local["from_cache"].value,
+                     "step_5_from_cache": bool(subs and subs[0].metadata["from_cache"].value),
+                     "assets": {e.step_key: e.event_specific_data.duration_ms / 1000
+                                for e in result.get_step_success_events()}})
     return rows
 
 
@@ -65,17 +75,26 @@ def default_partitions() -> list[dict]:
         return _materialise(defs, keys, Path(tmp), cache=True)
 
 
-def sweep() -> dict:
-    lines = [f"[sweep_{i}{j}.hure_vasak]\npreset = \"paper\"\nna = 1\nnb = 1\n"
-             f"local_models.n_rho = 18\nclustering.eps = {eps}\nclustering.min_pts = {mp}\n"
-             for i, eps in enumerate(EPS) for j, mp in enumerate(MIN_PTS)]
-    lines.append("[baselines.hure_vasak]\nwarmup = 10\nsubspace.order = 2\n")
+SWEEPS = {
+    "hure_vasak": (EPS, MIN_PTS, "preset = \"paper\"\nna = 1\nnb = 1\nlocal_models.n_rho = 18\n",
+                   "[baselines.hure_vasak]\nwarmup = 10\nsubspace.order = 2\n"),
+    "kuka_robot": (ROBOT_EPS, ROBOT_MIN_PTS, "preset = \"default\"\nna = 2\nnb = 2\n", ""),
+}
+"""Per data set: its ε and MinPts, the rest of each set, and the baselines' table."""
+
+
+def sweep(dataset: str) -> dict:
+    eps_values, min_pts_values, setting, baselines = SWEEPS[dataset]
+    lines = [f"[sweep_{i}{j}.{dataset}]\n{setting}clustering.eps = {eps}\n"
+             f"clustering.min_pts = {mp}\n"
+             for i, eps in enumerate(eps_values) for j, mp in enumerate(min_pts_values)]
+    lines.append(baselines)
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "sweep.toml"
         path.write_text("\n".join(lines))
         defs = build_definitions(path)
-        keys = [k for k in all_keys(partitions_of(defs)) if k.startswith("hure_vasak|")]
+        keys = [k for k in all_keys(partitions_of(defs)) if k.startswith(f"{dataset}|")]
         for cache in (True, False):
             run_dir = Path(tmp) / f"cache_{cache}"
             run_dir.mkdir()
@@ -84,30 +103,53 @@ def sweep() -> dict:
     return out
 
 
-def main() -> None:
-    defaults = default_partitions()
-    for r in defaults:
-        print(f"{r['partition']:22s} {r['seconds']:7.2f} s (local models {r['local_models_seconds']:.2f} s)")
-    runs = sweep()
+def summarise(runs: dict) -> dict:
+    """Totals of a sweep with and without the caches, and the saving."""
     summary = {}
     for name, rows in runs.items():
         summary[name] = {"total_seconds": sum(r["seconds"] for r in rows),
                          "median_run_seconds": statistics.median(r["seconds"] for r in rows),
                          "local_models_seconds": sum(r["local_models_seconds"] for r in rows),
-                         "runs_from_cache": sum(r["from_cache"] for r in rows)}
+                         "runs_local_models_from_cache": sum(r["from_cache"] for r in rows),
+                         "runs_step_5_from_cache": sum(r["step_5_from_cache"] for r in rows)}
     saved = summary["without_cache"]["total_seconds"] - summary["with_cache"]["total_seconds"]
+    summary["speed_up"] = (summary["without_cache"]["total_seconds"]
+                           / summary["with_cache"]["total_seconds"])
     summary["saved_seconds"] = saved
     summary["saved_share"] = saved / summary["without_cache"]["total_seconds"]
-    print(json.dumps(summary, indent=2))
-    write_json({"default_partitions": defaults, "sweep": runs, "sweep_summary": summary},
-               "pipeline")
-    md = ["## Materialising the default partitions\n",
-          pd.DataFrame(defaults).to_markdown(index=False, floatfmt=".3g"), "",
-          "## Sweep of 12 ε/MinPts sets on hure_vasak (paper setting, n_rho = 18)\n",
-          pd.DataFrame(summary).drop(columns=["saved_seconds", "saved_share"])
-          .T.to_markdown(floatfmt=".3g"), "",
-          f"Saved by the local-model cache: {saved:.2f} s "
-          f"({summary['saved_share']:.1%} of the sweep without it)."]
+    return summary
+
+
+def asset_medians(runs: dict) -> pd.DataFrame:
+    """Each asset's median seconds over the sets, with and without the caches."""
+    return pd.DataFrame({name: pd.DataFrame([r["assets"] for r in rows]).median()
+                         for name, rows in runs.items()})
+
+
+def main() -> None:
+    load = MachineLoad()
+    defaults = default_partitions()
+    for r in defaults:
+        print(f"{r['partition']:22s} {r['seconds']:7.2f} s (local models {r['local_models_seconds']:.2f} s)")
+    sweeps = {dataset: sweep(dataset) for dataset in SWEEPS}
+    machine = load.summary()
+    summaries = {dataset: summarise(runs) for dataset, runs in sweeps.items()}
+    print(json.dumps(summaries, indent=2))
+    write_json({"default_partitions": defaults, "sweeps": sweeps, "sweep_summaries": summaries,
+                "machine_load": machine}, "pipeline")
+    titles = {"hure_vasak": "12 ε/MinPts sets on hure_vasak (paper setting, n_rho = 18)",
+              "kuka_robot": "12 ε/MinPts sets on kuka_robot (default; benchmarks.sweep's sets)"}
+    md = [f"One run; {describe_load(machine)}.\n", "## Materialising the default partitions\n",
+          pd.DataFrame(defaults).drop(columns=["assets"]).to_markdown(index=False,
+                                                                      floatfmt=".3g"), ""]
+    for dataset, summary in summaries.items():
+        md += [f"## Sweep of {titles[dataset]}\n",
+               pd.DataFrame({k: v for k, v in summary.items() if isinstance(v, dict)})
+               .T.to_markdown(floatfmt=".3g"), "",
+               f"Saved by the caches: {summary['saved_seconds']:.2f} s "
+               f"({summary['saved_share']:.1%} of the sweep without them; "
+               f"{summary['speed_up']:.2f}x).\n", "Median seconds of each asset over the sets:\n",
+               asset_medians(sweeps[dataset]).to_markdown(floatfmt=".2f"), ""]
     (RESULTS / "pipeline.md").write_text("\n".join(md) + "\n")
 
 

@@ -27,8 +27,9 @@ first fit's:
 Then the paper setting's region SVM alone (in this process) at the preset's tolerance 1e-2,
 the former 1e-4 and a tight reference (1e-5, ten times the iterations): seconds, whether
 the solver converged, the primal objective, and how many regions agree with the
-reference's on the training rows and on the held-out test record. The 1-minute load
-average is recorded before and after; the last line printed is a summary.
+reference's on the training rows and on the held-out test record. How busy the machine
+was (``MachineLoad``: the 1-minute load average before and after, the CPU time the
+hypervisor stole) is recorded; the last line printed is a summary.
 
 Writes results/speed.json and results/speed.md.
 Usage: python -m benchmarks.speed [--repeats 3] [--previous 70cfa4d]
@@ -45,7 +46,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, in_fresh_process, previous_tree, write_json
+from benchmarks._common import (
+    RESULTS,
+    MachineLoad,
+    describe_load,
+    in_fresh_process,
+    previous_tree,
+    write_json,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = ("default", "default, every local model", "default, n_rho=61", "paper",
@@ -218,7 +226,7 @@ def main(argv=None) -> None:
     if args.worker:
         worker(*args.worker)
         return
-    load_start = os.getloadavg()[0]
+    load = MachineLoad()
     runs: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
@@ -233,7 +241,7 @@ def main(argv=None) -> None:
                 runs.setdefault(name, []).append(res)
                 print(f"run {i + 1}, {name}: {res['seconds']:.2f} s, peak {res['peak_mb']:.0f} MB",
                       flush=True)
-    load_end = os.getloadavg()[0]
+    machine = load.summary()
     rows = []
     for name, res in runs.items():
         row = {"variant": name, "median_seconds": statistics.median(r["seconds"] for r in res),
@@ -274,13 +282,13 @@ def main(argv=None) -> None:
     print(table.drop(columns="runs").to_markdown(floatfmt=".3g"))
     print(json.dumps(checks, indent=2))
     print(pd.DataFrame(svm).to_markdown(index=False, floatfmt=".6g"))
-    write_json({"load_average_1min": {"start": load_start, "end": load_end},
+    write_json({"machine_load": machine,
                 "repeats": args.repeats, "previous_commit": args.previous,
                 "fits": table.reset_index().to_dict(orient="records"), "checks": checks,
                 "svm_tolerance": svm, "cpus": len(os.sched_getaffinity(0))}, "speed")
     md = [f"Robot training record, {args.repeats} runs of each variant interleaved, each in a "
-          f"fresh process; 1-minute load average {load_start:.2f} at the start, "
-          f"{load_end:.2f} at the end, {len(os.sched_getaffinity(0))} CPUs.\n",
+          f"fresh process; {describe_load(machine)}; {len(os.sched_getaffinity(0))} "
+          f"CPUs.\n",
           table.drop(columns="runs").to_markdown(floatfmt=".3g"), "",
           "Checks: " + "; ".join(f"{k}: {v}" for k, v in checks.items()), "",
           "## The paper setting's region SVM (Crammer–Singer, 24,732 rows, 27 classes) by "
@@ -291,7 +299,8 @@ def main(argv=None) -> None:
                f"paper {table.loc['paper', 'median_seconds']:.2f} s with its SVM "
                f"{table.loc['paper', 'step_regions']:.2f} s, peak "
                f"{table.loc['paper', 'peak_mb'] / 1024:.2f} GB; medians of {args.repeats}; "
-               f"load {load_start:.2f} -> {load_end:.2f} on "
+               f"load {machine['start']:.2f} -> {machine['end']:.2f}, "
+               f"{machine['steal_share']:.0%} stolen, on "
                f"{len(os.sched_getaffinity(0))} CPUs")
     md.append("\n" + summary)
     (RESULTS / "speed.md").write_text("\n".join(md) + "\n")
