@@ -632,9 +632,9 @@ def test_the_k_means_start_places_rows_without_a_local_model_by_their_fit():
 
 def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
     """RefinedSubModels(memory=...) fits steps 2–4 once per consolidated state (step 1's
-    labels, MinPts) and parameters: a clustering with more noise rows that consolidates
-    alike takes them from the cache; another state, another MinPts or another parameter
-    fits them again; every result is the uncached fit's, bit for bit."""
+    labels, MinPts), parameters and local models: a clustering with more noise rows that
+    consolidates alike takes them from the cache; another state, MinPts, parameter or local
+    models fits them again; every result is the uncached fit's, bit for bit."""
     import copy
 
     phi, target, local, absorbed = _four_percent_mode()
@@ -644,11 +644,14 @@ def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
     own = DBSCANClustering().fit(local, target)  # the modes as DBSCAN finds them
     more_pts = copy.copy(noisier)
     more_pts.min_pts_ = 100  # more than the 4 % mode's rows
-    cases = ((absorbed, {}, 1), (noisier, {}, 1), (own, {}, 2), (more_pts, {}, 3),
-             (absorbed, {"split_tol": None}, 4))
-    for clustering, params, entries in cases:
-        plain = RefinedSubModels(**params).fit(phi, target, local, clustering, SVMRegions())
-        cached = clone(plain).set_params(memory=str(tmp_path)).fit(phi, target, local,
+    other = LocalLeastSquares().fit(phi, target * (1 + 1e-9))  # other θ_k, same parameters
+    cases = ((local, absorbed, {}, 1), (local, noisier, {}, 1), (local, own, {}, 2),
+             (local, more_pts, {}, 3), (local, absorbed, {"split_tol": None}, 4),
+             (other, absorbed, {}, 5))
+    for local_models, clustering, params, entries in cases:
+        plain = RefinedSubModels(**params).fit(phi, target, local_models, clustering,
+                                               SVMRegions())
+        cached = clone(plain).set_params(memory=str(tmp_path)).fit(phi, target, local_models,
                                                                   clustering, SVMRegions())
         assert len(list(tmp_path.rglob("output.pkl"))) == entries
         for name in ("thetas_", "labels_", "weights_"):

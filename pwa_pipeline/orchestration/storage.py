@@ -21,12 +21,14 @@ truncated) is refused with its path; a cache entry is then recomputed.
 import functools
 import hashlib
 import hmac
+import inspect
 import logging
 import os
 import pickle
 import secrets
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import dagster as dg
@@ -230,7 +232,8 @@ class SignedMemory:
     """The ``joblib.Memory`` interface over this store's signed pickles, for
     ``RefinedSubModels(memory=...)``: ``cache(func)`` returns ``func`` whose result is kept at
     ``<root>/<folder>/<key>.pkl``, the key a hash of the function, the numerical core's source
-    (:func:`core_fingerprint`) and the arguments (``joblib.hash``). An entry without a valid
+    (:func:`core_fingerprint`) and the arguments (``joblib.hash``) but those named in
+    ``ignore``, as joblib's. An entry without a valid
     signature, or unreadable, is recomputed after ``warn`` (a logging function) names it.
     ``hits`` and ``misses`` count the calls answered from the cache and computed. A handle on
     the store: copies (``clone`` of the step holding it) are this object."""
@@ -242,10 +245,14 @@ class SignedMemory:
     def __deepcopy__(self, memo: dict) -> "SignedMemory":
         return self
 
-    def cache(self, func):
+    def cache(self, func, ignore: Sequence[str] = ()):
+        signature = inspect.signature(func)
+
         def cached(*args, **kwargs):
-            key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(), args,
-                               kwargs))
+            bound = signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            hashed = {k: v for k, v in bound.arguments.items() if k not in ignore}
+            key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(), hashed))
             path = inside(self.root, self.folder, f"{key}.pkl")
             if path.is_file():
                 try:
