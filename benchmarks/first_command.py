@@ -39,7 +39,7 @@ from pathlib import Path
 import pandas as pd
 import psutil
 
-from benchmarks._common import RESULTS, write_json
+from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 FIT_STEPS = {"local_models", "clusters", "sub_models", "svm_regions", "output_error_refinement",
@@ -130,7 +130,7 @@ def main(argv=None) -> None:
                              "(default 2,1; the first is the one the summary quotes)")
     args = parser.parse_args(argv)
     variants = [int(j) for j in args.jobs.split(",")]
-    load_start = os.getloadavg()[0]
+    load = MachineLoad()
     runs: dict[int, list[dict]] = {j: [] for j in variants}
     for i in range(args.repeats):
         for jobs in variants:
@@ -139,9 +139,9 @@ def main(argv=None) -> None:
             run = runs[jobs][-1]
             print(f"repeat {i + 1}, --jobs {jobs}: {run['wall_seconds']:.1f} s, peak "
                   f"{run['peak_gb']:.2f} GB, exit code {run['exit_code']}", flush=True)
-    load_end = os.getloadavg()[0]
+    machine = load.summary()
     cpus = len(os.sched_getaffinity(0))
-    write_json({"load_average_1min": {"start": load_start, "end": load_end}, "cpus": cpus,
+    write_json({"machine_load": machine, "cpus": cpus,
                 "repeats": args.repeats, "runs": {str(j): r for j, r in runs.items()}},
                "first_command")
     wall = {j: statistics.median(r["wall_seconds"] for r in runs[j]) for j in variants}
@@ -158,10 +158,11 @@ def main(argv=None) -> None:
                f"{walls['runs'].iloc[0]}), peak {walls['peak GB'].iloc[0]:.2f} GB"
                + (f", {wall[main_jobs] / wall[ref]:.2f}x the {wall[ref]:.1f} s of --jobs {ref} "
                   f"in the same run" if len(variants) > 1 else "")
-               + f"; load {load_start:.2f} -> {load_end:.2f} on {cpus} CPUs")
+               + f"; load {machine['start']:.2f} -> {machine['end']:.2f}, "
+                 f"{machine['steal_share']:.0%} stolen, on {cpus} CPUs")
     md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} repeat(s) of each "
-          f"`--jobs` value, alternated; 1-minute load average {load_start:.2f} at the start, "
-          f"{load_end:.2f} at the end, {cpus} CPUs. Peak memory: the largest sum over the "
+          f"`--jobs` value, alternated; {describe_load(machine)}; {cpus} CPUs. Peak "
+          f"memory: the largest sum over the "
           f"command's processes.\n", walls.to_markdown(index=False, floatfmt=".3g"), ""]
     for j in variants:
         first = runs[j][0]
