@@ -16,9 +16,10 @@ relative of LAPACK's, ``benchmarks.local_solve``) one fit takes another path wit
 off, ``paper-20dB:5002`` (118 of 4,000 labels, |Δθ| 6.5e-4); the other 11 are the same to
 the bit.
 
-Writes results/submodels_exact.md. Usage::
+Writes results/submodels_exact.md (``--suffix``: results/submodels_exact<suffix>.md). Usage::
 
     python -m benchmarks.submodels_exact [--against ba13a41] [--fits paper-20dB:5000,robot]
+                                         [--suffix _65326d7]
 """
 
 import argparse
@@ -67,6 +68,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--against", default="ba13a41", help="the reference commit")
     parser.add_argument("--fits", default=FITS, help="comma-separated case:seed or robot")
+    parser.add_argument("--suffix", default="", help="written to submodels_exact<suffix>.md")
     parser.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -106,7 +108,7 @@ def main(argv=None) -> None:
             f"(default): this checkout's default against it.\n\n"
             + df.to_markdown(index=False, floatfmt=".3g") + "\n")
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "submodels_exact.md").write_text(text)
+    (RESULTS / f"submodels_exact{args.suffix}.md").write_text(text)
     print(text)
     if not exact:
         sys.exit(1)
