@@ -51,7 +51,6 @@ class MachineLoad:
                 "steal_share": delta[7] / max(sum(delta), 1)}
 
 
-
 def describe_load(load: dict) -> str:
     """A :meth:`MachineLoad.summary` in words."""
     return (f"1-minute load average {load['start']:.2f} at the start, {load['end']:.2f} at "

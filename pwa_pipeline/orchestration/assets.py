@@ -10,7 +10,6 @@ not: it ranks the stored scores of every partition. Methods come from
 :data:`pwa_pipeline.methods.METHODS`.
 """
 
-import pickle
 import time
 
 import dagster as dg
@@ -63,12 +62,9 @@ from .resources import MLflowTracker, PipelineSettings
 from .storage import (
     ALL_PARTITIONS,
     SignedMemory,
-    UnsignedFileError,
     cache_key,
     inside,
-    load_object,
-    save_object,
-    signing_key,
+    load_or_compute,
 )
 
 GROUP = "identification"
@@ -185,18 +181,9 @@ def _identification_assets(partitions_def) -> list:
                         **step.get_params())
         root = settings.cache_root()
         path = inside(root, "local_models", f"{key}.pkl")
-        local = None
-        if settings.cache_local_models and path.is_file():
-            try:
-                local = load_object(path, signing_key(root))
-            except (UnsignedFileError, pickle.UnpicklingError, EOFError, AttributeError) as exc:
-                context.log.warning(f"local-model cache entry {path} unusable ({exc}); "
-                                    f"recomputing it")
-        cached = local is not None
-        if not cached:
-            local = configuration.pwa.fit_step("local_models", regressors)
-            if settings.cache_local_models:
-                save_object(path, local, signing_key(root))
+        local, cached = load_or_compute(
+            path, root, lambda: configuration.pwa.fit_step("local_models", regressors),
+            context.log.warning, "local-model cache entry", settings.cache_local_models)
         context.log.info(
             f"local models: {local.n_estimated_:,} of {len(local.theta_):,} local sets of "
             f"n_rho = {local.n_rho_}{' from the cache' if cached else ''} "

@@ -28,7 +28,7 @@ import pickle
 import secrets
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import dagster as dg
@@ -216,6 +216,24 @@ def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:
     return h.hexdigest()[:24]
 
 
+def load_or_compute(path: Path, root: Path, compute: Callable[[], object],
+                    warn: Callable[[str], object], what: str = "cache entry",
+                    use: bool = True) -> tuple[object, bool]:
+    """The object signed at ``path`` in the store ``root`` and True; else ``compute()``,
+    saved there, and False. An entry without a valid signature, or unreadable, is recomputed
+    after ``warn`` names it (``"<what> <path> unusable (...)"``). ``use`` False: computed,
+    no file read or written."""
+    if use and path.is_file():
+        try:
+            return load_object(path, signing_key(root)), True
+        except (UnsignedFileError, pickle.UnpicklingError, EOFError, AttributeError) as exc:
+            warn(f"{what} {path} unusable ({exc}); recomputing it")
+    out = compute()
+    if use:
+        save_object(path, out, signing_key(root))
+    return out, False
+
+
 @functools.cache
 def core_fingerprint() -> str:
     """Hash of the numerical core's source (``pwa_pipeline/pwa`` and the modules it shares):
@@ -254,17 +272,9 @@ class SignedMemory:
             hashed = {k: v for k, v in bound.arguments.items() if k not in ignore}
             key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(), hashed))
             path = inside(self.root, self.folder, f"{key}.pkl")
-            if path.is_file():
-                try:
-                    out = load_object(path, signing_key(self.root))
-                    self.hits += 1
-                    return out
-                except (UnsignedFileError, pickle.UnpicklingError, EOFError,
-                        AttributeError) as exc:
-                    self.warn(f"cache entry {path} unusable ({exc}); recomputing it")
-            out = func(*args, **kwargs)
-            save_object(path, out, signing_key(self.root))
-            self.misses += 1
+            out, hit = load_or_compute(path, self.root, lambda: func(*args, **kwargs),
+                                       self.warn)
+            self.hits, self.misses = self.hits + hit, self.misses + (not hit)
             return out
 
         return cached
