@@ -660,3 +660,14 @@ def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
                                             "n_split_")] == [
             getattr(plain, a) for a in ("n_submodels_", "n_merged_", "n_iter_", "n_split_")]
     assert cached.memory == str(tmp_path)
+
+
+def test_a_memory_without_a_cache_method_is_refused_by_name():
+    """RefinedSubModels(memory=...) takes None, a folder or an object with cache()."""
+    from sklearn.utils._param_validation import InvalidParameterError
+
+    phi, target, local, absorbed = _four_percent_mode()
+    with pytest.raises(InvalidParameterError,
+                       match="'memory' parameter of RefinedSubModels must be None, an instance "
+                             "of 'str' or an object implementing 'cache'"):
+        RefinedSubModels(memory=3).fit(phi, target, local, absorbed, SVMRegions())
