@@ -24,7 +24,7 @@ SCRIPT = textwrap.dedent("""
                 time.sleep(0.01)
         print("completed", len(seen))
     except KeyboardInterrupt:
-        print("interrupted", len(seen), round(seen[1] - seen[0], 1))
+        print("interrupted", len(seen), seen[1] - seen[0])
 """)
 
 
@@ -34,7 +34,12 @@ def run(guard: str) -> str:
 
 
 def test_a_swallowed_interrupt_is_sent_again_after_the_grace():
-    assert run("interrupts_redelivered(grace=1.0)").split() == ["interrupted", "2", "1.0"]
+    outcome, signals, gap = run("interrupts_redelivered(grace=1.0)").split()
+    assert (outcome, signals) == ("interrupted", "2")
+    # at the grace (the first handler call may lag the signal by a few ms); later only by a
+    # busy machine's scheduling delay (CI on a VM losing CPU time measured 1.1 s twice),
+    # and well before the 6 s run would end on its own
+    assert 0.9 <= float(gap) < 2.0
 
 
 def test_without_it_the_run_goes_on():
