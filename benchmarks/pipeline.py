@@ -4,8 +4,9 @@
    the 'paper' and 'default' sets), in-process with dg.materialize, fresh stores.
 2. Two sweeps of 12 hyper-parameter sets that differ only in ε and MinPts: the simulated
    system in the paper setting (n_rho = 18), and the robot with the default (the sets of
-   benchmarks.sweep). Every asset of every set, once with the caches (local models and step
-   5, ``PipelineSettings.cache_local_models`` / ``cache_sub_models``) and once without; the
+   benchmarks.sweep). Every asset of every set, once with the caches (local models, step 5
+   and the baselines, ``PipelineSettings.cache_local_models`` / ``cache_sub_models`` /
+   ``cache_baselines``) and once without; the
    saving is the difference, and each asset's median seconds over the sets are reported.
    A set whose ε / MinPts leave DBSCAN without a cluster fails at `clusters` (as it should)
    and is timed all the same. The sweep's sets are a temporary hyper-parameter file, with
@@ -44,7 +45,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
     resources = {
         "io_manager": PartitionedFileIOManager(base_dir=str(tmp / "storage")),
         "settings": PipelineSettings(cache_dir=str(tmp / "cache"), cache_local_models=cache,
-                                     cache_sub_models=cache,
+                                     cache_sub_models=cache, cache_baselines=cache,
                                      hparams_path=defs.resources["settings"].hparams_path,
                                      datasets_path=defs.resources["settings"].datasets_path),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),

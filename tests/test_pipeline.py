@@ -235,6 +235,41 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
     assert len(list(cache.glob("*.pkl"))) == 1
 
 
+def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_path):
+    """Three sets of one data set: the second differs only in ε and takes both baselines from
+    the cache; the third's orders (na = nb = 2) change the linear ARX baseline, which is then
+    fitted, but not the subspace one. Without the cache, nothing is read or written."""
+    path = tmp_path / "sets.toml"
+    path.write_text("".join(f"[set_{i}.hure_vasak]\npreset = \"default\"\nna = {n}\nnb = {n}\n"
+                            f"clustering.eps = {eps}\n"
+                            for i, (n, eps) in enumerate(((1, 0.22), (1, 0.25), (2, 0.25)))))
+    sweep = build_definitions(path)
+    names = ("linear_arx_model", "subspace_model")
+    steps = [a for a in sweep.assets
+             if a.key.to_user_string() in ("configuration", "raw_benchmark", *names)]
+    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
+    runs = [dg.materialize(steps, partition_key=f"hure_vasak|set_{i}", resources=resources)
+            for i in range(3)]
+    cached = {n: [r.asset_materializations_for_node(n)[0].metadata["from_cache"].value
+                  for r in runs] for n in names}
+    assert cached == {"linear_arx_model": [False, True, False],
+                      "subspace_model": [False, True, True]}
+    for n in names:  # the model the first set fitted, every fitted attribute equal
+        first, reused = (vars(r.output_for_node(n)) for r in runs[:2])
+        np.testing.assert_equal(reused, first)
+        assert runs[1].output_for_node(n) is not runs[0].output_for_node(n)
+    assert runs[2].output_for_node("linear_arx_model").na == 2
+    assert len(list((tmp_path / "cache" / "baselines").glob("*.pkl"))) == 3
+
+    resources["settings"] = PipelineSettings(
+        cache_dir=str(tmp_path / "uncached"), cache_baselines=False,
+        hparams_path=str(path), datasets_path=str(tmp_path / "datasets.json"))
+    run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
+    assert not any(run.asset_materializations_for_node(n)[0].metadata["from_cache"].value
+                   for n in names)
+    assert not (tmp_path / "uncached").exists()
+
+
 def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, tmp_path):
     resources["mlflow"] = MLflowTracker(tracking_uri="http://127.0.0.1:9", timeout_seconds=1)
     result = dg.materialize(ASSETS, partition_key="hure_vasak|paper", resources=resources,

@@ -359,18 +359,30 @@ def _structured_model(context: dg.AssetExecutionContext, configuration: Configur
     return model
 
 
+def _fitted(estimator: BaseEstimator, u: list, y: list) -> BaseEstimator:
+    """A clone of ``estimator`` fitted on the experiments ``u``, ``y`` (what the baseline
+    assets cache)."""
+    return clone(estimator).fit(u, y)
+
+
 def _baseline_model_asset(method: Method, partitions_def):
     @dg.asset(name=f"{method.name}_model", partitions_def=partitions_def, group_name="models",
               kinds={"scikit-learn"},
-              description=f"The fitted {method.label} model, on the training experiments.")
-    def model(context: dg.AssetExecutionContext, configuration: Configuration,
-              raw_benchmark: Dataset) -> BaseEstimator:
+              description=f"The fitted {method.label} model, on the training experiments; "
+                          f"cached across the sets of a data set (``cache_baselines``), "
+                          f"whose baseline settings are usually the same.")
+    def model(context: dg.AssetExecutionContext, settings: PipelineSettings,
+              configuration: Configuration, raw_benchmark: Dataset) -> BaseEstimator:
         t0 = time.perf_counter()
-        fitted = clone(configuration.estimators[method.name]).fit(raw_benchmark.u_train,
-                                                                  raw_benchmark.y_train)
-        context.log.info(f"{method.label}: fitted in {time.perf_counter() - t0:.1f} s")
+        memory = SignedMemory(settings.cache_root(), "baselines", warn=context.log.warning)
+        fit = memory.cache(_fitted) if settings.cache_baselines else _fitted
+        fitted = fit(configuration.estimators[method.name], raw_benchmark.u_train,
+                     raw_benchmark.y_train)
+        cached = memory.hits > 0
+        context.log.info(f"{method.label}: {'from the cache' if cached else 'fitted'} in "
+                         f"{time.perf_counter() - t0:.1f} s")
         context.add_output_metadata(rounded({
-            "fit_seconds": time.perf_counter() - t0,
+            "fit_seconds": time.perf_counter() - t0, "from_cache": cached,
             "resolved parameters": markdown(params_table(fitted.resolved_params()))}))
         return fitted
 

@@ -76,12 +76,15 @@ class PipelineSettings(dg.ConfigurableResource):
         ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
         ``<project>/storage/datasets.json``.
     cache_dir : str
-        Cache of local models and of step 5; empty: ``<project>/storage/cache``.
+        Cache of local models, of step 5 and of the baselines; empty: ``<project>/storage/cache``.
     cache_local_models : bool
         Reuse local models across hyper-parameter sets that differ only in later steps.
     cache_sub_models : bool
         Reuse step 5's refinement (``RefinedSubModels(memory=...)``) across sets whose
         clusterings consolidate to the same sub-models (e.g. sets that differ only in ε).
+    cache_baselines : bool
+        Reuse the fitted baselines across the sets of a data set with the same baseline
+        settings.
     """
 
     kuka_path: str = ""
@@ -90,6 +93,7 @@ class PipelineSettings(dg.ConfigurableResource):
     cache_dir: str = ""
     cache_local_models: bool = True
     cache_sub_models: bool = True
+    cache_baselines: bool = True
 
     def with_files(self, hparams_path: str | os.PathLike,
                    datasets_path: str | os.PathLike) -> "PipelineSettings":
@@ -123,7 +127,7 @@ class PipelineSettings(dg.ConfigurableResource):
         return self.hparams().configuration(hparams, dataset, orders)
 
     def cache_root(self) -> Path:
-        """The cache folder (local models, step 5)."""
+        """The cache folder (local models, step 5, baselines)."""
         return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"
 
 

@@ -236,11 +236,14 @@ def load_or_compute(path: Path, root: Path, compute: Callable[[], object],
 
 @functools.cache
 def core_fingerprint() -> str:
-    """Hash of the numerical core's source (``pwa_pipeline/pwa`` and the modules it shares):
-    part of every cache key, so that entries computed by other code are never loaded."""
+    """Hash of the numerical core's source (the packages ``pwa``, ``baselines`` and
+    ``scoring`` of ``pwa_pipeline``, and the modules they share): part of every cache key, so
+    that entries computed by other code are never loaded."""
     package = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
-    for path in sorted([*package.glob("_*.py"), *(package / "pwa").glob("*.py")]):
+    for path in sorted([*package.glob("_*.py"),
+                        *(p for sub in ("pwa", "baselines", "scoring")
+                          for p in (package / sub).glob("*.py"))]):
         h.update(path.name.encode())
         h.update(path.read_bytes())
     return h.hexdigest()[:16]
