@@ -109,6 +109,26 @@ def test_diverged_free_run_is_clipped_marked_and_labelled(fit):
     assert "inf" in fig.axes[1].get_title(loc="left")
 
 
+def _legend_texts(fig):
+    assert all(ax.get_legend() is None for ax in fig.axes)  # one legend, the figure's
+    (legend,) = fig.legends
+    return [t.get_text() for t in legend.get_texts()]
+
+
+def test_prediction_figure_has_one_legend_of_what_any_output_draws(fit):
+    fig = prediction_figure(fit.data, fit.ev, "t", WARMUP)
+    assert _legend_texts(fig) == ["warm-up", "measured", "one-step", "free run"]
+    # output 1 diverges (clipped, shaded), output 2 is NaN: each entry once, in drawn order
+    diverged = _diverged(fit, flagged=False)
+    assert _legend_texts(prediction_figure(fit.data, diverged, "t", WARMUP)) == [
+        "warm-up", "measured", "one-step", "free run (clipped)", "free run out of range",
+        "free run (diverged, clipped)", "diverged free run out of range"]
+    to_png(fig)  # laid out: the legend right of every axes, inside the figure
+    box = fig.legends[0].get_window_extent()
+    assert box.x0 >= max(ax.get_window_extent().x1 for ax in fig.axes)
+    assert box.x1 <= fig.bbox.x1
+
+
 def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
     fig = prediction_figure(fit.data, _diverged(fit, flagged=False), "t", WARMUP)
     ax1, ax2 = fig.axes

@@ -55,9 +55,15 @@ def _figure(width: float, height: float) -> Figure:
     return Figure(figsize=(width, height), layout="constrained")
 
 
-def _legend_right(ax: Axes) -> None:
-    """Legend outside the axes, on the right, so that it never covers data."""
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+def _legend_right(fig: Figure) -> None:
+    """One legend for every axes of ``fig`` (each label once, in the order first drawn),
+    outside them on the upper right, so that it never covers data."""
+    entries: dict[str, object] = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    fig.legend(list(entries.values()), list(entries), loc="outside right upper", fontsize=8,
+               frameon=False)
 
 
 def clip_range(measured: np.ndarray) -> tuple[float, float]:
@@ -87,7 +93,8 @@ def _free_run(ax: Axes, k: np.ndarray, free: np.ndarray, measured: np.ndarray,
             label="free run (diverged, clipped)" if diverged else "free run (clipped)")
     if out.any():
         ax.fill_between(k, 0, 1, where=out, transform=ax.get_xaxis_transform(), step="mid",
-                        color=colour, alpha=0.10, lw=0, label="free run out of range")
+                        color=colour, alpha=0.10, lw=0,
+                        label=f"{'diverged ' if diverged else ''}free run out of range")
         exits = out & ~np.r_[False, out[:-1]]
         for side, edge, marker in ((above, hi, "^"), (below, lo, "v")):
             at = exits & side
@@ -108,7 +115,8 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, title: str,
     or with non-finite values, is drawn in red as "free run (diverged, clipped)": clipped to
     the measured range ± 50 % of its span, the line stops at the edge where the run leaves
     that range (a triangle marks each exit, the time outside is shaded) instead of lying flat
-    on the clip value. The warm-up window, excluded from the scores, is shaded grey.
+    on the clip value. The warm-up window, excluded from the scores, is shaded grey. One
+    legend on the right lists what any subplot draws.
 
     Parameters
     ----------
@@ -149,7 +157,7 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, title: str,
                      fontsize=9, loc="left")
         ax.set_ylabel(data.y_names[j])
         ax.set_xlim(0, n - 1)
-        _legend_right(ax)
+    _legend_right(fig)
     axes[-1].set_xlabel("sample k of the first held-out experiment")
     fig.suptitle(title)
     return fig
