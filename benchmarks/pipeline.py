@@ -8,6 +8,8 @@
    and the baselines, ``PipelineSettings.cache_local_models`` / ``cache_sub_models`` /
    ``cache_baselines``) and once without; the
    saving is the difference, and each asset's median seconds over the sets are reported.
+   Each run's row also gives the MB it added to the asset store, MLflow's artifact store
+   (the figures, tables and logged models of its three runs) and the caches.
    A set whose ε / MinPts leave DBSCAN without a cluster fails at `clusters` (as it should)
    and is timed all the same. The sweep's sets are a temporary hyper-parameter file, with
    definitions built for it (pwa_pipeline.orchestration.definitions.build_definitions).
@@ -39,6 +41,11 @@ EPS = (0.1, 0.15, 0.2, 0.3)
 MIN_PTS = (10, 15, 20)
 
 
+def _megabytes(folder: Path) -> float:
+    """What the files below ``folder`` take, in MB."""
+    return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6
+
+
 def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) -> list[dict]:
     # create the MLflow store first: its one-off migration is not the pipeline's cost
     MlflowClient(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}").search_experiments()
@@ -53,7 +60,10 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
     instance = dg.DagsterInstance.ephemeral()
     quiet = {"loggers": {"console": {"config": {"log_level": "ERROR"}}}}
     rows = []
+    stores = {"storage": tmp / "storage", "mlflow_artifacts": tmp / "mlartifacts",
+              "cache": tmp / "cache"}
     for key in keys:
+        before = {name: _megabytes(folder) for name, folder in stores.items()}
         with Timer() as t:
             result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
                                     selection=SWEEP_SELECTION, instance=instance,
@@ -64,6 +74,8 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
                      "local_models_seconds": local["seconds"].value,
                      "from_cache": local["from_cache"].value,
                      "step_5_from_cache": bool(subs and subs[0].metadata["from_cache"].value),
+                     **{f"{name}_mb_added": _megabytes(folder) - before[name]
+                        for name, folder in stores.items()},
                      "assets": {e.step_key: e.event_specific_data.duration_ms / 1000
                                 for e in result.get_step_success_events()}})
     return rows
@@ -112,7 +124,9 @@ def summarise(runs: dict) -> dict:
                          "median_run_seconds": statistics.median(r["seconds"] for r in rows),
                          "local_models_seconds": sum(r["local_models_seconds"] for r in rows),
                          "runs_local_models_from_cache": sum(r["from_cache"] for r in rows),
-                         "runs_step_5_from_cache": sum(r["step_5_from_cache"] for r in rows)}
+                         "runs_step_5_from_cache": sum(r["step_5_from_cache"] for r in rows),
+                         **{f"{store}_mb": sum(r[f"{store}_mb_added"] for r in rows)
+                            for store in ("storage", "mlflow_artifacts", "cache")}}
     saved = summary["without_cache"]["total_seconds"] - summary["with_cache"]["total_seconds"]
     summary["speed_up"] = (summary["without_cache"]["total_seconds"]
                            / summary["with_cache"]["total_seconds"])

@@ -199,6 +199,31 @@ def test_a_tiled_record_draws_the_subset_of_the_record_once():
     np.testing.assert_array_equal(tiled.neighbours_[rows, 0], rows)
 
 
+def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
+    """Stored and cached steps (the pipeline's assets and caches, MLflow's model) hold only
+    the rows of the estimated samples; loading restores every array as fitted."""
+    import copy
+    import pickle
+
+    rng = np.random.default_rng(5)
+    phi = np.tile(rng.normal(size=(600, 4)), (2, 1))  # a repeated record: copies too
+    target = np.tanh(phi[:, :2])
+    some = LocalLeastSquares(n_rho=12, max_sets=60).fit(phi, target)
+    every = LocalLeastSquares(n_rho=12, max_sets=None).fit(phi, target)
+    sizes = {}
+    for name, step in (("some", some), ("every", every)):
+        data = pickle.dumps(step, protocol=5)
+        sizes[name] = len(data)
+        for back in (pickle.loads(data), copy.deepcopy(step)):
+            assert set(vars(back)) == set(vars(step))
+            np.testing.assert_equal(vars(back), vars(step))  # NaN, −1 and dtypes as fitted
+            assert all(getattr(back, a).dtype == getattr(step, a).dtype
+                       for a in ("theta_", "neighbours_", "residual_var_"))
+    # 120 of 1,200 samples estimated: under a fifth of the room of every local model (the
+    # per-sample flags and originals stay whole)
+    assert sizes["some"] < 0.2 * sizes["every"]
+
+
 def test_the_paper_setting_estimates_every_local_model():
     from pwa_pipeline import PWARX
 
