@@ -5,9 +5,12 @@ with pwa-pipeline installed gives back the simulator of a logged run. Its input 
 with the model's input columns and output columns; the outputs are given on the leading
 warm-up rows (at least what the model needs, e.g. max(na, nb)) and empty (NaN) after. Its
 output is the table of output columns: the warm-up rows as given, then the free-run
-simulation (the same numbers as the model's ``simulate``).
+simulation (the same numbers as the model's ``simulate``). The logged PWARX keeps what
+simulation needs (θ_i, the regions, the orders); the record of its fit (local models,
+clusters, step 5, the rows' labels) stays in the ``pwa_model`` asset.
 """
 
+import copy
 from dataclasses import dataclass
 
 import mlflow.pyfunc
@@ -16,6 +19,9 @@ import pandas as pd
 
 _SCHEMA_ROWS = 100
 """Rows of the training table from which its MLflow schema is inferred."""
+_FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_")
+"""Fitted attributes of a PWARX that record its fit and play no part in ``simulate``: left
+out of the pickled :class:`Simulator` (the robot's paper setting: 69 MB of local models)."""
 
 
 class Simulator(mlflow.pyfunc.PythonModel):
@@ -32,6 +38,13 @@ class Simulator(mlflow.pyfunc.PythonModel):
         self.model = model
         self.u_names = list(u_names)
         self.y_names = list(y_names)
+
+    def __getstate__(self) -> dict:
+        """The state MLflow pickles: the model without the record of its fit."""
+        model = copy.copy(self.model)
+        for name in _FIT_RECORD:
+            model.__dict__.pop(name, None)
+        return {**self.__dict__, "model": model}
 
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
         """Simulate from the warm-up rows of ``model_input``.
