@@ -23,8 +23,9 @@ the Dagster event log of its home:
 
 Runs at once overlap: each partition's row says when it started after the first one.
 
-Writes results/first_command.json and results/first_command.md; the last line printed is a
-summary. Usage: python -m benchmarks.first_command [--repeats 1] [--jobs 2,1]
+Writes results/first_command.json and results/first_command.md (``--suffix S``:
+results/first_command<S>.json and .md); the last line printed is a summary.
+Usage: python -m benchmarks.first_command [--repeats 1] [--jobs 2,1] [--suffix S]
 """
 
 import argparse
@@ -125,6 +126,8 @@ def split(dagster_home: Path, start: float, end: float) -> dict:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--suffix", default="",
+                        help="written to first_command<suffix>.json and .md")
     parser.add_argument("--jobs", default="2,1",
                         help="comma-separated --jobs values of the command, alternated "
                              "(default 2,1; the first is the one the summary quotes)")
@@ -143,7 +146,7 @@ def main(argv=None) -> None:
     cpus = len(os.sched_getaffinity(0))
     write_json({"machine_load": machine, "cpus": cpus,
                 "repeats": args.repeats, "runs": {str(j): r for j, r in runs.items()}},
-               "first_command")
+               f"first_command{args.suffix}")
     wall = {j: statistics.median(r["wall_seconds"] for r in runs[j]) for j in variants}
     ref = variants[-1]
     walls = pd.DataFrame([{
@@ -176,7 +179,7 @@ def main(argv=None) -> None:
                "Per partition (seconds; scoring includes the MLflow logging with model "
                "registration; partitions run at once overlap):\n",
                table.to_markdown(floatfmt=".3g"), ""]
-    (RESULTS / "first_command.md").write_text("\n".join(md + [summary]) + "\n")
+    (RESULTS / f"first_command{args.suffix}.md").write_text("\n".join(md + [summary]) + "\n")
     print(summary)
 
 
