@@ -24,7 +24,6 @@ _CONSTANT = "every regressor column is constant (the data do not vary): no local
 _UNESTIMATED = {"neighbours_": -1, "theta_": np.nan, "residual_var_": np.nan}
 """The per-sample arrays of :class:`LocalLeastSquares`, and their value on the samples whose
 local model was not estimated; a pickle keeps only the estimated samples' rows."""
-_ESTIMATED_ROWS_ONLY = "_estimated_rows_only"
 
 
 def check_n_rho(n_rho: int, d: int) -> None:
@@ -323,11 +322,10 @@ class LocalLeastSquares(BaseEstimator):
         estimated = state.get("estimated_")
         if estimated is None or estimated.all():
             return state
-        return {**state, **{name: state[name][estimated] for name in _UNESTIMATED},
-                _ESTIMATED_ROWS_ONLY: True}
+        return {**state, **{name: state[name][estimated] for name in _UNESTIMATED}}
 
     def __setstate__(self, state: dict) -> None:
-        if state.pop(_ESTIMATED_ROWS_ONLY, False):
+        if "theta_" in state and len(state["theta_"]) < len(state["estimated_"]):
             rows = np.flatnonzero(state["estimated_"])
             n = len(state["estimated_"])
             state = {**state, **{name: _spread(state[name], rows, n, fill)
