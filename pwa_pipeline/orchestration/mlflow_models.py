@@ -19,9 +19,6 @@ import pandas as pd
 
 _SCHEMA_ROWS = 100
 """Rows of the training table from which its MLflow schema is inferred."""
-_FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_")
-"""Fitted attributes of a PWARX that record its fit and play no part in ``simulate``: left
-out of the pickled :class:`Simulator` (the robot's paper setting: 69 MB of local models)."""
 
 
 class Simulator(mlflow.pyfunc.PythonModel):
@@ -40,9 +37,11 @@ class Simulator(mlflow.pyfunc.PythonModel):
         self.y_names = list(y_names)
 
     def __getstate__(self) -> dict:
-        """The state MLflow pickles: the model without the record of its fit."""
+        """The state MLflow pickles: the model without the record of its fit
+        (:attr:`PWARX.FIT_RECORD <pwa_pipeline.pwa.PWARX.FIT_RECORD>`; the robot's paper
+        setting: 69 MB of local models)."""
         model = copy.copy(self.model)
-        for name in _FIT_RECORD:
+        for name in getattr(model, "FIT_RECORD", ()):
             model.__dict__.pop(name, None)
         return {**self.__dict__, "model": model}
 

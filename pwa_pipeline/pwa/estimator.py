@@ -121,6 +121,10 @@ class PWARX(ARXModelBase):
     0.2
     """
 
+    FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_")
+    """Fitted attributes that record the fit (steps 2–5, the rows' labels): ``predict`` and
+    ``simulate`` use none of them (``thetas_`` and ``regions_`` make the model)."""
+
     _parameter_constraints: dict = {
         "na": [Interval(Integral, 0, None, closed="left")],
         "nb": [Interval(Integral, 0, None, closed="left")],
