@@ -316,8 +316,9 @@ class LocalLeastSquares(BaseEstimator):
     def __getstate__(self) -> dict:
         """The state to pickle: ``theta_``, ``neighbours_`` and ``residual_var_`` only on the
         estimated samples when some were not (their other rows hold no information), so a
-        stored or cached step takes about ``max_sets``/n of the room (the robot's default:
-        9 MB instead of 74 MB); :meth:`__setstate__` restores the same arrays."""
+        stored or cached step takes about ``max_sets``/n of the room (a robot partition with
+        the default adds about 10 MB to the caches, ``benchmarks/results/pipeline.md``);
+        :meth:`__setstate__` restores the same arrays."""
         state = super().__getstate__()
         estimated = state.get("estimated_")
         if estimated is None or estimated.all():
