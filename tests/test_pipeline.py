@@ -236,37 +236,82 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
 
 
 def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_path):
-    """Three sets of one data set: the second differs only in ε and takes both baselines from
-    the cache; the third's orders (na = nb = 2) change the linear ARX baseline, which is then
-    fitted, but not the subspace one. Without the cache, nothing is read or written."""
+    """Three sets of one data set: the second differs only in ε and takes both baselines, and
+    their scores and figures, from the cache; the third's orders (na = nb = 2) change the
+    linear ARX baseline, which is then fitted and scored, but not the subspace one. MLflow
+    gets a run for every set and method, but each distinct model is logged and registered
+    once. Without the cache, nothing is read or written."""
     path = tmp_path / "sets.toml"
     path.write_text("".join(f"[set_{i}.hure_vasak]\npreset = \"default\"\nna = {n}\nnb = {n}\n"
                             f"clustering.eps = {eps}\n"
                             for i, (n, eps) in enumerate(((1, 0.22), (1, 0.25), (2, 0.25)))))
     sweep = build_definitions(path)
     names = ("linear_arx_model", "subspace_model")
+    scores = ("linear_arx_scores", "subspace_scores")
     steps = [a for a in sweep.assets
-             if a.key.to_user_string() in ("configuration", "raw_benchmark", *names)]
+             if a.key.to_user_string() in ("configuration", "raw_benchmark", *names, *scores)]
     resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
     runs = [dg.materialize(steps, partition_key=f"hure_vasak|set_{i}", resources=resources)
             for i in range(3)]
-    cached = {n: [r.asset_materializations_for_node(n)[0].metadata["from_cache"].value
-                  for r in runs] for n in names}
+
+    def metadata(run, node: str, key: str):
+        return run.asset_materializations_for_node(node)[0].metadata[key].value
+
+    cached = {n: [metadata(r, n, "from_cache") for r in runs] for n in names}
     assert cached == {"linear_arx_model": [False, True, False],
                       "subspace_model": [False, True, True]}
+    scored = {n: [metadata(r, n, "scores_from_cache") for r in runs] for n in scores}
+    assert scored == {"linear_arx_scores": [False, True, False],
+                      "subspace_scores": [False, True, True]}
     for n in names:  # the model the first set fitted, every fitted attribute equal
         first, reused = (vars(r.output_for_node(n)) for r in runs[:2])
         np.testing.assert_equal(reused, first)
         assert runs[1].output_for_node(n) is not runs[0].output_for_node(n)
+    for n in scores:
+        pd.testing.assert_frame_equal(runs[1].output_for_node(n), runs[0].output_for_node(n))
+        # the figure is the model's, titled by data set (the same for every set sharing it)
+        assert (metadata(runs[1], n, "prediction") == metadata(runs[0], n, "prediction")
+                and "| hure_vasak](data:image/png" in metadata(runs[0], n, "prediction"))
     assert runs[2].output_for_node("linear_arx_model").na == 2
-    assert len(list((tmp_path / "cache" / "baselines").glob("*.pkl"))) == 3
+    assert not runs[2].output_for_node("linear_arx_scores").equals(
+        runs[0].output_for_node("linear_arx_scores"))
+    for folder in ("baselines", "baseline_scores"):
+        assert len(list((tmp_path / "cache" / folder).glob("*.pkl"))) == 3
+
+    client, tracked = _runs(resources, "hure_vasak")
+    run_ids = {(r.data.tags["method"], r.data.tags["hparams"]): r.info.run_id for r in tracked}
+    logged_by = {(r.data.tags["method"], r.data.tags["hparams"]): r.data.tags["model_run_id"]
+                 for r in tracked}
+    assert logged_by == {
+        ("linear_arx", "set_0"): run_ids["linear_arx", "set_0"],
+        ("linear_arx", "set_1"): run_ids["linear_arx", "set_0"],
+        ("linear_arx", "set_2"): run_ids["linear_arx", "set_2"],
+        **{("subspace", f"set_{i}"): run_ids["subspace", "set_0"] for i in range(3)}}
+    versions = {m: [v.run_id for v in client.search_model_versions(
+        f"name = 'pwa-pipeline.hure_vasak.{m}'")] for m in ("linear_arx", "subspace")}
+    assert sorted(versions["linear_arx"]) == sorted([run_ids["linear_arx", "set_0"],
+                                                     run_ids["linear_arx", "set_2"]])
+    assert versions["subspace"] == [run_ids["subspace", "set_0"]]
+    reused = client.get_run(run_ids["subspace", "set_1"]).data.tags
+    assert reused["model_uri"] == client.get_run(run_ids["subspace", "set_0"]).data.tags[
+        "model_uri"]
+    data = runs[1].output_for_node("raw_benchmark")
+    table = pd.concat([pd.DataFrame(data.u_test[0][:30], columns=data.u_names),
+                       pd.DataFrame(data.y_test[0][:30], columns=data.y_names)], axis=1)
+    table.loc[5:, data.y_names] = np.nan
+    np.testing.assert_allclose(  # the model its URI names is set_1's subspace model
+        mlflow.pyfunc.load_model(reused["model_uri"]).predict(table).to_numpy()[5:],
+        runs[1].output_for_node("subspace_model").simulate(data.u_test[0][:30],
+                                                           data.y_test[0][:5])[5:])
 
     resources["settings"] = PipelineSettings(
         cache_dir=str(tmp_path / "uncached"), cache_baselines=False,
         hparams_path=str(path), datasets_path=str(tmp_path / "datasets.json"))
     run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
-    assert not any(run.asset_materializations_for_node(n)[0].metadata["from_cache"].value
-                   for n in names)
+    assert not any(metadata(run, n, "from_cache") for n in names)
+    assert not any(metadata(run, n, "scores_from_cache") for n in scores)
+    pd.testing.assert_frame_equal(run.output_for_node("subspace_scores"),
+                                  runs[1].output_for_node("subspace_scores"))
     assert not (tmp_path / "uncached").exists()
 
 

@@ -25,7 +25,7 @@ from ..pwa import PWARX, STEPS
 from ..pwa.regressors import Regressors, build_regressors, regressor_names
 from ..scoring.comparison import leaderboard as leaderboard_table
 from ..scoring.comparison import mean_scores
-from ..scoring.evaluation import evaluate
+from ..scoring.evaluation import Evaluation, evaluate
 from ..scoring.truth import ground_truth_scores
 from .checks import (
     CLUSTER_CHECKS,
@@ -41,6 +41,7 @@ from .figures import (
     prediction_figure,
     regions_figure,
     switching_figure,
+    png_markdown,
     to_markdown,
     to_png,
 )
@@ -389,20 +390,35 @@ def _baseline_model_asset(method: Method, partitions_def):
     return model
 
 
+def _scored(model, data: Dataset, warmup: int, title: str) -> tuple[Evaluation, bytes]:
+    """``model`` scored on ``data``'s held-out experiments by the evaluation protocol, and
+    its prediction figure rendered as PNG (what the scores assets cache for a baseline)."""
+    ev = evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
+    return ev, to_png(prediction_figure(data, ev, title, warmup))
+
+
 def _scores_asset(method: Method, partitions_def):
     @dg.asset(name=f"{method.name}_scores", partitions_def=partitions_def, group_name="scores",
               kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model")},
               description=f"The {method.label} model scored on held-out data by the "
-                          f"evaluation protocol (one-step and free run), tracked in MLflow.")
+                          f"evaluation protocol (one-step and free run), tracked in MLflow"
+                          + ("." if method.name == "pwa" else
+                             "; the scores and figure cached with the model "
+                             "(``cache_baselines``), the same for every set that shares it."))
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
-               configuration: Configuration, raw_benchmark: Dataset, model) -> pd.DataFrame:
+               settings: PipelineSettings, configuration: Configuration,
+               raw_benchmark: Dataset, model) -> pd.DataFrame:
         data = raw_benchmark
-        ev = evaluate(model, data.u_test, data.y_test, warmup=configuration.warmup,
-                      output_names=data.y_names)
+        dataset, hparams = split_key(context.partition_key)
+        # a baseline's model, scores and figure are the same for every set sharing it
+        baseline = method.name != "pwa"
+        title = f"{method.label} | {dataset if baseline else context.partition_key}"
+        memory = SignedMemory(settings.cache_root(), "baseline_scores", warn=context.log.warning)
+        score = memory.cache(_scored) if baseline and settings.cache_baselines else _scored
+        ev, png = score(model, data, configuration.warmup, title)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
         fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")
-        dataset, hparams = split_key(context.partition_key)
         extra_metrics, artifacts = {"fit_seconds": fit_seconds}, {}
         if isinstance(model, PWARX) and model.structured:
             extra_metrics.update(n_submodels=model.n_submodels_)
@@ -420,9 +436,6 @@ def _scores_asset(method: Method, partitions_def):
             artifacts["parameter_matrices.json"] = {
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
                 "outputs": data.y_names}
-        figure = prediction_figure(data, ev, f"{method.label} | {context.partition_key}",
-                                   configuration.warmup)
-        png = to_png(figure)  # rendered once, for MLflow and for the asset page
         t0 = time.perf_counter()
         run_id = mlflow.log_run(
             dataset=dataset, hparams=hparams, method=method.name,
@@ -437,7 +450,8 @@ def _scores_asset(method: Method, partitions_def):
                 training=training_table(data)))
         log_seconds = time.perf_counter() - t0
         context.add_output_metadata(rounded({
-            "prediction": dg.MetadataValue.md(to_markdown(figure, png=png)),
+            "prediction": dg.MetadataValue.md(png_markdown(png, title)),
+            "scores_from_cache": memory.hits > 0,
             "mlflow_run_id": run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run_id)),
             "mlflow_log_seconds": log_seconds,
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))

@@ -446,24 +446,22 @@ def to_png(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> b
         dpi *= 0.75
 
 
-def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000,
-                png: bytes | None = None) -> str:
+def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> str:
     """The figure as a Markdown image with the PNG inlined (base64), for
-    ``dagster.MetadataValue.md``.
+    ``dagster.MetadataValue.md``: :func:`png_markdown` of its :func:`to_png`, the suptitle as
+    alternative text.
 
     Parameters
     ----------
     fig : Figure
     width, max_bytes
         As in :func:`to_png`.
-    png : bytes, optional
-        The figure's :func:`to_png`, if already rendered (rendering is the cost).
-
-    Returns
-    -------
-    str
-        ``![<suptitle>](data:image/png;base64,...)``.
     """
-    png = to_png(fig, width, max_bytes) if png is None else png
-    alt = " ".join((fig.get_suptitle() or "figure").replace("[", "(").replace("]", ")").split())
+    return png_markdown(to_png(fig, width, max_bytes), fig.get_suptitle() or "figure")
+
+
+def png_markdown(png: bytes, alt: str) -> str:
+    """A rendered PNG as a Markdown image inlined in base64:
+    ``![<alt>](data:image/png;base64,...)`` (brackets in ``alt`` made parentheses)."""
+    alt = " ".join(alt.replace("[", "(").replace("]", ")").split())
     return f"![{alt}](data:image/png;base64,{base64.b64encode(png).decode('ascii')})"

@@ -13,6 +13,7 @@ clusters, step 5, the rows' labels) stays in the ``pwa_model`` asset.
 import copy
 from dataclasses import dataclass
 
+import joblib
 import mlflow.pyfunc
 import numpy as np
 import pandas as pd
@@ -85,6 +86,12 @@ class ModelToLog:
     simulator: Simulator
     input_example: pd.DataFrame
     training: pd.DataFrame
+
+    def fingerprint(self) -> str:
+        """Hash of what is logged as the model (the simulator's state: the fitted model
+        without the record of its fit, and the column names); equal fingerprints simulate
+        alike, so that a model is logged once however many runs score it."""
+        return joblib.hash(self.simulator.__getstate__())
 
     def dataset(self) -> "mlflow.data.pandas_dataset.PandasDataset":
         """The training table as an MLflow dataset, its schema taken from the first rows.

@@ -261,7 +261,21 @@ class MLflowTracker(dg.ConfigurableResource):
                 client.set_tag(run.info.run_id, "latest", "false")
         client.set_tag(run_id, "latest", "true")
 
-    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog") -> None:
+    @staticmethod
+    def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
+        """The ``model_uri`` and ``model_run_id`` tags of a finished run of ``method`` that
+        logged or reused a model with this :meth:`~.mlflow_models.ModelToLog.fingerprint`,
+        or None."""
+        for run in client.search_runs(
+                [exp_id], max_results=1,
+                filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
+                              f"and tags.model_fingerprint = '{fingerprint}'"):
+            if {"model_uri", "model_run_id"} <= run.data.tags.keys():
+                return {k: run.data.tags[k] for k in ("model_uri", "model_run_id")}
+        return None
+
+    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog") -> str:
+        """Log and register ``model`` in the run; returns its model URI."""
         import mlflow
         from mlflow.models import infer_signature
 
@@ -274,7 +288,7 @@ class MLflowTracker(dg.ConfigurableResource):
         try:
             with mlflow.start_run(run_id=run_id):
                 mlflow.log_input(model.dataset(), context="training")
-                mlflow.pyfunc.log_model(
+                info = mlflow.pyfunc.log_model(
                     name="model", python_model=model.simulator,
                     signature=infer_signature(model.input_example, output),
                     input_example=model.input_example, registered_model_name=registered_name,
@@ -282,6 +296,7 @@ class MLflowTracker(dg.ConfigurableResource):
                     pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
         finally:
             pyfunc_log.setLevel(level)
+        return info.model_uri
 
     def run_url(self, run_id: str) -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
@@ -309,8 +324,12 @@ class MLflowTracker(dg.ConfigurableResource):
         ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
         matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are).
         ``model`` is logged as the run's MLflow model (a pyfunc with signature and input
-        example, registered as
-        ``<prefix>.<dataset>.<method>``) and its training table as the run's dataset.
+        example, registered as ``<prefix>.<dataset>.<method>``) and its training table as the
+        run's dataset, unless a finished run of the method in the data set's experiment has
+        the same model (equal :meth:`~.mlflow_models.ModelToLog.fingerprint`, e.g. a baseline
+        shared by the sets of a sweep): then it is not logged or registered again. Either way
+        the run is tagged ``model_uri`` (where the model is), ``model_run_id`` (the run that
+        logged it) and ``model_fingerprint``.
         ``run_name`` defaults to ``<method>|<hparams>``.
         """
         from mlflow.entities import Metric, Param, RunTag
@@ -345,7 +364,13 @@ class MLflowTracker(dg.ConfigurableResource):
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             if model is not None:
-                self._log_model(run_id, f"{self.experiment_prefix}.{dataset}.{method}", model)
+                fingerprint = model.fingerprint()
+                logged = self._logged_model(client, exp_id, method, fingerprint) or {
+                    "model_uri": self._log_model(
+                        run_id, f"{self.experiment_prefix}.{dataset}.{method}", model),
+                    "model_run_id": run_id}
+                client.log_batch(run_id, tags=[
+                    RunTag(k, v) for k, v in {**logged, "model_fingerprint": fingerprint}.items()])
             client.set_terminated(run_id, "FINISHED")
             self._mark_latest(client, exp_id, run_id, hparams, method)
         except BaseException as exc:
