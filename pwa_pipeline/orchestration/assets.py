@@ -38,10 +38,10 @@ from .checks import (
 )
 from .figures import (
     parameter_clusters_figure,
+    png_markdown,
     prediction_figure,
     regions_figure,
     switching_figure,
-    png_markdown,
     to_markdown,
     to_png,
 )

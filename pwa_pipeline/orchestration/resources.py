@@ -84,7 +84,7 @@ class PipelineSettings(dg.ConfigurableResource):
         clusterings consolidate to the same sub-models (e.g. sets that differ only in ε).
     cache_baselines : bool
         Reuse the fitted baselines across the sets of a data set with the same baseline
-        settings.
+        settings, and with each its scores and prediction figure.
     """
 
     kuka_path: str = ""
