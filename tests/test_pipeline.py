@@ -292,9 +292,15 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     assert sorted(versions["linear_arx"]) == sorted([run_ids["linear_arx", "set_0"],
                                                      run_ids["linear_arx", "set_2"]])
     assert versions["subspace"] == [run_ids["subspace", "set_0"]]
-    reused = client.get_run(run_ids["subspace", "set_1"]).data.tags
-    assert reused["model_uri"] == client.get_run(run_ids["subspace", "set_0"]).data.tags[
-        "model_uri"]
+    reused = client.get_run(run_ids["subspace", "set_1"])
+    first = client.get_run(run_ids["subspace", "set_0"])
+    assert {k: reused.data.tags[k] for k in ("model_uri", "model_id")} == {
+        k: first.data.tags[k] for k in ("model_uri", "model_id")}
+    # the reusing run shows the model as its output, its training data, and who logged it
+    assert [m.model_id for m in reused.outputs.model_outputs] == [first.data.tags["model_id"]]
+    assert [d.dataset.name for d in reused.inputs.dataset_inputs] == ["training"]
+    assert f"runs/{first.info.run_id}?" in reused.data.tags["mlflow.note.content"]
+    reused = reused.data.tags
     data = runs[1].output_for_node("raw_benchmark")
     table = pd.concat([pd.DataFrame(data.u_test[0][:30], columns=data.u_names),
                        pd.DataFrame(data.y_test[0][:30], columns=data.y_names)], axis=1)

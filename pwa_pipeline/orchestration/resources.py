@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 
 #: What a logged model needs to load elsewhere (pinned to the versions that logged it).
 REQUIREMENTS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn", "pandas")
+#: Run tags that say where a run's model is (see :meth:`MLflowTracker.log_run`).
+MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
 #: The experiment tag of MLflow 3 for classic model training (not GenAI); MLflow 3.17's UI
 #: follows its own GenAI / model-training switch instead, so links add ``MLFLOW_TRAINING_VIEW``.
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
@@ -263,23 +265,27 @@ class MLflowTracker(dg.ConfigurableResource):
 
     @staticmethod
     def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
-        """The ``model_uri`` and ``model_run_id`` tags of a finished run of ``method`` that
-        logged or reused a model with this :meth:`~.mlflow_models.ModelToLog.fingerprint`,
-        or None."""
+        """The model tags (``model_uri``, ``model_id``, ``model_run_id``) of a finished run of
+        ``method`` that logged or reused a model with this
+        :meth:`~.mlflow_models.ModelToLog.fingerprint`, or None."""
         for run in client.search_runs(
                 [exp_id], max_results=1,
                 filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
                               f"and tags.model_fingerprint = '{fingerprint}'"):
-            if {"model_uri", "model_run_id"} <= run.data.tags.keys():
-                return {k: run.data.tags[k] for k in ("model_uri", "model_run_id")}
+            if set(MODEL_TAGS) <= run.data.tags.keys():
+                return {k: run.data.tags[k] for k in MODEL_TAGS}
         return None
 
-    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog") -> str:
-        """Log and register ``model`` in the run; returns its model URI."""
+    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog",
+                   logged: dict | None) -> dict:
+        """Log the training table as the run's dataset, and ``model`` as its model, logged
+        and registered, unless ``logged`` (the tags of :meth:`_logged_model`) names it
+        already logged: then the run is linked to that model as its output, and its
+        description says which run logged it. Returns the run's model tags."""
         import mlflow
+        from mlflow.entities import LoggedModelOutput
         from mlflow.models import infer_signature
 
-        output = model.simulator.predict(None, model.input_example)
         # MLflow warns that a python_model object is stored with cloudpickle, at every log;
         # the module doc of mlflow_models says what loading needs instead
         pyfunc_log = logging.getLogger("mlflow.pyfunc")
@@ -288,15 +294,28 @@ class MLflowTracker(dg.ConfigurableResource):
         try:
             with mlflow.start_run(run_id=run_id):
                 mlflow.log_input(model.dataset(), context="training")
-                info = mlflow.pyfunc.log_model(
-                    name="model", python_model=model.simulator,
-                    signature=infer_signature(model.input_example, output),
-                    input_example=model.input_example, registered_model_name=registered_name,
-                    # given, not inferred: inference imports and inspects the environment
-                    pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+                if logged is None:
+                    output = model.simulator.predict(None, model.input_example)
+                    info = mlflow.pyfunc.log_model(
+                        name="model", python_model=model.simulator,
+                        signature=infer_signature(model.input_example, output),
+                        input_example=model.input_example,
+                        registered_model_name=registered_name,
+                        # given, not inferred: inference imports and inspects the environment
+                        pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+                    return {"model_uri": info.model_uri, "model_id": info.model_id,
+                            "model_run_id": run_id}
         finally:
             pyfunc_log.setLevel(level)
-        return info.model_uri
+        client = self.client()
+        client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
+        source = client.get_run(logged["model_run_id"]).info
+        client.set_tag(run_id, "mlflow.note.content", (
+            f"The model of this run was logged by run [{source.run_name}](#/experiments/"
+            f"{source.experiment_id}/runs/{source.run_id}{MLFLOW_TRAINING_VIEW}), which "
+            f"scored the same fitted model; load it with "
+            f"`mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`."))
+        return logged
 
     def run_url(self, run_id: str) -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
@@ -327,9 +346,11 @@ class MLflowTracker(dg.ConfigurableResource):
         example, registered as ``<prefix>.<dataset>.<method>``) and its training table as the
         run's dataset, unless a finished run of the method in the data set's experiment has
         the same model (equal :meth:`~.mlflow_models.ModelToLog.fingerprint`, e.g. a baseline
-        shared by the sets of a sweep): then it is not logged or registered again. Either way
-        the run is tagged ``model_uri`` (where the model is), ``model_run_id`` (the run that
-        logged it) and ``model_fingerprint``.
+        shared by the sets of a sweep): then it is not logged or registered again, but linked
+        to this run as its output, and the run's description links the run that logged it.
+        Either way the run is tagged ``model_uri`` (where the model is), ``model_id`` (its
+        MLflow logged model), ``model_run_id`` (the run that logged it) and
+        ``model_fingerprint``.
         ``run_name`` defaults to ``<method>|<hparams>``.
         """
         from mlflow.entities import Metric, Param, RunTag
@@ -365,10 +386,9 @@ class MLflowTracker(dg.ConfigurableResource):
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             if model is not None:
                 fingerprint = model.fingerprint()
-                logged = self._logged_model(client, exp_id, method, fingerprint) or {
-                    "model_uri": self._log_model(
-                        run_id, f"{self.experiment_prefix}.{dataset}.{method}", model),
-                    "model_run_id": run_id}
+                logged = self._log_model(
+                    run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
+                    self._logged_model(client, exp_id, method, fingerprint))
                 client.log_batch(run_id, tags=[
                     RunTag(k, v) for k, v in {**logged, "model_fingerprint": fingerprint}.items()])
             client.set_terminated(run_id, "FINISHED")
