@@ -310,10 +310,15 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
         runs[1].output_for_node("subspace_model").simulate(data.u_test[0][:30],
                                                            data.y_test[0][:5])[5:])
 
+    # a model deleted in the MLflow UI is logged again by the next run that scores it
+    client.delete_logged_model(first.data.tags["model_id"])
     resources["settings"] = PipelineSettings(
         cache_dir=str(tmp_path / "uncached"), cache_baselines=False,
         hparams_path=str(path), datasets_path=str(tmp_path / "datasets.json"))
     run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
+    again = client.get_run(metadata(run, "subspace_scores", "mlflow_run_id")).data.tags
+    assert again["model_run_id"] == metadata(run, "subspace_scores", "mlflow_run_id")
+    assert again["model_id"] != first.data.tags["model_id"]
     assert not any(metadata(run, n, "from_cache") for n in names)
     assert not any(metadata(run, n, "scores_from_cache") for n in scores)
     pd.testing.assert_frame_equal(run.output_for_node("subspace_scores"),

@@ -265,15 +265,26 @@ class MLflowTracker(dg.ConfigurableResource):
 
     @staticmethod
     def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
-        """The model tags (``model_uri``, ``model_id``, ``model_run_id``) of a finished run of
-        ``method`` that logged or reused a model with this
-        :meth:`~.mlflow_models.ModelToLog.fingerprint`, or None."""
+        """The model tags (``model_uri``, ``model_id``, ``model_run_id``) of the latest
+        finished run of ``method`` that logged or reused a model with this
+        :meth:`~.mlflow_models.ModelToLog.fingerprint`, if that model is still there and
+        ready (not deleted in the UI, say); else None."""
+        from mlflow.entities import LoggedModelStatus
+        from mlflow.exceptions import MlflowException
+
         for run in client.search_runs(
                 [exp_id], max_results=1,
                 filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
                               f"and tags.model_fingerprint = '{fingerprint}'"):
-            if set(MODEL_TAGS) <= run.data.tags.keys():
-                return {k: run.data.tags[k] for k in MODEL_TAGS}
+            tags = run.data.tags
+            if not set(MODEL_TAGS) <= tags.keys():
+                return None
+            try:
+                ready = client.get_logged_model(tags["model_id"]).status == \
+                    LoggedModelStatus.READY
+            except MlflowException:  # deleted
+                return None
+            return {k: tags[k] for k in MODEL_TAGS} if ready else None
         return None
 
     def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog",
