@@ -37,3 +37,43 @@ def test_the_logged_simulator_keeps_what_simulation_needs_and_not_the_fit_record
     np.testing.assert_array_equal(back.predict(None, table).to_numpy(),
                                   simulator.predict(None, table).to_numpy())
     assert len(data) < 0.1 * len(pickle.dumps(model))
+
+
+def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
+        tmp_path, mlflow_template, monkeypatch):
+    """Two runs of one fitted model: the second links the model the first logged; with the
+    first run gone from the store (``mlflow gc``), its description says so instead of
+    linking it, and the run is still logged."""
+    import shutil
+
+    from mlflow.exceptions import MlflowException
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline import LinearARX, make_hure_vasak
+    from pwa_pipeline.orchestration.mlflow_models import ModelToLog, Simulator, example_table
+    from pwa_pipeline.orchestration.resources import MLflowTracker
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
+    data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
+    model = LinearARX(na=1, nb=1).fit(data.u, data.y)
+    table = example_table(data.u, data.y, data.u_names, data.y_names, 5)
+    to_log = ModelToLog(Simulator(model, data.u_names, data.y_names), table, table)
+
+    def log(hparams: str) -> str:
+        return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
+                               metrics={}, tags={}, artifacts={}, model=to_log)
+
+    first = log("a")
+    real_get_run = MlflowClient.get_run
+
+    def purged(self, run_id):
+        if run_id == first:
+            raise MlflowException(f"Run '{run_id}' not found")
+        return real_get_run(self, run_id)
+
+    monkeypatch.setattr(MlflowClient, "get_run", purged)
+    second = real_get_run(tracker.client(), log("b")).data.tags
+    assert second["model_run_id"] == first
+    assert f"{first} (no longer in the store)" in second["mlflow.note.content"]
+    assert second["model_uri"] in second["mlflow.note.content"]

@@ -88,10 +88,12 @@ class ModelToLog:
     training: pd.DataFrame
 
     def fingerprint(self) -> str:
-        """Hash of what is logged as the model (the simulator's state: the fitted model
-        without the record of its fit, and the column names); equal fingerprints simulate
-        alike, so that a model is logged once however many runs score it."""
-        return joblib.hash(self.simulator.__getstate__())
+        """Hash of what is logged as the model (from the simulator's state: the fitted model
+        without the record of its fit, and the column names; not what MLflow adds to the
+        simulator when logging it); equal fingerprints simulate alike, so that a model is
+        logged once however many runs score it."""
+        state = self.simulator.__getstate__()
+        return joblib.hash([state[k] for k in ("model", "u_names", "y_names")])
 
     def dataset(self) -> "mlflow.data.pandas_dataset.PandasDataset":
         """The training table as an MLflow dataset, its schema taken from the first rows.

@@ -295,6 +295,7 @@ class MLflowTracker(dg.ConfigurableResource):
         description says which run logged it. Returns the run's model tags."""
         import mlflow
         from mlflow.entities import LoggedModelOutput
+        from mlflow.exceptions import MlflowException
         from mlflow.models import infer_signature
 
         # MLflow warns that a python_model object is stored with cloudpickle, at every log;
@@ -320,12 +321,15 @@ class MLflowTracker(dg.ConfigurableResource):
             pyfunc_log.setLevel(level)
         client = self.client()
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
-        source = client.get_run(logged["model_run_id"]).info
+        try:
+            source = client.get_run(logged["model_run_id"]).info
+            by = (f"[{source.run_name}](#/experiments/{source.experiment_id}/runs/"
+                  f"{source.run_id}{MLFLOW_TRAINING_VIEW})")
+        except MlflowException:  # that run purged from the store, its model kept
+            by = f"{logged['model_run_id']} (no longer in the store)"
         client.set_tag(run_id, "mlflow.note.content", (
-            f"The model of this run was logged by run [{source.run_name}](#/experiments/"
-            f"{source.experiment_id}/runs/{source.run_id}{MLFLOW_TRAINING_VIEW}), which "
-            f"scored the same fitted model; load it with "
-            f"`mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`."))
+            f"The model of this run was logged by run {by}, which scored the same fitted "
+            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`."))
         return logged
 
     def run_url(self, run_id: str) -> str:
