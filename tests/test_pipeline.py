@@ -14,6 +14,7 @@ from pwa_pipeline import PWARX, LinearARX, SubspaceSS
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
+from pwa_pipeline.orchestration import assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
 from pwa_pipeline.orchestration.partitions import (
     all_keys,
@@ -235,7 +236,8 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
     assert len(list(cache.glob("*.pkl"))) == 1
 
 
-def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_path):
+def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_path,
+                                                               monkeypatch):
     """Three sets of one data set: the second differs only in ε and takes both baselines, and
     their scores and figures, from the cache; the third's orders (na = nb = 2) change the
     linear ARX baseline, which is then fitted and scored, but not the subspace one. MLflow
@@ -309,6 +311,12 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
         mlflow.pyfunc.load_model(reused["model_uri"]).predict(table).to_numpy()[5:],
         runs[1].output_for_node("subspace_model").simulate(data.u_test[0][:30],
                                                            data.y_test[0][:5])[5:])
+
+    # changed figure code draws the baselines' figures again, their fits still cached
+    monkeypatch.setattr(assets, "figures_fingerprint", lambda: "other figure code")
+    run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
+    assert all(metadata(run, n, "from_cache") for n in names)
+    assert not any(metadata(run, n, "scores_from_cache") for n in scores)
 
     # a model deleted in the MLflow UI is logged again by the next run that scores it
     client.delete_logged_model(first.data.tags["model_id"])

@@ -173,6 +173,9 @@ def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_pa
     monkeypatch.setattr(storage, "core_fingerprint", lambda: "other code")
     cached(np.arange(3.0), factor=1.0)
     assert len(calls) == 4 and len(list((tmp_path / "m").glob("*.pkl"))) == 4
+    salted = SignedMemory(tmp_path, "m", salt="other figures").cache(scaled)
+    salted(np.arange(3.0), factor=1.0)  # the same call, another salt: computed again
+    assert len(calls) == 5 and len(list((tmp_path / "m").glob("*.pkl"))) == 5
     assert copy.deepcopy(memory) is memory
     assert clone(RefinedSubModels(memory=memory)).memory is memory
 

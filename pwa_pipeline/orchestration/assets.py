@@ -37,6 +37,7 @@ from .checks import (
     sub_model_results,
 )
 from .figures import (
+    figures_fingerprint,
     parameter_clusters_figure,
     png_markdown,
     prediction_figure,
@@ -413,7 +414,8 @@ def _scores_asset(method: Method, partitions_def):
         # a baseline's model, scores and figure are the same for every set sharing it
         baseline = method.name != "pwa"
         title = f"{method.label} | {dataset if baseline else context.partition_key}"
-        memory = SignedMemory(settings.cache_root(), "baseline_scores", warn=context.log.warning)
+        memory = SignedMemory(settings.cache_root(), "baseline_scores", warn=context.log.warning,
+                              salt=figures_fingerprint())
         score = memory.cache(_scored) if baseline and settings.cache_baselines else _scored
         ev, png = score(model, data, configuration.warmup, title)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "

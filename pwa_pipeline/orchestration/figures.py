@@ -9,7 +9,9 @@ every figure, DBSCAN noise is grey.
 from __future__ import annotations
 
 import base64
+import functools
 import io
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -19,6 +21,7 @@ from ..pwa.clustering import k_distances
 from ..pwa.embedding import EMBEDDINGS
 from ..pwa.regressors import lagged_matrix, n_initial
 from ..scoring.metrics import match_submodels
+from .storage import source_fingerprint
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -42,6 +45,13 @@ _MAX_LEVELS = 10
 _CURVE_POINTS = 1000
 """Points queried for the parameter-clusters figure's k-distance curve: its shape, at a
 fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.clustering.k_distances`)."""
+
+
+@functools.cache
+def figures_fingerprint() -> str:
+    """Hash of this module's source: part of the key of cached figures, so that figures drawn
+    by other code are never shown."""
+    return source_fingerprint([Path(__file__)])
 
 
 def _colour(i: int) -> str:

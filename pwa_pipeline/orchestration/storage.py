@@ -234,33 +234,40 @@ def load_or_compute(path: Path, root: Path, compute: Callable[[], object],
     return out, False
 
 
+def source_fingerprint(paths: Sequence[Path]) -> str:
+    """Hash of the names and contents of the source files ``paths``."""
+    h = hashlib.sha256()
+    for path in sorted(paths):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
 @functools.cache
 def core_fingerprint() -> str:
     """Hash of the numerical core's source (the packages ``pwa``, ``baselines`` and
     ``scoring`` of ``pwa_pipeline``, and the modules they share): part of every cache key, so
     that entries computed by other code are never loaded."""
     package = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for path in sorted([*package.glob("_*.py"),
-                        *(p for sub in ("pwa", "baselines", "scoring")
-                          for p in (package / sub).glob("*.py"))]):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()[:16]
+    return source_fingerprint([*package.glob("_*.py"),
+                               *(p for sub in ("pwa", "baselines", "scoring")
+                                 for p in (package / sub).glob("*.py"))])
 
 
 class SignedMemory:
     """The ``joblib.Memory`` interface over this store's signed pickles, for
     ``RefinedSubModels(memory=...)``: ``cache(func)`` returns ``func`` whose result is kept at
     ``<root>/<folder>/<key>.pkl``, the key a hash of the function, the numerical core's source
-    (:func:`core_fingerprint`) and the arguments (``joblib.hash``) but those named in
-    ``ignore``, as joblib's. An entry without a valid
+    (:func:`core_fingerprint`), ``salt`` (e.g. the source fingerprint of other code the
+    function calls) and the arguments (``joblib.hash``) but those named in ``ignore``, as
+    joblib's. An entry without a valid
     signature, or unreadable, is recomputed after ``warn`` (a logging function) names it.
     ``hits`` and ``misses`` count the calls answered from the cache and computed. A handle on
     the store: copies (``clone`` of the step holding it) are this object."""
 
-    def __init__(self, root: Path, folder: str, warn=logging.getLogger(__name__).warning):
-        self.root, self.folder, self.warn = Path(root), folder, warn
+    def __init__(self, root: Path, folder: str, warn=logging.getLogger(__name__).warning,
+                 salt: str = ""):
+        self.root, self.folder, self.warn, self.salt = Path(root), folder, warn, salt
         self.hits = self.misses = 0
 
     def __deepcopy__(self, memo: dict) -> "SignedMemory":
@@ -273,7 +280,8 @@ class SignedMemory:
             bound = signature.bind(*args, **kwargs)
             bound.apply_defaults()
             hashed = {k: v for k, v in bound.arguments.items() if k not in ignore}
-            key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(), hashed))
+            key = joblib.hash((func.__module__, func.__qualname__, core_fingerprint(),
+                               self.salt, hashed))
             path = inside(self.root, self.folder, f"{key}.pkl")
             out, hit = load_or_compute(path, self.root, lambda: func(*args, **kwargs),
                                        self.warn)
