@@ -16,6 +16,7 @@ from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration import assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.mlflow_models import example_table
 from pwa_pipeline.orchestration.partitions import (
     all_keys,
     check_keys,
@@ -304,9 +305,7 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     assert f"runs/{first.info.run_id}?" in reused.data.tags["mlflow.note.content"]
     reused = reused.data.tags
     data = runs[1].output_for_node("raw_benchmark")
-    table = pd.concat([pd.DataFrame(data.u_test[0][:30], columns=data.u_names),
-                       pd.DataFrame(data.y_test[0][:30], columns=data.y_names)], axis=1)
-    table.loc[5:, data.y_names] = np.nan
+    table = example_table(data.u_test[0], data.y_test[0], data.u_names, data.y_names, 5, 30)
     np.testing.assert_allclose(  # the model its URI names is set_1's subspace model
         mlflow.pyfunc.load_model(reused["model_uri"]).predict(table).to_numpy()[5:],
         runs[1].output_for_node("subspace_model").simulate(data.u_test[0][:30],

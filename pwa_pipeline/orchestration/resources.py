@@ -272,65 +272,38 @@ class MLflowTracker(dg.ConfigurableResource):
         from mlflow.entities import LoggedModelStatus
         from mlflow.exceptions import MlflowException
 
-        for run in client.search_runs(
-                [exp_id], max_results=1,
-                filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
-                              f"and tags.model_fingerprint = '{fingerprint}'"):
-            tags = run.data.tags
-            if not set(MODEL_TAGS) <= tags.keys():
-                return None
-            try:
-                ready = client.get_logged_model(tags["model_id"]).status == \
-                    LoggedModelStatus.READY
-            except MlflowException:  # deleted
-                return None
-            return {k: tags[k] for k in MODEL_TAGS} if ready else None
-        return None
+        runs = client.search_runs(
+            [exp_id], max_results=1,
+            filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
+                          f"and tags.model_fingerprint = '{fingerprint}'")
+        tags = runs[0].data.tags if runs else {}
+        if not set(MODEL_TAGS) <= tags.keys():
+            return None
+        try:
+            status = client.get_logged_model(tags["model_id"]).status
+        except MlflowException:  # deleted
+            return None
+        return {k: tags[k] for k in MODEL_TAGS} if status == LoggedModelStatus.READY else None
 
     def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog",
                    logged: dict | None) -> dict:
         """Log the training table as the run's dataset, and ``model`` as its model, logged
         and registered, unless ``logged`` (the tags of :meth:`_logged_model`) names it
-        already logged: then the run is linked to that model as its output, and its
-        description says which run logged it. Returns the run's model tags."""
+        already logged: then the run is linked to that model as its output. Returns the
+        run's tags for its model: :data:`MODEL_TAGS`, and for a linked model a description
+        (``mlflow.note.content``) that says which run logged it."""
         import mlflow
         from mlflow.entities import LoggedModelOutput
-        from mlflow.exceptions import MlflowException
-        from mlflow.models import infer_signature
 
-        # MLflow warns that a python_model object is stored with cloudpickle, at every log;
-        # the module doc of mlflow_models says what loading needs instead
-        pyfunc_log = logging.getLogger("mlflow.pyfunc")
-        level = pyfunc_log.level
-        pyfunc_log.setLevel(logging.ERROR)
-        try:
-            with mlflow.start_run(run_id=run_id):
-                mlflow.log_input(model.dataset(), context="training")
-                if logged is None:
-                    output = model.simulator.predict(None, model.input_example)
-                    info = mlflow.pyfunc.log_model(
-                        name="model", python_model=model.simulator,
-                        signature=infer_signature(model.input_example, output),
-                        input_example=model.input_example,
-                        registered_model_name=registered_name,
-                        # given, not inferred: inference imports and inspects the environment
-                        pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
-                    return {"model_uri": info.model_uri, "model_id": info.model_id,
-                            "model_run_id": run_id}
-        finally:
-            pyfunc_log.setLevel(level)
+        with mlflow.start_run(run_id=run_id):
+            mlflow.log_input(model.dataset(), context="training")
+            if logged is None:
+                info = _log_pyfunc(model, registered_name)
+                return {"model_uri": info.model_uri, "model_id": info.model_id,
+                        "model_run_id": run_id}
         client = self.client()
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
-        try:
-            source = client.get_run(logged["model_run_id"]).info
-            by = (f"[{source.run_name}](#/experiments/{source.experiment_id}/runs/"
-                  f"{source.run_id}{MLFLOW_TRAINING_VIEW})")
-        except MlflowException:  # that run purged from the store, its model kept
-            by = f"{logged['model_run_id']} (no longer in the store)"
-        client.set_tag(run_id, "mlflow.note.content", (
-            f"The model of this run was logged by run {by}, which scored the same fitted "
-            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`."))
-        return logged
+        return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
 
     def run_url(self, run_id: str) -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
@@ -414,6 +387,44 @@ class MLflowTracker(dg.ConfigurableResource):
             client.set_terminated(run_id, "FAILED" if isinstance(exc, Exception) else "KILLED")
             raise
         return run_id
+
+
+def _log_pyfunc(model: "ModelToLog", registered_name: str):
+    """Log ``model`` as the active run's pyfunc model, registered as ``registered_name``;
+    returns MLflow's ``ModelInfo``."""
+    import mlflow
+    from mlflow.models import infer_signature
+
+    output = model.simulator.predict(None, model.input_example)
+    # MLflow warns that a python_model object is stored with cloudpickle, at every log;
+    # the module doc of mlflow_models says what loading needs instead
+    pyfunc_log = logging.getLogger("mlflow.pyfunc")
+    level = pyfunc_log.level
+    pyfunc_log.setLevel(logging.ERROR)
+    try:
+        return mlflow.pyfunc.log_model(
+            name="model", python_model=model.simulator,
+            signature=infer_signature(model.input_example, output),
+            input_example=model.input_example, registered_model_name=registered_name,
+            # given, not inferred: inference imports and inspects the environment
+            pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+    finally:
+        pyfunc_log.setLevel(level)
+
+
+def _reuse_note(client, logged: dict) -> str:
+    """The description of a run that reuses the model another run logged (``logged``: the
+    tags of ``MLflowTracker._logged_model``): a link to that run and how to load the model."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        source = client.get_run(logged["model_run_id"]).info
+        by = (f"[{source.run_name}](#/experiments/{source.experiment_id}/runs/"
+              f"{source.run_id}{MLFLOW_TRAINING_VIEW})")
+    except MlflowException:  # that run purged from the store, its model kept
+        by = f"{logged['model_run_id']} (no longer in the store)"
+    return (f"The model of this run was logged by run {by}, which scored the same fitted "
+            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`.")
 
 
 def _log_bytes(client, run_id: str, data: bytes, name: str) -> None:
