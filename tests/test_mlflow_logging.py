@@ -77,3 +77,34 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     assert second["model_run_id"] == first
     assert f"{first} (no longer in the store)" in second["mlflow.note.content"]
     assert second["model_uri"] in second["mlflow.note.content"]
+
+
+def test_models_that_predict_alike_share_a_fingerprint_and_others_do_not(default_30db, sim_30db):
+    """A PWARX's fingerprint ignores the record of its fit and its unfitted steps (what
+    ``predict`` and ``simulate`` do not read: a copy without them simulates the same), and
+    sees its θ_i and its column names."""
+    import copy
+
+    import numpy as np
+
+    from pwa_pipeline.orchestration.mlflow_models import predictor_fingerprint
+    from pwa_pipeline.pwa import PWARX
+    from pwa_pipeline.pwa.clustering import DBSCANClustering
+
+    model, names = default_30db, (sim_30db.u_names, sim_30db.y_names)
+    other = copy.deepcopy(model).set_params(clustering=DBSCANClustering(eps=0.3),
+                                            local_models=None)
+    other.timings_ = {"local_models": 99.0}
+    stripped = copy.copy(other)
+    for name in PWARX.FIT_RECORD + PWARX.FIT_PARAMS:
+        stripped.__dict__.pop(name, None)
+    assert set(model.prediction_state()) == set(vars(stripped))
+    u, y = sim_30db.u[:300], sim_30db.y[:300]
+    np.testing.assert_array_equal(stripped.simulate(u, y[:5]), model.simulate(u, y[:5]))
+    np.testing.assert_array_equal(stripped.predict(u, y), model.predict(u, y))
+    assert predictor_fingerprint(other, *names) == predictor_fingerprint(model, *names)
+    nudged = copy.deepcopy(model)
+    nudged.thetas_[0, 0, 0] += 1e-12
+    assert predictor_fingerprint(nudged, *names) != predictor_fingerprint(model, *names)
+    assert predictor_fingerprint(model, names[0], ["a", "b"]) != \
+        predictor_fingerprint(model, *names)

@@ -5,6 +5,7 @@ import shutil
 from pathlib import Path
 
 import dagster as dg
+import joblib
 import mlflow
 import numpy as np
 import pandas as pd
@@ -237,6 +238,48 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
     assert len(list(cache.glob("*.pkl"))) == 1
 
 
+def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow_model(
+        resources, tmp_path):
+    """Two default sets that differ only in ε and end in the same θ_i and regions (their
+    clusterings differ): the second takes the PWA model's scores and figures from the cache,
+    and its MLflow run is linked to the model the first logged (one registered version);
+    the models' prediction states are equal, their fingerprints too."""
+    path = tmp_path / "eps.toml"
+    path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"default\"\nna = 1\nnb = 1\n"
+                            f"clustering.eps = {eps}\n" for i, eps in enumerate((0.22, 0.25))))
+    sweep = build_definitions(path)
+    steps = [a for a in sweep.assets if a.key.to_user_string() in
+             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters",
+              "sub_models", "svm_regions", "output_error_refinement", "pwa_model",
+              "pwa_scores")]
+    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
+    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+            for i in (0, 1)]
+
+    def metadata(run, node: str, key: str):
+        return run.asset_materializations_for_node(node)[0].metadata[key].value
+
+    models = [r.output_for_node("pwa_model") for r in runs]
+    assert models[0].clustering_.eps_ != models[1].clustering_.eps_
+    np.testing.assert_array_equal(models[0].thetas_, models[1].thetas_)
+    assert joblib.hash(models[0].prediction_state()) == joblib.hash(models[1].prediction_state())
+    assert [metadata(r, "pwa_scores", "scores_from_cache") for r in runs] == [False, True]
+    assert [metadata(r, "pwa_model", "figures_from_cache") for r in runs] == [False, True]
+    for node, key in (("pwa_scores", "prediction"), ("pwa_model", "regions"),
+                      ("pwa_model", "switching (first held-out experiment)")):
+        assert metadata(runs[0], node, key) == metadata(runs[1], node, key)
+    assert "| hure_vasak](data:image/png" in metadata(runs[0], "pwa_scores", "prediction")
+    pd.testing.assert_frame_equal(runs[1].output_for_node("pwa_scores"),
+                                  runs[0].output_for_node("pwa_scores"))
+    client, tracked = _runs(resources, "hure_vasak")
+    run_ids = {r.data.tags["hparams"]: r.info.run_id for r in tracked}
+    assert {r.data.tags["model_run_id"] for r in tracked} == {run_ids["eps_0"]}
+    assert [v.run_id for v in client.search_model_versions(
+        "name = 'pwa-pipeline.hure_vasak.pwa'")] == [run_ids["eps_0"]]
+    assert {r.data.params["clustering__eps"] for r in tracked} == {"0.22", "0.25"}
+    assert len(list((tmp_path / "cache" / "model_figures").glob("*.pkl"))) == 1
+
+
 def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_path,
                                                                monkeypatch):
     """Three sets of one data set: the second differs only in ε and takes both baselines, and
@@ -278,7 +321,7 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     assert runs[2].output_for_node("linear_arx_model").na == 2
     assert not runs[2].output_for_node("linear_arx_scores").equals(
         runs[0].output_for_node("linear_arx_scores"))
-    for folder in ("baselines", "baseline_scores"):
+    for folder in ("baselines", "scores"):
         assert len(list((tmp_path / "cache" / folder).glob("*.pkl"))) == 3
 
     client, tracked = _runs(resources, "hure_vasak")
@@ -320,7 +363,7 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     # a model deleted in the MLflow UI is logged again by the next run that scores it
     client.delete_logged_model(first.data.tags["model_id"])
     resources["settings"] = PipelineSettings(
-        cache_dir=str(tmp_path / "uncached"), cache_baselines=False,
+        cache_dir=str(tmp_path / "uncached"), cache_baselines=False, cache_scores=False,
         hparams_path=str(path), datasets_path=str(tmp_path / "datasets.json"))
     run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
     again = client.get_run(metadata(run, "subspace_scores", "mlflow_run_id")).data.tags

@@ -47,7 +47,7 @@ from .figures import (
     to_png,
 )
 from .jobs import LEADERBOARD
-from .mlflow_models import ModelToLog, Simulator, example_table
+from .mlflow_models import ModelToLog, Simulator, example_table, predictor_fingerprint
 from .partitions import split_key
 from .reporting import (
     leaderboard_markdown,
@@ -304,8 +304,8 @@ def _identification_assets(partitions_def) -> list:
         return step
 
     @dg.asset(partitions_def=partitions_def, group_name="models", kinds={"scikit-learn"})
-    def pwa_model(context: dg.AssetExecutionContext, configuration: Configuration,
-                  raw_benchmark: Dataset, regressors: Regressors,
+    def pwa_model(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                  configuration: Configuration, raw_benchmark: Dataset, regressors: Regressors,
                   local_models: BaseEstimator | None, clusters: BaseEstimator | None,
                   sub_models: BaseEstimator | None, svm_regions: BaseEstimator | None,
                   output_error_refinement: BaseEstimator | None) -> PWARX:
@@ -320,18 +320,17 @@ def _identification_assets(partitions_def) -> list:
         model.timings_ = {name: _latest_metadata(context, asset, "seconds")
                           for name, asset in STEP_ASSETS.items()}
         data = raw_benchmark
-        truth = _truth(model, data)
-        switching = switching_figure(
-            model, data.u_test[0], data.y_test[0],
-            true_modes=truth.modes_test[0] if truth else None,
-            true_thetas=truth.thetas if truth else None)
-        regions = regions_figure(model, regressors.phi, _phi_names(model, data))
+        memory = SignedMemory(settings.cache_root(), "model_figures", warn=context.log.warning,
+                              salt=figures_fingerprint())
+        draw = memory.cache(_model_figures, ignore=["model"]) if settings.cache_scores \
+            else _model_figures
+        figures = draw(model, data, regressors.phi, model.labels_,
+                       predictor_fingerprint(model, data.u_names, data.y_names))
         context.add_output_metadata(rounded({
             "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
             "resolved parameters": markdown(params_table(model.resolved_params())),
-            **_truth_metadata(model, data),
-            "switching (first held-out experiment)": dg.MetadataValue.md(to_markdown(switching)),
-            "regions": dg.MetadataValue.md(to_markdown(regions))}))
+            **_truth_metadata(model, data), "figures_from_cache": memory.hits > 0,
+            **{name: dg.MetadataValue.md(text) for name, text in figures.items()}}))
         return model
 
     return [configuration, raw_benchmark, regressors, local_models, clusters, sub_models,
@@ -391,33 +390,51 @@ def _baseline_model_asset(method: Method, partitions_def):
     return model
 
 
-def _scored(model, data: Dataset, warmup: int, title: str) -> tuple[Evaluation, bytes]:
+def _scored(model, data: Dataset, warmup: int, title: str, fingerprint: str
+            ) -> tuple[Evaluation, bytes]:
     """``model`` scored on ``data``'s held-out experiments by the evaluation protocol, and
-    its prediction figure rendered as PNG (what the scores assets cache for a baseline)."""
+    its prediction figure rendered as PNG: what the scores assets cache (``cache_scores``),
+    keyed by the model's ``fingerprint`` (:func:`predictor_fingerprint`) in place of the
+    model."""
     ev = evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
     return ev, to_png(prediction_figure(data, ev, title, warmup))
+
+
+def _model_figures(model: PWARX, data: Dataset, phi, labels, fingerprint: str
+                   ) -> dict[str, str]:
+    """The PWA model's switching and regions figures as Markdown images (``pwa_model``'s
+    metadata), cached like :func:`_scored`: keyed by the model's ``fingerprint`` and the
+    rows' ``labels`` (the regions figure colours the rows by them) in place of the model."""
+    truth = _truth(model, data)
+    switching = switching_figure(
+        model, data.u_test[0], data.y_test[0],
+        true_modes=truth.modes_test[0] if truth else None,
+        true_thetas=truth.thetas if truth else None)
+    regions = regions_figure(model, phi, _phi_names(model, data))
+    return {"switching (first held-out experiment)": to_markdown(switching),
+            "regions": to_markdown(regions)}
 
 
 def _scores_asset(method: Method, partitions_def):
     @dg.asset(name=f"{method.name}_scores", partitions_def=partitions_def, group_name="scores",
               kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model")},
               description=f"The {method.label} model scored on held-out data by the "
-                          f"evaluation protocol (one-step and free run), tracked in MLflow"
-                          + ("." if method.name == "pwa" else
-                             "; the scores and figure cached with the model "
-                             "(``cache_baselines``), the same for every set that shares it."))
+                          f"evaluation protocol (one-step and free run), tracked in MLflow; "
+                          f"the scores and figure cached by what the model predicts with "
+                          f"(``cache_scores``), the same for every set whose model predicts "
+                          f"alike.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                settings: PipelineSettings, configuration: Configuration,
                raw_benchmark: Dataset, model) -> pd.DataFrame:
         data = raw_benchmark
         dataset, hparams = split_key(context.partition_key)
-        # a baseline's model, scores and figure are the same for every set sharing it
-        baseline = method.name != "pwa"
-        title = f"{method.label} | {dataset if baseline else context.partition_key}"
-        memory = SignedMemory(settings.cache_root(), "baseline_scores", warn=context.log.warning,
+        # titled by data set: sets whose models predict alike share the scores and figure
+        title = f"{method.label} | {dataset}"
+        memory = SignedMemory(settings.cache_root(), "scores", warn=context.log.warning,
                               salt=figures_fingerprint())
-        score = memory.cache(_scored) if baseline and settings.cache_baselines else _scored
-        ev, png = score(model, data, configuration.warmup, title)
+        score = memory.cache(_scored, ignore=["model"]) if settings.cache_scores else _scored
+        ev, png = score(model, data, configuration.warmup, title,
+                        predictor_fingerprint(model, data.u_names, data.y_names))
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
         fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")

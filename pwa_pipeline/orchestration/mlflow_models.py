@@ -68,6 +68,18 @@ class Simulator(mlflow.pyfunc.PythonModel):
         return pd.DataFrame(simulated, columns=self.y_names, index=model_input.index)
 
 
+def predictor_fingerprint(model, u_names: list[str], y_names: list[str]) -> str:
+    """Hash of what a fitted model predicts with and of its column names: equal fingerprints
+    simulate alike.
+
+    For a PWARX, its :meth:`~pwa_pipeline.pwa.PWARX.prediction_state` (θ_i, regions, orders;
+    not the record of the fit nor the unfitted steps, so that sets of a sweep that end in
+    the same model share one); for another model, all its attributes.
+    """
+    state = model.prediction_state() if hasattr(model, "prediction_state") else vars(model)
+    return joblib.hash([type(model).__qualname__, state, list(u_names), list(y_names)])
+
+
 def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: list[str],
                   warmup: int, rows: int = 40) -> pd.DataFrame:
     """An input table for :class:`Simulator`: ``rows`` samples, outputs given on ``warmup``."""
@@ -88,12 +100,10 @@ class ModelToLog:
     training: pd.DataFrame
 
     def fingerprint(self) -> str:
-        """Hash of what is logged as the model (from the simulator's state: the fitted model
-        without the record of its fit, and the column names; not what MLflow adds to the
-        simulator when logging it); equal fingerprints simulate alike, so that a model is
-        logged once however many runs score it."""
-        state = self.simulator.__getstate__()
-        return joblib.hash([state[k] for k in ("model", "u_names", "y_names")])
+        """:func:`predictor_fingerprint` of the simulator's model and columns, so that a
+        model is logged once however many runs score it."""
+        sim = self.simulator
+        return predictor_fingerprint(sim.model, sim.u_names, sim.y_names)
 
     def dataset(self) -> "mlflow.data.pandas_dataset.PandasDataset":
         """The training table as an MLflow dataset, its schema taken from the first rows.
@@ -108,3 +118,4 @@ class ModelToLog:
         data = from_pandas(self.training, name="training")
         data.__dict__["schema"] = infer_signature(self.training.head(_SCHEMA_ROWS)).inputs
         return data
+

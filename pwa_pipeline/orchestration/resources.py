@@ -78,7 +78,8 @@ class PipelineSettings(dg.ConfigurableResource):
         ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
         ``<project>/storage/datasets.json``.
     cache_dir : str
-        Cache of local models, of step 5 and of the baselines; empty: ``<project>/storage/cache``.
+        Cache of local models, of step 5, of the baselines and of scores and figures; empty:
+        ``<project>/storage/cache``.
     cache_local_models : bool
         Reuse local models across hyper-parameter sets that differ only in later steps.
     cache_sub_models : bool
@@ -86,7 +87,13 @@ class PipelineSettings(dg.ConfigurableResource):
         clusterings consolidate to the same sub-models (e.g. sets that differ only in ε).
     cache_baselines : bool
         Reuse the fitted baselines across the sets of a data set with the same baseline
-        settings, and with each its scores and prediction figure.
+        settings.
+    cache_scores : bool
+        Reuse a model's scores and figures (prediction; for a PWA model also its switching
+        and regions figures) across sets whose fitted models predict alike
+        (:func:`~pwa_pipeline.orchestration.mlflow_models.predictor_fingerprint`): a
+        baseline shared by the sets of a data set, or a PWA model that sets differing only
+        in ε or MinPts end in.
     """
 
     kuka_path: str = ""
@@ -96,6 +103,7 @@ class PipelineSettings(dg.ConfigurableResource):
     cache_local_models: bool = True
     cache_sub_models: bool = True
     cache_baselines: bool = True
+    cache_scores: bool = True
 
     def with_files(self, hparams_path: str | os.PathLike,
                    datasets_path: str | os.PathLike) -> "PipelineSettings":
@@ -129,7 +137,7 @@ class PipelineSettings(dg.ConfigurableResource):
         return self.hparams().configuration(hparams, dataset, orders)
 
     def cache_root(self) -> Path:
-        """The cache folder (local models, step 5, baselines)."""
+        """The cache folder (local models, step 5, baselines, scores and figures)."""
         return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"
 
 

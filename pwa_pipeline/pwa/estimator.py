@@ -7,6 +7,7 @@ from numbers import Integral
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
@@ -121,9 +122,15 @@ class PWARX(ARXModelBase):
     0.2
     """
 
-    FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_")
-    """Fitted attributes that record the fit (steps 2–5, the rows' labels): ``predict`` and
-    ``simulate`` use none of them (``thetas_`` and ``regions_`` make the model)."""
+    FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_", "refinement_",
+                  "structure_fit_", "timings_")
+    """Fitted attributes that record the fit (steps 2–5, the refinement, the rows' labels,
+    the structure search, the seconds): ``predict`` and ``simulate`` use none of them
+    (``thetas_`` and ``regions_``, or ``structure_``, make the model)."""
+
+    FIT_PARAMS = (*STEPS, "refinement")
+    """Parameters that only ``fit`` reads (the unfitted steps): ``predict`` and ``simulate``
+    read what they fitted."""
 
     _parameter_constraints: dict = {
         "na": [Interval(Integral, 0, None, closed="left")],
@@ -377,6 +384,22 @@ class PWARX(ARXModelBase):
             out["refinement"] = type(self.refinement).__name__
             out.update({f"refinement__{k}": v for k, v in self.refinement.get_params().items()})
         return out
+
+    def prediction_state(self) -> dict:
+        """What ``predict`` and ``simulate`` read: the model's attributes but
+        :attr:`FIT_RECORD` and :attr:`FIT_PARAMS`. Fitted models with equal states predict
+        alike, whatever steps and settings fitted them: e.g. the sets of a sweep over ε and
+        MinPts whose clusterings end in the same θ_i and regions (the pipeline scores, draws
+        and logs such a model once).
+
+        Returns
+        -------
+        dict
+            Attribute name to value (the model's own objects, not copies); fitted models only.
+        """
+        check_is_fitted(self)
+        return {k: v for k, v in vars(self).items()
+                if k not in self.FIT_RECORD and k not in self.FIT_PARAMS}
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         if self.structured:
