@@ -79,6 +79,25 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     assert second["model_uri"] in second["mlflow.note.content"]
 
 
+def test_the_digest_is_mlflows_for_text_numeric_and_other_columns():
+    import numpy as np
+    import pandas as pd
+    from mlflow.data.digest_utils import compute_pandas_digest
+
+    from pwa_pipeline.orchestration.mlflow_models import pandas_digest
+
+    rng = np.random.default_rng(0)
+    table = pd.DataFrame({"u1": rng.normal(size=12_000), "n": np.arange(12_000),
+                          "flag": np.arange(12_000) % 2 == 0,
+                          "experiment": [str(i % 3) for i in range(12_000)],
+                          "text with a gap": ["a"] * 11_999 + [None],
+                          "kind": pd.Categorical(["p", "q"] * 6_000),
+                          "at": pd.Timestamp("2026-01-01")})
+    digests = {pandas_digest(t): compute_pandas_digest(t)
+               for t in (table, table.iloc[:, [3, 0]], table.tail(500), table.iloc[:, :3])}
+    assert all(ours == theirs for ours, theirs in digests.items()) and len(digests) == 4
+
+
 def test_models_that_predict_alike_share_a_fingerprint_and_others_do_not(default_30db, sim_30db):
     """A PWARX's fingerprint ignores the record of its fit and its unfitted steps (what
     ``predict`` and ``simulate`` do not read: a copy without them simulates the same), and

@@ -17,6 +17,7 @@ import joblib
 import mlflow.pyfunc
 import numpy as np
 import pandas as pd
+from pandas.api.types import is_numeric_dtype
 
 _SCHEMA_ROWS = 100
 """Rows of the training table from which its MLflow schema is inferred."""
@@ -111,11 +112,28 @@ class ModelToLog:
         MLflow infers a dataset's schema by testing every cell for a missing value (1.3 s
         a run on the robot's 40k × 13 table); the table has no missing value (the data are
         validated finite) and one type per column, so its first rows give the same schema.
+        Its digest is :func:`pandas_digest`'s, MLflow's without testing numeric cells.
         """
         from mlflow.data import from_pandas
         from mlflow.models import infer_signature
 
-        data = from_pandas(self.training, name="training")
+        data = from_pandas(self.training, name="training", digest=pandas_digest(self.training))
         data.__dict__["schema"] = infer_signature(self.training.head(_SCHEMA_ROWS)).inputs
         return data
 
+
+def pandas_digest(table: pd.DataFrame) -> str:
+    """MLflow's digest of a table (``mlflow.data.digest_utils.compute_pandas_digest``: its
+    first rows' text and numeric columns hashed with its length and column names), without
+    the type test of every cell of the numeric columns, which hold no text (0.15 s a run on
+    the robot's 40k × 13 training table).
+    """
+    from mlflow.data.digest_utils import MAX_ROWS, get_normalized_md5_digest
+
+    text = table.columns[[not is_numeric_dtype(table[c]) and bool(table[c].map(type).eq(str).all())
+                          for c in table.columns]]
+    head = table.head(MAX_ROWS)
+    head = head[text.union(head.select_dtypes(include=[np.number]).columns)]
+    return get_normalized_md5_digest([pd.util.hash_pandas_object(head).values,
+                                      np.int64(len(table))]
+                                     + [str(c).encode() for c in table.columns])
