@@ -4,11 +4,12 @@
    the 'paper' and 'default' sets), in-process with dg.materialize, fresh stores.
 2. Two sweeps of 12 hyper-parameter sets that differ only in ε and MinPts: the simulated
    system in the paper setting (n_rho = 18), and the robot with the default (the sets of
-   benchmarks.sweep). Every asset of every set, once with the caches (local models, step 5
-   and the baselines, ``PipelineSettings.cache_local_models`` / ``cache_sub_models`` /
-   ``cache_baselines``) and once without, the two alternating set by set (each in its own
-   stores) so that they share the machine's load; the saving is the difference, and each
-   asset's median seconds over the sets are reported.
+   benchmarks.sweep). Every asset of every set, once with the caches (local models, step 5,
+   the baselines, the scores and figures, ``PipelineSettings.cache_local_models`` /
+   ``cache_sub_models`` / ``cache_baselines`` / ``cache_scores``) and once without, the two
+   alternating set by set (each in its own stores) so that they share the machine's load;
+   the saving is the difference, and each asset's median seconds over the sets are
+   reported.
    Each run's row also gives the MB it added to the asset store, MLflow's artifact store
    (the figures, tables and logged models of its three runs) and the caches.
    A set whose ε / MinPts leave DBSCAN without a cluster fails at `clusters` (as it should)
@@ -54,6 +55,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
         "io_manager": PartitionedFileIOManager(base_dir=str(tmp / "storage")),
         "settings": PipelineSettings(cache_dir=str(tmp / "cache"), cache_local_models=cache,
                                      cache_sub_models=cache, cache_baselines=cache,
+                                     cache_scores=cache,
                                      hparams_path=defs.resources["settings"].hparams_path,
                                      datasets_path=defs.resources["settings"].datasets_path),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),
@@ -71,10 +73,13 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
                                     run_config=quiet, raise_on_error=False)
         local = result.asset_materializations_for_node("local_models")[0].metadata
         subs = result.asset_materializations_for_node("sub_models")
+        scored = result.asset_materializations_for_node("pwa_scores")
         rows.append({"partition": key, "seconds": t.seconds, "success": result.success,
                      "local_models_seconds": local["seconds"].value,
                      "from_cache": local["from_cache"].value,
                      "step_5_from_cache": bool(subs and subs[0].metadata["from_cache"].value),
+                     "pwa_scores_from_cache": bool(
+                         scored and scored[0].metadata["scores_from_cache"].value),
                      **{f"{name}_mb_added": _megabytes(folder) - before[name]
                         for name, folder in stores.items()},
                      "assets": {e.step_key: e.event_specific_data.duration_ms / 1000
@@ -127,6 +132,8 @@ def summarise(runs: dict) -> dict:
                          "local_models_seconds": sum(r["local_models_seconds"] for r in rows),
                          "runs_local_models_from_cache": sum(r["from_cache"] for r in rows),
                          "runs_step_5_from_cache": sum(r["step_5_from_cache"] for r in rows),
+                         "runs_pwa_scores_from_cache": sum(r["pwa_scores_from_cache"]
+                                                           for r in rows),
                          **{f"{store}_mb": sum(r[f"{store}_mb_added"] for r in rows)
                             for store in ("storage", "mlflow_artifacts", "cache")}}
     saved = summary["without_cache"]["total_seconds"] - summary["with_cache"]["total_seconds"]

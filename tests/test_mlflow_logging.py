@@ -127,3 +127,25 @@ def test_models_that_predict_alike_share_a_fingerprint_and_others_do_not(default
     assert predictor_fingerprint(nudged, *names) != predictor_fingerprint(model, *names)
     assert predictor_fingerprint(model, names[0], ["a", "b"]) != \
         predictor_fingerprint(model, *names)
+
+
+def test_the_training_table_stacks_the_experiments_and_labels_each_rows_experiment():
+    from types import SimpleNamespace
+
+    import numpy as np
+    import pandas as pd
+
+    from pwa_pipeline.orchestration.reporting import training_table
+
+    rng = np.random.default_rng(0)
+    lengths = (5, 3, 12)
+    data = SimpleNamespace(u_train=[rng.normal(size=(n, 2)) for n in lengths],
+                           y_train=[rng.normal(size=(n, 1)) for n in lengths],
+                           u_names=["u1", "u2"], y_names=["y1"])
+    table = training_table(data)
+    assert list(table.columns) == ["u1", "u2", "y1", "experiment"]
+    assert table["experiment"].tolist() == ["0"] * 5 + ["1"] * 3 + ["2"] * 12
+    assert all(isinstance(v, str) for v in table["experiment"])
+    np.testing.assert_array_equal(table[["u1", "u2"]].to_numpy(), np.concatenate(data.u_train))
+    np.testing.assert_array_equal(table["y1"].to_numpy(), np.concatenate(data.y_train)[:, 0])
+    assert isinstance(table.index, pd.RangeIndex) and len(table) == sum(lengths)

@@ -66,11 +66,14 @@ def nrmse_summary(table: pd.DataFrame) -> dict[str, float]:
 
 
 def training_table(data: Dataset) -> pd.DataFrame:
-    """The training experiments as one table (experiment, inputs, outputs)."""
-    return pd.concat([pd.DataFrame(np.column_stack([u, y]), columns=data.u_names + data.y_names)
-                      .assign(experiment=str(i)) for i, (u, y) in
-                      enumerate(zip(data.u_train, data.y_train, strict=True))],
-                     ignore_index=True)
+    """The training experiments as one table: inputs, outputs, and the experiment of each row
+    (``"0"``, ``"1"``, ...)."""
+    table = pd.DataFrame(np.column_stack([np.concatenate(data.u_train),
+                                          np.concatenate(data.y_train)]),
+                         columns=data.u_names + data.y_names)
+    table["experiment"] = np.repeat([str(i) for i in range(len(data.u_train))],
+                                    [len(u) for u in data.u_train])
+    return table
 
 
 def _sig4(value: float) -> str:
