@@ -259,17 +259,16 @@ class MLflowTracker(dg.ConfigurableResource):
             return exp.experiment_id
 
     @staticmethod
-    def _mark_latest(client, exp_id: str, run_id: str, hparams: str, method: str) -> None:
-        """Tag ``run_id`` ``latest=true`` and the earlier runs of the same set and method
-        ``latest=false``, so that re-runs are told apart in the UI (filter
-        ``tags.latest = 'true'``)."""
+    def _unmark_earlier(client, exp_id: str, run_id: str, hparams: str, method: str) -> None:
+        """Tag the earlier runs of the same set and method ``latest=false`` (``run_id`` gets
+        ``latest=true`` with its last tags), so that re-runs are told apart in the UI
+        (filter ``tags.latest = 'true'``)."""
         earlier = client.search_runs(
             [exp_id], filter_string=f"tags.hparams = '{hparams}' and tags.method = '{method}' "
                                     f"and tags.latest = 'true'")
         for run in earlier:
             if run.info.run_id != run_id:
                 client.set_tag(run.info.run_id, "latest", "false")
-        client.set_tag(run_id, "latest", "true")
 
     @staticmethod
     def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
@@ -380,15 +379,17 @@ class MLflowTracker(dg.ConfigurableResource):
                     client.log_text(run_id, obj, name)
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
+            last = {}
             if model is not None:
                 fingerprint = model.fingerprint()
-                logged = self._log_model(
+                last = {**self._log_model(
                     run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
-                    self._logged_model(client, exp_id, method, fingerprint))
-                client.log_batch(run_id, tags=[
-                    RunTag(k, v) for k, v in {**logged, "model_fingerprint": fingerprint}.items()])
+                    self._logged_model(client, exp_id, method, fingerprint)),
+                    "model_fingerprint": fingerprint}
+            self._unmark_earlier(client, exp_id, run_id, hparams, method)
+            client.log_batch(run_id, tags=[RunTag(k, v) for k, v in
+                                           {**last, "latest": "true"}.items()])
             client.set_terminated(run_id, "FINISHED")
-            self._mark_latest(client, exp_id, run_id, hparams, method)
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
             # as KILLED rather than leave it RUNNING forever
