@@ -310,7 +310,9 @@ def _identification_assets(partitions_def) -> list:
                   sub_models: BaseEstimator | None, svm_regions: BaseEstimator | None,
                   output_error_refinement: BaseEstimator | None) -> PWARX:
         """The fitted PWARX model, joined from its fitted steps; what ``pwa_scores`` scores.
-        A set with a structure of its own (form, outputs, scheduling: the structured route of
+        Its switching and regions figures are cached by what it predicts with
+        (``cache_scores``), shared by the sets that end in the same model. A set with a
+        structure of its own (form, outputs, scheduling: the structured route of
         :mod:`pwa_pipeline.pwa.structure_fit`) is fitted here whole."""
         if configuration.pwa.structured:
             return _structured_model(context, configuration, raw_benchmark)
