@@ -228,6 +228,44 @@ def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
     assert {r.info.status for r in runs} == {"FINISHED"}
 
 
+def _log_model_once_at(args):
+    """Log a run of one fitted linear ARX model once ``barrier`` lets every process go."""
+    uri, hparams, barrier = args
+    from pwa_pipeline import LinearARX, make_hure_vasak
+    from pwa_pipeline.orchestration.mlflow_models import ModelToLog, Simulator, example_table
+
+    data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
+    model = LinearARX(na=1, nb=1).fit(data.u, data.y)
+    table = example_table(data.u, data.y, data.u_names, data.y_names, 5)
+    tracker = MLflowTracker(tracking_uri=uri)
+    tracker.client()  # the store ready before the race
+    barrier.wait()
+    return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
+                           metrics={}, tags={}, artifacts={},
+                           model=ModelToLog(Simulator(model, data.u_names, data.y_names),
+                                            table, table))
+
+
+def test_runs_scoring_one_model_at_once_log_it_once(tmp_path, mlflow_template):
+    """Three processes score the same model at the same moment (as ``run --jobs 2`` does with
+    a baseline two partitions share): on the sqlite store one run logs and registers it, the
+    others link it."""
+    from mlflow.tracking import MlflowClient
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    barrier = multiprocessing.get_context("fork").Manager().Barrier(3)
+    with _fork_pool(3) as pool:
+        ids = pool.map(_log_model_once_at, [(uri, f"s{i}", barrier) for i in range(3)])
+    client = MlflowClient(tracking_uri=uri)
+    tags = [client.get_run(i).data.tags for i in ids]
+    logged = {t["model_run_id"] for t in tags}
+    assert len(logged) == 1 and logged <= set(ids)
+    assert len({t["model_id"] for t in tags}) == 1
+    versions = client.search_model_versions("name = 'pwa-pipeline.d.linear_arx'")
+    assert [v.run_id for v in versions] == list(logged)
+
+
 class _Exploding:
     """A value whose JSON serialisation (``float(self)``) raises ``error``."""
 

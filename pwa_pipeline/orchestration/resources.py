@@ -1,6 +1,7 @@
 """Resources: data and hyper-parameter locations, and MLflow tracking."""
 
 import base64
+import contextlib
 import json
 import logging
 import os
@@ -233,6 +234,18 @@ class MLflowTracker(dg.ConfigurableResource):
             return client
         return MlflowClient(tracking_uri=uri)
 
+    def _models_lock(self):
+        """For the embedded sqlite store, a lock (a file beside the database) held from
+        looking for a run's logged model to the run's end, so that runs of other processes
+        scoring the same model at the same moment (``run --jobs 2``) log it once; for a
+        tracking server, no lock (its runs may come from other machines)."""
+        from filelock import FileLock
+
+        uri = self.uri()
+        if not uri.startswith("sqlite:///"):
+            return contextlib.nullcontext()
+        return FileLock(uri[len("sqlite:///"):] + ".models.lock")
+
     def _experiment(self, client, dataset: str) -> str:
         """Get or create the data set's experiment; another process creating it at the same
         moment is fine."""
@@ -342,7 +355,9 @@ class MLflowTracker(dg.ConfigurableResource):
         run's dataset, unless a finished run of the method in the data set's experiment has
         the same model (equal :meth:`~.mlflow_models.ModelToLog.fingerprint`, e.g. a baseline
         shared by the sets of a sweep): then it is not logged or registered again, but linked
-        to this run as its output, and the run's description links the run that logged it.
+        to this run as its output, and the run's description links the run that logged it
+        (on the embedded sqlite store, runs of other processes that score the same model at
+        the same moment wait for each other, :meth:`_models_lock`, so one logs it).
         Either way the run is tagged ``model_uri`` (where the model is), ``model_id`` (its
         MLflow logged model), ``model_run_id`` (the run that logged it) and
         ``model_fingerprint``.
@@ -380,16 +395,17 @@ class MLflowTracker(dg.ConfigurableResource):
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             last = {}
-            if model is not None:
-                fingerprint = model.fingerprint()
-                last = {**self._log_model(
-                    run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
-                    self._logged_model(client, exp_id, method, fingerprint)),
-                    "model_fingerprint": fingerprint}
-            self._unmark_earlier(client, exp_id, run_id, hparams, method)
-            client.log_batch(run_id, tags=[RunTag(k, v) for k, v in
-                                           {**last, "latest": "true"}.items()])
-            client.set_terminated(run_id, "FINISHED")
+            with self._models_lock() if model is not None else contextlib.nullcontext():
+                if model is not None:
+                    fingerprint = model.fingerprint()
+                    last = {**self._log_model(
+                        run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
+                        self._logged_model(client, exp_id, method, fingerprint)),
+                        "model_fingerprint": fingerprint}
+                self._unmark_earlier(client, exp_id, run_id, hparams, method)
+                client.log_batch(run_id, tags=[RunTag(k, v) for k, v in
+                                               {**last, "latest": "true"}.items()])
+                client.set_terminated(run_id, "FINISHED")
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
             # as KILLED rather than leave it RUNNING forever
