@@ -21,6 +21,9 @@ the Dagster event log of its home:
   steps is Dagster's own (events, storage, input loading between steps);
 - ``leaderboard`` and ``end`` (last run to process exit).
 
+Each repeat also counts the versions of each registered model in its MLflow store (each
+distinct model is registered once, also when two partitions score it at the same moment).
+
 Runs at once overlap: each partition's row says when it started after the first one.
 
 Writes results/first_command.json and results/first_command.md (``--suffix S``:
@@ -35,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import pandas as pd
@@ -65,7 +69,17 @@ def one_run(home: Path, jobs: int) -> dict:
             time.sleep(0.1)
     wall = time.time() - start
     return {"jobs": jobs, "wall_seconds": wall, "peak_gb": peak / 1024**3,
-            "exit_code": proc.returncode, **split(home / ".dagster_home", start, start + wall)}
+            "exit_code": proc.returncode, "model_versions": model_versions(home / "mlflow.db"),
+            **split(home / ".dagster_home", start, start + wall)}
+
+
+def model_versions(db: Path) -> dict[str, int]:
+    """Versions of each registered model in the run's MLflow store (a model two partitions
+    share is registered once)."""
+    from mlflow.tracking import MlflowClient
+
+    versions = MlflowClient(tracking_uri=f"sqlite:///{db}").search_model_versions()
+    return dict(sorted(Counter(v.name for v in versions).items()))
 
 
 def tree_rss(proc: psutil.Process) -> int:
@@ -154,7 +168,9 @@ def main(argv=None) -> None:
         "runs": ", ".join(f"{r['wall_seconds']:.1f}" for r in runs[j]),
         "peak GB": max(r["peak_gb"] for r in runs[j]),
         f"over --jobs {ref}": wall[j] / wall[ref],
-        "exit codes": ", ".join(str(r["exit_code"]) for r in runs[j])} for j in variants])
+        "exit codes": ", ".join(str(r["exit_code"]) for r in runs[j]),
+        "registered versions": ", ".join(str(sum(r["model_versions"].values()))
+                                         for r in runs[j])} for j in variants])
     main_jobs = variants[0]
     summary = (f"summary: python -m pwa_pipeline run (--jobs {main_jobs}) on fresh stores "
                f"{wall[main_jobs]:.1f} s (median of {args.repeats}; runs "
@@ -178,7 +194,9 @@ def main(argv=None) -> None:
                overview.to_markdown(floatfmt=".3g"), "",
                "Per partition (seconds; scoring includes the MLflow logging with model "
                "registration; partitions run at once overlap):\n",
-               table.to_markdown(floatfmt=".3g"), ""]
+               table.to_markdown(floatfmt=".3g"), "",
+               "Registered model versions (first repeat): " + ", ".join(
+                   f"{name} {n}" for name, n in first["model_versions"].items()) + "\n"]
     (RESULTS / f"first_command{args.suffix}.md").write_text("\n".join(md + [summary]) + "\n")
     print(summary)
 

@@ -40,6 +40,8 @@ MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 #: sqlite tracking stores whose schema this process has created or checked.
 _READY_STORES: set[str] = set()
+#: Lock files of :meth:`MLflowTracker._models_lock` per sqlite store.
+_MODEL_LOCKS = 16
 
 
 def split_credentials(uri: str) -> tuple[str, str]:
@@ -234,17 +236,22 @@ class MLflowTracker(dg.ConfigurableResource):
             return client
         return MlflowClient(tracking_uri=uri)
 
-    def _models_lock(self):
-        """For the embedded sqlite store, a lock (a file beside the database) held from
-        looking for a run's logged model to the run's end, so that runs of other processes
-        scoring the same model at the same moment (``run --jobs 2``) log it once; for a
-        tracking server, no lock (its runs may come from other machines)."""
+    def _models_lock(self, fingerprint: str):
+        """For the embedded sqlite store, a lock held from looking for a run's logged model
+        to the run's end, so that runs of other processes scoring the same model at the same
+        moment (``run --jobs 2``) log it once: one of :data:`_MODEL_LOCKS` files in
+        ``<database>.locks/``, chosen by the model's ``fingerprint``, so that runs of other
+        models rarely wait. For a tracking server, no lock (its runs may come from other
+        machines)."""
         from filelock import FileLock
 
         uri = self.uri()
         if not uri.startswith("sqlite:///"):
             return contextlib.nullcontext()
-        return FileLock(uri[len("sqlite:///"):] + ".models.lock")
+        db = Path(uri[len("sqlite:///"):])
+        folder = db.parent / f"{db.name}.locks"
+        folder.mkdir(exist_ok=True)
+        return FileLock(folder / f"model-{int(fingerprint[:8], 16) % _MODEL_LOCKS}.lock")
 
     def _experiment(self, client, dataset: str) -> str:
         """Get or create the data set's experiment; another process creating it at the same
@@ -395,9 +402,10 @@ class MLflowTracker(dg.ConfigurableResource):
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
             last = {}
-            with self._models_lock() if model is not None else contextlib.nullcontext():
+            fingerprint = model.fingerprint() if model is not None else ""
+            with self._models_lock(fingerprint) if model is not None \
+                    else contextlib.nullcontext():
                 if model is not None:
-                    fingerprint = model.fingerprint()
                     last = {**self._log_model(
                         run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
                         self._logged_model(client, exp_id, method, fingerprint)),
