@@ -212,20 +212,27 @@ def test_local_models_are_reused_when_only_eps_changes(resources, tmp_path):
     np.testing.assert_array_equal(local[0].theta_, local[1].theta_)
 
 
-def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resources, tmp_path):
-    """Two default sets that differ only in ε, whose clusterings (3 clusters, other noise
-    rows) consolidate to the same sub-models: the second takes step 5's steps 2–4 from the
-    signed cache, with the first's results; the stored steps hold no cache."""
+def _two_eps_sets(resources, tmp_path, *assets: str) -> list:
+    """The identification assets up to the clusters and ``assets``, materialised for two
+    default sets of hure_vasak that differ only in ε (0.22, 0.25; their clusterings differ,
+    their sub-models and regions do not)."""
     path = tmp_path / "eps.toml"
     path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"default\"\nna = 1\nnb = 1\n"
                             f"clustering.eps = {eps}\n" for i, eps in enumerate((0.22, 0.25))))
     sweep = build_definitions(path)
     steps = [a for a in sweep.assets if a.key.to_user_string() in
              ("configuration", "raw_benchmark", "regressors", "local_models", "clusters",
-              "sub_models")]
+              *assets)]
     resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
-    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+    return [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
             for i in (0, 1)]
+
+
+def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resources, tmp_path):
+    """Two default sets that differ only in ε, whose clusterings (3 clusters, other noise
+    rows) consolidate to the same sub-models: the second takes step 5's steps 2–4 from the
+    signed cache, with the first's results; the stored steps hold no cache."""
+    runs = _two_eps_sets(resources, tmp_path, "sub_models")
     meta = [r.asset_materializations_for_node("sub_models")[0].metadata for r in runs]
     assert [m["from_cache"].value for m in meta] == [False, True]
     clusters = [r.output_for_node("clusters") for r in runs]
@@ -244,17 +251,8 @@ def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow
     clusterings differ): the second takes the PWA model's scores and figures from the cache,
     and its MLflow run is linked to the model the first logged (one registered version);
     the models' prediction states are equal, their fingerprints too."""
-    path = tmp_path / "eps.toml"
-    path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"default\"\nna = 1\nnb = 1\n"
-                            f"clustering.eps = {eps}\n" for i, eps in enumerate((0.22, 0.25))))
-    sweep = build_definitions(path)
-    steps = [a for a in sweep.assets if a.key.to_user_string() in
-             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters",
-              "sub_models", "svm_regions", "output_error_refinement", "pwa_model",
-              "pwa_scores")]
-    resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
-    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
-            for i in (0, 1)]
+    runs = _two_eps_sets(resources, tmp_path, "sub_models", "svm_regions",
+                         "output_error_refinement", "pwa_model", "pwa_scores")
 
     def metadata(run, node: str, key: str):
         return run.asset_materializations_for_node(node)[0].metadata[key].value
