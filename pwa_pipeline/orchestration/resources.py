@@ -207,8 +207,8 @@ class MLflowTracker(dg.ConfigurableResource):
                         f"store; assets already materialised are kept."
                     )
                 ) from None
-        elif uri.startswith("sqlite:///"):
-            folder = Path(uri[len("sqlite:///"):]).parent
+        elif (db := self._sqlite_db()) is not None:
+            folder = db.parent
             if not os.access(folder, os.W_OK):
                 raise dg.Failure(description=f"MLflow store folder {folder} is not writable")
 
@@ -225,30 +225,34 @@ class MLflowTracker(dg.ConfigurableResource):
             os.environ["MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR"] = "1"
         # Artifact repositories of a tracking server resolve through the global URI.
         mlflow.set_tracking_uri(uri)
-        if uri.startswith("sqlite:///") and uri not in _READY_STORES:
+        if (db := self._sqlite_db()) is not None and uri not in _READY_STORES:
             from filelock import FileLock
 
             # the client's first use of a store creates and migrates its schema
-            with FileLock(uri[len("sqlite:///"):] + ".lock"):
+            with FileLock(f"{db}.lock"):
                 client = MlflowClient(tracking_uri=uri)
                 client.search_experiments(max_results=1)
             _READY_STORES.add(uri)
             return client
         return MlflowClient(tracking_uri=uri)
 
-    def _models_lock(self, fingerprint: str):
+    def _sqlite_db(self) -> Path | None:
+        """The database file of an embedded sqlite store; None for a tracking server."""
+        uri = self.uri()
+        return Path(uri[len("sqlite:///"):]) if uri.startswith("sqlite:///") else None
+
+    def _models_lock(self, fingerprint: str | None):
         """For the embedded sqlite store, a lock held from looking for a run's logged model
         to the run's end, so that runs of other processes scoring the same model at the same
         moment (``run --jobs 2``) log it once: one of :data:`_MODEL_LOCKS` files in
         ``<database>.locks/``, chosen by the model's ``fingerprint``, so that runs of other
-        models rarely wait. For a tracking server, no lock (its runs may come from other
-        machines)."""
+        models rarely wait. No lock for a run without a model (``fingerprint`` None), nor
+        for a tracking server (its runs may come from other machines)."""
         from filelock import FileLock
 
-        uri = self.uri()
-        if not uri.startswith("sqlite:///"):
+        db = self._sqlite_db()
+        if fingerprint is None or db is None:
             return contextlib.nullcontext()
-        db = Path(uri[len("sqlite:///"):])
         folder = db.parent / f"{db.name}.locks"
         folder.mkdir(exist_ok=True)
         return FileLock(folder / f"model-{int(fingerprint[:8], 16) % _MODEL_LOCKS}.lock")
@@ -265,9 +269,8 @@ class MLflowTracker(dg.ConfigurableResource):
                 client.set_experiment_tag(exp.experiment_id, *EXPERIMENT_KIND)
             return exp.experiment_id
         location = None
-        if self.uri().startswith("sqlite:///"):
+        if (db := self._sqlite_db()) is not None:
             # beside the database, never relative to whichever process's working directory
-            db = Path(self.uri()[len("sqlite:///"):])
             location = (db.parent / "mlartifacts" / dataset).as_uri()
         try:
             return client.create_experiment(name, artifact_location=location,
@@ -401,15 +404,12 @@ class MLflowTracker(dg.ConfigurableResource):
                     client.log_text(run_id, obj, name)
                 else:
                     client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
-            last = {}
-            fingerprint = model.fingerprint() if model is not None else ""
-            with self._models_lock(fingerprint) if model is not None \
-                    else contextlib.nullcontext():
-                if model is not None:
-                    last = {**self._log_model(
-                        run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
-                        self._logged_model(client, exp_id, method, fingerprint)),
-                        "model_fingerprint": fingerprint}
+            fingerprint = model.fingerprint() if model is not None else None
+            with self._models_lock(fingerprint):
+                last = {} if model is None else {**self._log_model(
+                    run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
+                    self._logged_model(client, exp_id, method, fingerprint)),
+                    "model_fingerprint": fingerprint}
                 self._unmark_earlier(client, exp_id, run_id, hparams, method)
                 client.log_batch(run_id, tags=[RunTag(k, v) for k, v in
                                                {**last, "latest": "true"}.items()])
