@@ -125,8 +125,8 @@ class ModelToLog:
 def pandas_digest(table: pd.DataFrame) -> str:
     """MLflow's digest of a table (``mlflow.data.digest_utils.compute_pandas_digest``: its
     first rows' text and numeric columns hashed with its length and column names), without
-    the type test of every cell of the numeric columns, which hold no text (0.15 s a run on
-    the robot's 40k × 13 training table).
+    the type test of every cell of the numeric columns, which hold no text (on the robot's
+    40k × 13 training table, most of the time MLflow's digest takes).
     """
     from mlflow.data.digest_utils import MAX_ROWS, get_normalized_md5_digest
 
