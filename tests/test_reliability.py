@@ -109,6 +109,38 @@ def test_signed_files_round_trip_and_damage_is_detected(tmp_path):
         load_object(tmp_path / "a.pkl", key)
 
 
+def test_a_file_this_process_signed_is_loaded_from_memory_until_it_changes(tmp_path,
+                                                                           monkeypatch):
+    """The payload a process wrote or verified is unpickled again without reading the file;
+    a file replaced (another process's write), touched or planted since is read and
+    verified anew."""
+    key = signing_key(tmp_path)
+    path = tmp_path / "a.pkl"
+    save_object(path, {"theta": 1.0}, key)
+    reads = []
+    read_bytes = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda p: reads.append(p.name) or read_bytes(p))
+    first, second = load_object(path, key), load_object(path, key)
+    assert first == second == {"theta": 1.0} and first is not second and reads == []
+    save_object(tmp_path / "b.pkl", {"theta": 2.0}, key)
+    os.replace(tmp_path / "b.pkl", path)  # what another process's atomic write does
+    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl"]
+    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl"]  # verified: kept
+    os.utime(path, ns=(0, 0))
+    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl", "a.pkl"]
+    marker = tmp_path / "marker"
+    planted = tmp_path / "c.pkl"
+    planted.write_bytes(pickle.dumps(_Planted(marker)))
+    os.replace(planted, path)
+    with pytest.raises(UnsignedFileError, match="a.pkl is not a file this store wrote"):
+        load_object(path, key)
+    assert not marker.exists()
+    # another store's key never gets this store's payload from memory
+    save_object(path, {"theta": 3.0}, key)
+    with pytest.raises(UnsignedFileError):
+        load_object(path, signing_key(tmp_path / "other"))
+
+
 @pytest.fixture()
 def settings(tmp_path):
     return PipelineSettings(cache_dir=str(tmp_path / "cache"))

@@ -97,31 +97,89 @@ def signing_key(root: Path) -> bytes:
     return path.read_bytes()
 
 
+class _VerifiedPayloads:
+    """The payloads of the signed files this process wrote or verified last, each with the
+    file's identity then (device, inode, size, modification and change times in ns): while
+    a file keeps that identity it is unpickled from memory, neither read nor verified again
+    (a run's steps load the same regressors and local models several times; 10 MB each on
+    the robot). Rewriting, replacing or touching a file changes its identity (its change
+    time at least), so it is then read and verified anew. Only payloads this process signed
+    or verified are ever kept: the identity tells whether the file still holds one, never
+    lets an unverified one in. Payloads over a quarter of
+    ``max_bytes`` are not kept; the least recently used beyond ``max_bytes`` are dropped."""
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes = max_bytes
+        self._kept: dict[tuple[str, bytes], tuple[tuple, bytes]] = {}
+
+    @staticmethod
+    def identity(path: Path) -> tuple:
+        """What tells a file's versions apart: device, inode, size, modification and change
+        times."""
+        st = path.stat()
+        return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
+
+    def get(self, path: Path, key: bytes) -> bytes | None:
+        """The payload of ``path`` signed with ``key``, if kept and the file is unchanged."""
+        kept = self._kept.pop((str(path), key), None)
+        if kept is None or kept[0] != self.identity(path):
+            return None
+        self._kept[(str(path), key)] = kept  # most recently used last
+        return kept[1]
+
+    def put(self, path: Path, key: bytes, payload: bytes, identity: tuple) -> None:
+        """Keep the payload written to or verified at ``path`` when the file had
+        ``identity``, unless the file has changed since (another process replaced it)."""
+        self._kept.pop((str(path), key), None)
+        if len(payload) > self.max_bytes // 4 or self.identity(path) != identity:
+            return
+        self._kept[(str(path), key)] = (identity, payload)
+        while sum(len(p) for _, p in self._kept.values()) > self.max_bytes:
+            del self._kept[next(iter(self._kept))]
+
+
+_VERIFIED = _VerifiedPayloads(max_bytes=128 * 2**20)
+
+
 def save_object(path: Path, obj, key: bytes) -> None:
     """Pickle ``obj`` to ``path`` atomically, signed with ``key``."""
     payload = pickle.dumps(obj, protocol=5)
     digest = hmac.new(key, payload, hashlib.sha256).digest()
-    atomic_write(path, lambda p: p.write_bytes(MAGIC + digest + payload))
+    written = []
+
+    def write(tmp: Path) -> None:
+        tmp.write_bytes(MAGIC + digest + payload)
+        written.append(os.stat(tmp).st_ino)
+
+    atomic_write(path, write)
+    identity = _VERIFIED.identity(path)
+    if identity[1] == written[0]:  # the file is the one just written, not another's since
+        _VERIFIED.put(path, key, payload, identity)
 
 
 def load_object(path: Path, key: bytes):
-    """Unpickle a file written by :func:`save_object` with the same key.
+    """Unpickle a file written by :func:`save_object` with the same key (from memory when
+    this process wrote or verified it and it is unchanged since, :class:`_VerifiedPayloads`).
 
     Raises
     ------
     UnsignedFileError
         If the header or signature is missing or wrong (the file is then never unpickled).
     """
-    data = path.read_bytes()
-    head = len(MAGIC)
-    digest, payload = data[head:head + 32], data[head + 32:]
-    expected = hmac.new(key, payload, hashlib.sha256).digest()
-    if not data.startswith(MAGIC) or not hmac.compare_digest(digest, expected):
-        raise UnsignedFileError(
-            f"{path} is not a file this store wrote (missing or wrong signature: planted, "
-            f"copied from another store, or damaged); it was not loaded. Delete it and "
-            f"materialise again"
-        )
+    payload = _VERIFIED.get(path, key)
+    if payload is None:
+        identity = _VERIFIED.identity(path)
+        data = path.read_bytes()
+        head = len(MAGIC)
+        digest, payload = data[head:head + 32], data[head + 32:]
+        expected = hmac.new(key, payload, hashlib.sha256).digest()
+        if not data.startswith(MAGIC) or not hmac.compare_digest(digest, expected):
+            raise UnsignedFileError(
+                f"{path} is not a file this store wrote (missing or wrong signature: planted, "
+                f"copied from another store, or damaged); it was not loaded. Delete it and "
+                f"materialise again"
+            )
+        _VERIFIED.put(path, key, payload, identity)  # kept if not replaced while read
     return pickle.loads(payload)
 
 
