@@ -342,7 +342,10 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
         k: first.data.tags[k] for k in ("model_uri", "model_id")}
     # the reusing run shows the model as its output, its training data, and who logged it
     assert [m.model_id for m in reused.outputs.model_outputs] == [first.data.tags["model_id"]]
-    assert [d.dataset.name for d in reused.inputs.dataset_inputs] == ["training"]
+    assert [(d.dataset.name, {t.key: t.value for t in d.tags}) for d in
+            reused.inputs.dataset_inputs] == [("training", {"mlflow.data.context": "training"})]
+    assert (reused.inputs.dataset_inputs[0].dataset.digest
+            == first.inputs.dataset_inputs[0].dataset.digest)
     assert f"runs/{first.info.run_id}?" in reused.data.tags["mlflow.note.content"]
     reused = reused.data.tags
     data = runs[1].output_for_node("raw_benchmark")

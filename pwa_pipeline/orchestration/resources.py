@@ -323,15 +323,19 @@ class MLflowTracker(dg.ConfigurableResource):
         run's tags for its model: :data:`MODEL_TAGS`, and for a linked model a description
         (``mlflow.note.content``) that says which run logged it."""
         import mlflow
-        from mlflow.entities import LoggedModelOutput
+        from mlflow.entities import DatasetInput, InputTag, LoggedModelOutput
+        from mlflow.utils.mlflow_tags import MLFLOW_DATASET_CONTEXT
 
-        with mlflow.start_run(run_id=run_id):
-            mlflow.log_input(model.dataset(), context="training")
-            if logged is None:
-                info = _log_pyfunc(model, registered_name)
-                return {"model_uri": info.model_uri, "model_id": info.model_id,
-                        "model_run_id": run_id}
         client = self.client()
+        # as mlflow.log_input does, without making the run the active one
+        client.log_inputs(run_id, datasets=[DatasetInput(
+            model.dataset()._to_mlflow_entity(),
+            tags=[InputTag(MLFLOW_DATASET_CONTEXT, "training")])])
+        if logged is None:
+            with mlflow.start_run(run_id=run_id):  # the fluent log_model needs an active run
+                info = _log_pyfunc(model, registered_name)
+            return {"model_uri": info.model_uri, "model_id": info.model_id,
+                    "model_run_id": run_id}
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
         return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
 
