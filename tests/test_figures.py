@@ -277,6 +277,65 @@ def test_parameter_clusters_legend_lists_the_clusters_with_their_own_colour():
     assert sum(c.get_label().startswith("cluster") for c in fig.axes[0].collections) == 27
 
 
+def _clusters_layout_faults(fig) -> list[str]:
+    """What the parameter-clusters figure's hand layout got wrong: texts outside the figure
+    or over the other panel, the legend over the x label or its tick labels."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    ax, ax_k = fig.axes
+    whole = fig.bbox
+
+    def drawn(axis):  # tick labels of the ticks within the view (the others are not drawn)
+        low, high = sorted(axis.get_view_interval())
+        return [t for minor in (False, True) for t, v in zip(
+                    axis.get_ticklabels(minor=minor), axis.get_ticklocs(minor=minor),
+                    strict=True) if low <= v <= high and t.get_text()]
+
+    ticks = {id(t) for a in (ax, ax_k) for axis in (a.xaxis, a.yaxis)
+             for t in [*axis.get_ticklabels(), *axis.get_ticklabels(minor=True)]}
+    texts = [t for t in fig.findobj(lambda a: hasattr(a, "get_text") and a.get_visible())
+             if id(t) not in ticks and t.get_text()]
+    texts += [t for a in (ax, ax_k) for axis in (a.xaxis, a.yaxis) for t in drawn(axis)]
+    faults = []
+    for text in texts:
+        box = text.get_window_extent(renderer)
+        if not (whole.x0 - 1 <= box.x0 and box.x1 <= whole.x1 + 1 and whole.y0 - 1 <= box.y0
+                and box.y1 <= whole.y1 + 1):
+            faults.append(f"outside the figure: {text.get_text()!r}")
+    for own, other in ((ax, ax_k), (ax_k, ax)):
+        for label in (own.yaxis.label, *drawn(own.yaxis)):
+            if label.get_window_extent(renderer).overlaps(
+                    other.get_window_extent(renderer)):
+                faults.append(f"over the other panel: {label.get_text()!r}")
+    legend = ax.get_legend().get_window_extent(renderer)
+    for text in (ax.xaxis.label, *drawn(ax.xaxis)):
+        if legend.y1 > text.get_window_extent(renderer).y0:
+            faults.append(f"legend over {text.get_text()!r}")
+    return faults
+
+
+def test_parameter_clusters_layout_keeps_every_text_inside_and_apart(fit):
+    """The figure is laid out by hand (no constrained layout): with one legend row and with
+    the longest legend (27 clusters), and with long tick labels on the log axis, nothing
+    leaves the figure or covers the other panel, and the legend stays below the x label."""
+    rng = np.random.default_rng(1)
+    labels = np.r_[np.full(60, -1), np.repeat(np.arange(27), np.arange(27)[::-1] + 22)]
+    local = SimpleNamespace(theta_=rng.normal(size=(labels.size, 3, 2)), phi_scale_=np.ones(3))
+    step = SimpleNamespace(unit_free=False, embedding="exact", labels_=labels, min_pts_=6,
+                           clustered_=np.ones(labels.size, bool), eps_=1.0, eps_auto_=False)
+    many = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
+    one = parameter_clusters_figure(fit.model.local_models_, fit.model.clustering_,
+                                    fit.reg.target)
+    assert many.get_layout_engine() is None and many.get_figheight() > one.get_figheight()
+    for fig in (many, one):
+        assert _clusters_layout_faults(fig) == []
+    squeezed = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
+    squeezed.axes[0].set_position([0.05, 0.05, 0.9, 0.9])  # a layout that is wrong
+    assert len(_clusters_layout_faults(squeezed)) > 3
+
+
 def _png(markdown):
     assert markdown.startswith("![") and "](data:image/png;base64," in markdown
     assert markdown.endswith(")")

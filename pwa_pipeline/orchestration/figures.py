@@ -59,10 +59,10 @@ def _colour(i: int) -> str:
     return _NOISE if i < 0 else _PALETTE[i % len(_PALETTE)]
 
 
-def _figure(width: float, height: float) -> Figure:
+def _figure(width: float, height: float, layout: str | None = "constrained") -> Figure:
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(width, height), layout="constrained")
+    return Figure(figsize=(width, height), layout=layout)
 
 
 def _legend_right(fig: Figure) -> None:
@@ -220,8 +220,16 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     pcs = np.zeros((emb.shape[0], 2))
     pcs[:, :min(2, axes.shape[1])] = centred @ axes[:, :2]
     share = 100 * var / max(float(np.sum(var)), np.finfo(float).tiny)
-    fig = _figure(10, 4.0)
-    ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
+    # laid out by hand: the constrained layout measures every text first, which doubled
+    # the time to draw this figure (it is drawn for every set of a sweep)
+    columns = 3
+    n_listed = min(len(np.unique(labels)), len(_PALETTE) + 1) + (labels.max() >= len(_PALETTE))
+    below = 0.55 + 0.17 * -(-n_listed // columns)  # inches: tick labels, x label, legend
+    height, top, left, right, gap = 2.45 + below + 0.65, 0.65, 0.75, 0.15, 1.0
+    fig = _figure(10, height, layout=None)
+    ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1), gridspec_kw=dict(
+        left=left / 10, right=1 - right / 10, bottom=below / height, top=1 - top / height,
+        wspace=gap / ((10 - left - right - gap) / 2)))
     listed = []
     for c in np.unique(labels):  # (labels run by decreasing size: small clusters on top)
         rows = labels == c
@@ -244,7 +252,8 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     ax.set_title(f"{labels.size} of {step.labels_.size} local models clustered ({scale})",
                  fontsize=9, loc="left")
     ax.legend(handles=listed, fontsize=8, markerscale=2, loc="upper center",
-              bbox_to_anchor=(0.5, -0.16), ncols=min(3, len(listed)), frameon=False)
+              bbox_to_anchor=(0.5, -0.5 / 2.45), ncols=min(columns, len(listed)),
+              frameon=False)
     dist = k_distances(emb, step.min_pts_, max_query=_CURVE_POINTS)
     ax_k.plot(100 * (np.arange(dist.size) + 0.5) / dist.size, dist, color="black", lw=1.0,
               label="k-distance")
@@ -258,7 +267,8 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     ax_k.set_title(f"k-distance curve (MinPts = {step.min_pts_}{queried})", fontsize=9,
                    loc="left")
     ax_k.legend(fontsize=8, loc="upper left")
-    fig.suptitle(title or "Step 4: local models θ_k in the DBSCAN embedding (PCA)")
+    fig.suptitle(title or "Step 4: local models θ_k in the DBSCAN embedding (PCA)",
+                 y=1 - 0.08 / height, va="top")
     return fig
 
 
