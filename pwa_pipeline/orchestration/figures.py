@@ -176,10 +176,10 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, title: str,
 def _clustering_embedding(local, step, target: np.ndarray) -> np.ndarray:
     """The clustered θ_k embedded as the clustering step embedded them (eq. 8–10), unit-free
     (θ_k·rms(φ)/rms(y)) when the step was."""
-    theta = local.theta_
+    theta = local.theta_[step.clustered_]  # (a few thousand of the robot's 40k rows)
     if step.unit_free:
         theta = theta * local.phi_scale_[None, :, None] / column_rms(np.asarray(target))
-    return EMBEDDINGS[step.embedding](theta[step.clustered_])
+    return EMBEDDINGS[step.embedding](theta)
 
 
 def parameter_clusters_figure(local, clustering, target: np.ndarray,
