@@ -55,3 +55,33 @@ def test_user_tables_round_trip(tmp_path, suffix):
     with pytest.raises(ValueError, match="unsupported file type '.txt'"):
         (tmp_path / "x.txt").write_text("a")
         load_table(tmp_path / "x.txt", ["a"], ["b"])
+
+
+def test_a_data_sets_digest_changes_with_any_part_of_it_and_travels_with_it():
+    """What the pipeline's caches key on in place of the data: equal for equal contents,
+    another for a sample changed by 1e-12, another split, other names or other truth."""
+    import dataclasses
+    import pickle
+
+    from pwa_pipeline.datasets.registry import load_dataset
+
+    data = load_dataset("hure_vasak")
+    same = pickle.loads(pickle.dumps(dataclasses.replace(data)))
+    assert same.digest == data.digest and len(data.digest) == 24
+    y = data.y_test[0].copy()
+    y[5, 1] += 1e-12
+    u = np.concatenate(data.u_train)
+    half = len(u) // 2
+    others = [
+        dataclasses.replace(data, y_test=[y]),
+        *(dataclasses.replace(data, u_train=np.split(u, [cut]),
+                              y_train=np.split(np.concatenate(data.y_train), [cut]))
+          for cut in (half, half + 1)),  # the same samples in other experiments
+        dataclasses.replace(data, y_names=data.y_names[::-1]),
+        dataclasses.replace(data, truth=None),
+        dataclasses.replace(data, name="other")]
+    digests = {data.digest, *(d.digest for d in others)}
+    assert len(digests) == 1 + len(others)
+    # computed once, then stored with the data set (the raw_benchmark asset's pickle)
+    stored = pickle.loads(pickle.dumps(data))
+    assert stored.__dict__["digest"] == data.digest

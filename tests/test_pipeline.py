@@ -245,6 +245,30 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
     assert len(list(cache.glob("*.pkl"))) == 1
 
 
+def test_cached_scores_are_those_of_the_same_model_on_the_same_held_out_data(tmp_path):
+    """The scores cache keys on the model's fingerprint and the data set's digest: the same
+    model scored on held-out data changed in one sample (a user's edited test file) is
+    scored again, and gives other scores."""
+    import dataclasses
+
+    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.orchestration.storage import SignedMemory
+
+    data = load_dataset("hure_vasak")
+    y = data.y_test[0].copy()
+    y[50:, 0] += 0.1
+    edited = dataclasses.replace(data, y_test=[y])
+    model = LinearARX(na=1, nb=1).fit(data.u_train, data.y_train)
+    memory = SignedMemory(tmp_path, "scores")
+    score = memory.cache(assets._scored, ignore=["model", "data"])
+    first = score(model, data, 10, "t", assets._prediction_key(model, data))[0]
+    again = score(model, data, 10, "t", assets._prediction_key(model, data))[0]
+    other = score(model, edited, 10, "t", assets._prediction_key(model, edited))[0]
+    assert (memory.hits, memory.misses) == (1, 2)
+    pd.testing.assert_frame_equal(first.table, again.table)
+    assert not np.allclose(first.table["nrmse"], other.table["nrmse"])
+
+
 def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow_model(
         resources, tmp_path):
     """Two default sets that differ only in ε and end in the same θ_i and regions (their

@@ -1,10 +1,13 @@
 """The named data sets the pipeline and benchmarks use, each split into training and held-out
 experiments."""
 
+import functools
+import hashlib
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import joblib
 import numpy as np
 
 from .._typing import Float2D
@@ -49,6 +52,20 @@ class Dataset:
     u_names: list[str]
     y_names: list[str]
     truth: GroundTruth | None = None
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """Hash of the name, channel names, experiments and ground truth: what the
+        pipeline's caches key on in place of the data, so that the arrays are hashed once
+        per loaded data set, not at every cache lookup."""
+        h = hashlib.sha256(repr((self.name, self.u_names, self.y_names)).encode())
+        for part in (self.u_train, self.y_train, self.u_test, self.y_test):
+            h.update(str(len(part)).encode())
+            for a in map(np.ascontiguousarray, part):
+                h.update(f"{a.dtype}{a.shape}".encode())
+                h.update(a.tobytes())
+        h.update(joblib.hash(self.truth).encode())
+        return h.hexdigest()[:24]
 
     @property
     def n_train(self) -> int:

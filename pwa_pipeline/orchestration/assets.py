@@ -153,6 +153,7 @@ def _identification_assets(partitions_def) -> list:
             "train_samples": data.n_train, "test_samples": data.n_test,
             "train_experiments": len(data.u_train), "test_experiments": len(data.u_test),
             "inputs": ", ".join(data.u_names), "outputs": ", ".join(data.y_names),
+            "digest": data.digest,  # (computed once: stored with the data set)
         })
         return data
 
@@ -324,10 +325,10 @@ def _identification_assets(partitions_def) -> list:
         data = raw_benchmark
         memory = SignedMemory(settings.cache_root(), "model_figures", warn=context.log.warning,
                               salt=figures_fingerprint())
-        draw = memory.cache(_model_figures, ignore=["model"]) if settings.cache_scores \
-            else _model_figures
+        draw = memory.cache(_model_figures, ignore=["model", "data", "phi"]) \
+            if settings.cache_scores else _model_figures
         figures = draw(model, data, regressors.phi, model.labels_,
-                       predictor_fingerprint(model, data.u_names, data.y_names))
+                       _prediction_key(model, data))
         context.add_output_metadata(rounded({
             "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
             "resolved parameters": markdown(params_table(model.resolved_params())),
@@ -392,21 +393,29 @@ def _baseline_model_asset(method: Method, partitions_def):
     return model
 
 
-def _scored(model, data: Dataset, warmup: int, title: str, fingerprint: str
+def _prediction_key(model, data: Dataset) -> tuple[str, str]:
+    """What the scores and figure caches key on in place of ``model`` and ``data``: the
+    model's :func:`predictor_fingerprint` and the data's :attr:`~Dataset.digest` (the same
+    model on edited held-out data is scored again)."""
+    return predictor_fingerprint(model, data.u_names, data.y_names), data.digest
+
+
+def _scored(model, data: Dataset, warmup: int, title: str, key: tuple[str, str]
             ) -> tuple[Evaluation, bytes]:
     """``model`` scored on ``data``'s held-out experiments by the evaluation protocol, and
     its prediction figure rendered as PNG: what the scores assets cache (``cache_scores``),
-    keyed by the model's ``fingerprint`` (:func:`predictor_fingerprint`) in place of the
-    model."""
+    keyed by ``key`` (:func:`_prediction_key`) in place of the model and the data."""
     ev = evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
     return ev, to_png(prediction_figure(data, ev, title, warmup))
 
 
-def _model_figures(model: PWARX, data: Dataset, phi, labels, fingerprint: str
+def _model_figures(model: PWARX, data: Dataset, phi, labels, key: tuple[str, str]
                    ) -> dict[str, str]:
     """The PWA model's switching and regions figures as Markdown images (``pwa_model``'s
-    metadata), cached like :func:`_scored`: keyed by the model's ``fingerprint`` and the
-    rows' ``labels`` (the regions figure colours the rows by them) in place of the model."""
+    metadata), cached like :func:`_scored`: keyed by ``key`` (:func:`_prediction_key`) and
+    the rows' ``labels`` (the regions figure colours the rows by them) in
+    place of the model, the data and ``phi`` (the data's regressors at the model's
+    orders)."""
     truth = _truth(model, data)
     switching = switching_figure(
         model, data.u_test[0], data.y_test[0],
@@ -434,9 +443,10 @@ def _scores_asset(method: Method, partitions_def):
         title = f"{method.label} | {dataset}"
         memory = SignedMemory(settings.cache_root(), "scores", warn=context.log.warning,
                               salt=figures_fingerprint())
-        score = memory.cache(_scored, ignore=["model"]) if settings.cache_scores else _scored
+        score = memory.cache(_scored, ignore=["model", "data"]) if settings.cache_scores \
+            else _scored
         ev, png = score(model, data, configuration.warmup, title,
-                        predictor_fingerprint(model, data.u_names, data.y_names))
+                        _prediction_key(model, data))
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
         fit_seconds = _latest_metadata(context, f"{method.name}_model", "fit_seconds")
