@@ -259,14 +259,21 @@ def test_regions_figure_keeps_a_long_legend_inside_the_figure():
             box.y1 <= page.y1, text.get_text()
 
 
-def test_parameter_clusters_legend_lists_the_clusters_with_their_own_colour():
-    """27 clusters (the paper's setting on the robot): the 8 with a colour of their own and
-    noise are listed, the rest is one line with their sizes."""
+def _twenty_seven_clusters():
+    """Fitted local-model and clustering steps as the figure reads them: 27 clusters (the
+    paper's setting on the robot) of 22–48 local models each, and 60 noise ones."""
     rng = np.random.default_rng(1)
     labels = np.r_[np.full(60, -1), np.repeat(np.arange(27), np.arange(27)[::-1] + 22)]
     local = SimpleNamespace(theta_=rng.normal(size=(labels.size, 3, 2)), phi_scale_=np.ones(3))
     step = SimpleNamespace(unit_free=False, embedding="exact", labels_=labels, min_pts_=6,
                            clustered_=np.ones(labels.size, bool), eps_=1.0, eps_auto_=False)
+    return local, step, labels
+
+
+def test_parameter_clusters_legend_lists_the_clusters_with_their_own_colour():
+    """27 clusters (the paper's setting on the robot): the 8 with a colour of their own and
+    noise are listed, the rest is one line with their sizes."""
+    local, step, labels = _twenty_seven_clusters()
     fig = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -320,11 +327,7 @@ def test_parameter_clusters_layout_keeps_every_text_inside_and_apart(fit):
     """The figure is laid out by hand (no constrained layout): with one legend row and with
     the longest legend (27 clusters), and with long tick labels on the log axis, nothing
     leaves the figure or covers the other panel, and the legend stays below the x label."""
-    rng = np.random.default_rng(1)
-    labels = np.r_[np.full(60, -1), np.repeat(np.arange(27), np.arange(27)[::-1] + 22)]
-    local = SimpleNamespace(theta_=rng.normal(size=(labels.size, 3, 2)), phi_scale_=np.ones(3))
-    step = SimpleNamespace(unit_free=False, embedding="exact", labels_=labels, min_pts_=6,
-                           clustered_=np.ones(labels.size, bool), eps_=1.0, eps_auto_=False)
+    local, step, labels = _twenty_seven_clusters()
     many = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
     one = parameter_clusters_figure(fit.model.local_models_, fit.model.clustering_,
                                     fit.reg.target)
