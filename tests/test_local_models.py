@@ -215,10 +215,24 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
         data = pickle.dumps(step, protocol=5)
         sizes[name] = len(data)
         for back in (pickle.loads(data), copy.deepcopy(step)):
+            for name in ("theta_", "neighbours_", "residual_var_"):
+                getattr(back, name)  # (kept compact until read)
             assert set(vars(back)) == set(vars(step))
             np.testing.assert_equal(vars(back), vars(step))  # NaN, −1 and dtypes as fitted
             assert all(getattr(back, a).dtype == getattr(step, a).dtype
                        for a in ("theta_", "neighbours_", "residual_var_"))
+    # loaded, the per-sample arrays stay compact until read; pickled again unread or half
+    # read, the same bytes
+    back = pickle.loads(pickle.dumps(some, protocol=5))
+    assert not {"theta_", "neighbours_", "residual_var_"} & set(vars(back))
+    assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)
+    assert "_compact" in vars(back)  # pickling leaves the step as it was
+    np.testing.assert_array_equal(back.residual_var_, some.residual_var_)
+    assert "theta_" not in vars(back) and "residual_var_" in vars(back)
+    assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)
+    assert pickle.dumps(copy.deepcopy(back), protocol=5) == pickle.dumps(some, protocol=5)
+    with pytest.raises(AttributeError, match="'LocalLeastSquares' object has no attribute 'x_'"):
+        back.x_
     # 120 of 1,200 samples estimated: under a fifth of the room of every local model (the
     # per-sample flags and originals stay whole)
     assert sizes["some"] < 0.2 * sizes["every"]

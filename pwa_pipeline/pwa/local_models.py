@@ -318,20 +318,36 @@ class LocalLeastSquares(BaseEstimator):
         estimated samples when some were not (their other rows hold no information), so a
         stored or cached step takes about ``max_sets``/n of the room (a robot partition with
         the default adds about 10 MB to the caches, ``benchmarks/results/pipeline.md``);
-        :meth:`__setstate__` restores the same arrays."""
-        state = super().__getstate__()
+        :meth:`__setstate__` restores the same arrays (spread to every sample when first
+        read); the keys sorted, so that a step loaded and stored again gives the same bytes."""
+        state = dict(super().__getstate__())  # (object's is the instance's own dict)
+        compact = state.pop("_compact", {})
         estimated = state.get("estimated_")
-        if estimated is None or estimated.all():
-            return state
-        return {**state, **{name: state[name][estimated] for name in _UNESTIMATED}}
+        if estimated is not None and not estimated.all():
+            state.update({name: compact[name] if name in compact else state[name][estimated]
+                          for name in _UNESTIMATED})
+        return dict(sorted(state.items()))  # the same bytes, however much was read
 
     def __setstate__(self, state: dict) -> None:
         if "theta_" in state and len(state["theta_"]) < len(state["estimated_"]):
-            rows = np.flatnonzero(state["estimated_"])
-            n = len(state["estimated_"])
-            state = {**state, **{name: _spread(state[name], rows, n, fill)
-                                 for name, fill in _UNESTIMATED.items()}}
+            # kept compact until read (:meth:`__getattr__`): the pipeline's steps that only
+            # pass a loaded step on (or pickle it again) never spread its 60 MB on the robot
+            state = dict(state)
+            state["_compact"] = {name: state.pop(name) for name in _UNESTIMATED}
         super().__setstate__(state)
+
+    def __getattr__(self, name: str):
+        """``theta_``, ``neighbours_`` or ``residual_var_`` of an unpickled step, spread to
+        every sample when first read (:meth:`__setstate__` keeps them compact)."""
+        compact = self.__dict__.get("_compact")
+        if compact is None or name not in compact:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        value = _spread(compact.pop(name), np.flatnonzero(self.estimated_),
+                        len(self.estimated_), _UNESTIMATED[name])
+        setattr(self, name, value)
+        if not compact:
+            del self._compact
+        return value
 
 
 def _spread(values: np.ndarray, rows: np.ndarray, n: int, fill) -> np.ndarray:
