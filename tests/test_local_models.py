@@ -227,6 +227,8 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
     assert not {"theta_", "neighbours_", "residual_var_"} & set(vars(back))
     assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)
     assert "_compact" in vars(back)  # pickling leaves the step as it was
+    np.testing.assert_array_equal(back.estimated_theta(), some.theta_[some.estimated_])
+    assert "theta_" not in vars(back) and every.estimated_theta() is every.theta_
     np.testing.assert_array_equal(back.residual_var_, some.residual_var_)
     assert "theta_" not in vars(back) and "residual_var_" in vars(back)
     assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)

@@ -660,6 +660,20 @@ def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
                                             "n_split_")] == [
             getattr(plain, a) for a in ("n_submodels_", "n_merged_", "n_iter_", "n_split_")]
     assert cached.memory == str(tmp_path)
+    # local models of 1,500 of the samples: other local models; loaded from a pickle (kept
+    # compact), the same entry, found without spreading their θ_k
+    import pickle
+
+    subset = LocalLeastSquares(max_sets=1500).fit(phi, target)
+    plain = RefinedSubModels().fit(phi, target, subset, absorbed, SVMRegions())
+    clone(plain).set_params(memory=str(tmp_path)).fit(phi, target, subset, absorbed,
+                                                      SVMRegions())
+    assert len(list(tmp_path.rglob("output.pkl"))) == 6
+    restored = pickle.loads(pickle.dumps(subset, protocol=5))
+    hit = clone(plain).set_params(memory=str(tmp_path)).fit(phi, target, restored, absorbed,
+                                                            SVMRegions())
+    assert len(list(tmp_path.rglob("output.pkl"))) == 6 and "theta_" not in vars(restored)
+    np.testing.assert_array_equal(hit.thetas_, plain.thetas_)
 
 
 def test_a_memory_without_a_cache_method_is_refused_by_name():

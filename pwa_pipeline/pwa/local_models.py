@@ -313,6 +313,14 @@ class LocalLeastSquares(BaseEstimator):
         """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
         return {**self.get_params(), "n_rho": self.n_rho_}
 
+    def estimated_theta(self) -> np.ndarray:
+        """``theta_`` on the estimated samples (``estimated_``), without spreading the
+        compact arrays of an unpickled step (:meth:`__setstate__`)."""
+        compact = self.__dict__.get("_compact", {})
+        if "theta_" in compact:
+            return compact["theta_"]
+        return self.theta_ if self.estimated_.all() else self.theta_[self.estimated_]
+
     def __getstate__(self) -> dict:
         """The state to pickle: ``theta_``, ``neighbours_`` and ``residual_var_`` only on the
         estimated samples when some were not (their other rows hold no information), so a

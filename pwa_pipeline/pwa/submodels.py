@@ -839,14 +839,15 @@ class RefinedSubModels(BaseEstimator):
             labels = refine(phi, target, labels, min_size, self.n_refine, memo=memo)[1]
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
-        # the cache's key holds the local models (n × d × m, NaN where a row has none) as a
-        # SHA-256 of their bytes, 2.5× faster than joblib's hash on the robot's 46 MB
-        local_key = None if self.memory is None else _array_key(local.theta_)
-        consolidated = check_memory(self.memory).cache(_from_consolidated,
-                                                       ignore=["local_theta"])
+        # the cache's key holds the local models as a SHA-256 of the estimated samples and
+        # their θ_k (which give theta_, NaN elsewhere), 2.5× faster than joblib's hash and
+        # read without spreading a loaded step's arrays (5,000 of the robot's 40k rows)
+        local_key = None if self.memory is None else _array_key(local.estimated_,
+                                                                local.estimated_theta())
+        consolidated = check_memory(self.memory).cache(_from_consolidated, ignore=["local"])
         (self.thetas_, self.labels_, margin, merged, self.n_iter_,
          self.n_split_) = consolidated(clone(self).set_params(memory=None), phi, target, labels,
-                                       local.theta_, local_key, min_pts,
+                                       local, local_key, min_pts,
                                        *_search_steps(local, clustering), regions)
         self.weights_ = margin_weights(margin)
         self.n_submodels_ = self.thetas_.shape[0]
@@ -978,18 +979,20 @@ def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
 
 
 def _from_consolidated(step: RefinedSubModels, phi: Float2D, target: Float2D,
-                       labels: np.ndarray, local_theta: np.ndarray, local_key: str | None,
+                       labels: np.ndarray, local, local_key: str | None,
                        min_pts: int, search_local, search_clustering, regions) -> tuple:
-    """:meth:`RefinedSubModels._from_consolidated` of ``step`` (no ``memory``): a function of
-    its arguments alone, for ``RefinedSubModels.memory`` to cache, ``local_key``
-    (:func:`_array_key` of ``local_theta``) standing for ``local_theta`` in its key."""
-    return step._from_consolidated(phi, target, labels, local_theta, min_pts, search_local,
+    """:meth:`RefinedSubModels._from_consolidated` of ``step`` (no ``memory``) with the
+    fitted local-model step's ``theta_``: a function of its arguments alone, for
+    ``RefinedSubModels.memory`` to cache, ``local_key`` (:func:`_array_key` of its estimated
+    samples and their θ_k) standing for ``local`` in its key."""
+    return step._from_consolidated(phi, target, labels, local.theta_, min_pts, search_local,
                                    search_clustering, regions)
 
 
-def _array_key(a: np.ndarray) -> str:
-    """SHA-256 of an array's shape, type and bytes."""
-    a = np.ascontiguousarray(a)
-    h = hashlib.sha256(f"{a.shape}{a.dtype}".encode())
-    h.update(memoryview(a).cast("B"))
+def _array_key(*arrays: np.ndarray) -> str:
+    """SHA-256 of the arrays' shapes, types and bytes."""
+    h = hashlib.sha256()
+    for a in map(np.ascontiguousarray, arrays):
+        h.update(f"{a.shape}{a.dtype}".encode())
+        h.update(memoryview(a).cast("B"))
     return h.hexdigest()
