@@ -141,6 +141,31 @@ def test_a_file_this_process_signed_is_loaded_from_memory_until_it_changes(tmp_p
         load_object(path, signing_key(tmp_path / "other"))
 
 
+def test_the_memory_of_verified_files_keeps_the_recently_used_within_its_bound(tmp_path):
+    """At most ``max_bytes`` of payloads, the least recently used dropped first; a payload
+    over a quarter of the bound is never kept."""
+    memory = storage._VerifiedPayloads(max_bytes=400)
+    files = {}
+    for name in "abcdef":
+        files[name] = tmp_path / name
+        files[name].write_bytes(b"x")
+    key = b"k"
+
+    def put(name, size):
+        memory.put(files[name], key, name.encode() * size, memory.identity(files[name]))
+
+    for name in "abcd":
+        put(name, 100)
+    assert [memory.get(files[n], key) is not None for n in "abcd"] == [True] * 4
+    assert memory.get(files["a"], key) == b"a" * 100  # a: the most recently used now
+    put("e", 100)  # over the bound: b, the least recently used, is dropped
+    assert [memory.get(files[n], key) is not None for n in "abcde"] == [
+        True, False, True, True, True]
+    put("f", 101)  # over a quarter of the bound: not kept, nothing dropped
+    assert memory.get(files["f"], key) is None
+    assert sum(memory.get(files[n], key) is not None for n in "acde") == 4
+
+
 @pytest.fixture()
 def settings(tmp_path):
     return PipelineSettings(cache_dir=str(tmp_path / "cache"))

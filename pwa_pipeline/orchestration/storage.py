@@ -27,6 +27,7 @@ import os
 import pickle
 import secrets
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -111,6 +112,7 @@ class _VerifiedPayloads:
     def __init__(self, max_bytes: int):
         self.max_bytes = max_bytes
         self._kept: dict[tuple[str, bytes], tuple[tuple, bytes]] = {}
+        self._lock = threading.Lock()  # (steps of one process may run in threads)
 
     @staticmethod
     def identity(path: Path) -> tuple:
@@ -121,21 +123,23 @@ class _VerifiedPayloads:
 
     def get(self, path: Path, key: bytes) -> bytes | None:
         """The payload of ``path`` signed with ``key``, if kept and the file is unchanged."""
-        kept = self._kept.pop((str(path), key), None)
-        if kept is None or kept[0] != self.identity(path):
-            return None
-        self._kept[(str(path), key)] = kept  # most recently used last
-        return kept[1]
+        with self._lock:
+            kept = self._kept.pop((str(path), key), None)
+            if kept is None or kept[0] != self.identity(path):
+                return None
+            self._kept[(str(path), key)] = kept  # most recently used last
+            return kept[1]
 
     def put(self, path: Path, key: bytes, payload: bytes, identity: tuple) -> None:
         """Keep the payload written to or verified at ``path`` when the file had
         ``identity``, unless the file has changed since (another process replaced it)."""
-        self._kept.pop((str(path), key), None)
-        if len(payload) > self.max_bytes // 4 or self.identity(path) != identity:
-            return
-        self._kept[(str(path), key)] = (identity, payload)
-        while sum(len(p) for _, p in self._kept.values()) > self.max_bytes:
-            del self._kept[next(iter(self._kept))]
+        with self._lock:
+            self._kept.pop((str(path), key), None)
+            if len(payload) > self.max_bytes // 4 or self.identity(path) != identity:
+                return
+            self._kept[(str(path), key)] = (identity, payload)
+            while sum(len(p) for _, p in self._kept.values()) > self.max_bytes:
+                del self._kept[next(iter(self._kept))]
 
 
 _VERIFIED = _VerifiedPayloads(max_bytes=128 * 2**20)
