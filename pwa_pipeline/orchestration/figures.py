@@ -42,6 +42,11 @@ _LEGEND_ROWS = 22
 """Entries of a legend column of the regions figure (more fit beside its 5.2-inch axes)."""
 _MAX_LEVELS = 10
 """Regions the switching figure labels on its 2-inch axis without overlap."""
+_AXES_HEIGHT = 2.45
+"""Inches of the parameter-clusters figure's axes (its height grows with its legend)."""
+_TICKS_AND_LABEL = 0.5
+"""Inches below those axes for their tick labels and x label, above the legend."""
+_LEGEND_COLUMNS = 3
 _CURVE_POINTS = 1000
 """Points queried for the parameter-clusters figure's k-distance curve: its shape, at a
 fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.clustering.k_distances`)."""
@@ -220,16 +225,11 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     pcs = np.zeros((emb.shape[0], 2))
     pcs[:, :min(2, axes.shape[1])] = centred @ axes[:, :2]
     share = 100 * var / max(float(np.sum(var)), np.finfo(float).tiny)
-    # laid out by hand: the constrained layout measures every text first, which doubled
-    # the time to draw this figure (it is drawn for every set of a sweep)
-    columns = 3
-    n_listed = min(len(np.unique(labels)), len(_PALETTE) + 1) + (labels.max() >= len(_PALETTE))
-    below = 0.55 + 0.17 * -(-n_listed // columns)  # inches: tick labels, x label, legend
-    height, top, left, right, gap = 2.45 + below + 0.65, 0.65, 0.75, 0.15, 1.0
-    fig = _figure(10, height, layout=None)
-    ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1), gridspec_kw=dict(
-        left=left / 10, right=1 - right / 10, bottom=below / height, top=1 - top / height,
-        wspace=gap / ((10 - left - right - gap) / 2)))
+    # laid out by hand (below, once the legend's rows are known): the constrained layout
+    # measures every text first, which doubled the time to draw this figure (it is drawn
+    # for every set of a sweep)
+    fig = _figure(10, 4.0, layout=None)
+    ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
     listed = []
     for c in np.unique(labels):  # (labels run by decreasing size: small clusters on top)
         rows = labels == c
@@ -252,8 +252,8 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     ax.set_title(f"{labels.size} of {step.labels_.size} local models clustered ({scale})",
                  fontsize=9, loc="left")
     ax.legend(handles=listed, fontsize=8, markerscale=2, loc="upper center",
-              bbox_to_anchor=(0.5, -0.5 / 2.45), ncols=min(columns, len(listed)),
-              frameon=False)
+              bbox_to_anchor=(0.5, -_TICKS_AND_LABEL / _AXES_HEIGHT),
+              ncols=min(_LEGEND_COLUMNS, len(listed)), frameon=False)
     dist = k_distances(emb, step.min_pts_, max_query=_CURVE_POINTS)
     ax_k.plot(100 * (np.arange(dist.size) + 0.5) / dist.size, dist, color="black", lw=1.0,
               label="k-distance")
@@ -267,6 +267,13 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     ax_k.set_title(f"k-distance curve (MinPts = {step.min_pts_}{queried})", fontsize=9,
                    loc="left")
     ax_k.legend(fontsize=8, loc="upper left")
+    # in inches: the axes 2.45 high under 0.65 of titles, above the tick labels, the x label
+    # and the legend's rows; 0.75 left of the axes, 1.0 between them, 0.15 right of them
+    below = _TICKS_AND_LABEL + 0.05 + 0.17 * -(-len(listed) // _LEGEND_COLUMNS)
+    height = _AXES_HEIGHT + below + 0.65
+    fig.set_figheight(height)
+    fig.subplots_adjust(left=0.075, right=0.985, bottom=below / height, top=1 - 0.65 / height,
+                        wspace=1.0 / ((10 - 0.75 - 0.15 - 1.0) / 2))
     fig.suptitle(title or "Step 4: local models θ_k in the DBSCAN embedding (PCA)",
                  y=1 - 0.08 / height, va="top")
     return fig
