@@ -349,6 +349,37 @@ def test_interrupted_logging_ends_the_run(tmp_path, mlflow_template, error, stat
     assert [r.info.status for r in client.search_runs([exp.experiment_id])] == [status]
 
 
+@pytest.mark.parametrize("error", [KeyboardInterrupt(), RuntimeError("disk full")])
+def test_a_run_that_cannot_be_marked_ended_keeps_its_own_error(tmp_path, mlflow_template,
+                                                               monkeypatch, caplog, error):
+    """When marking the broken run fails too (an interrupt inside a sqlite write can leave
+    the store locked: `database is locked`), the interrupt or error itself propagates, so
+    that Dagster ends the step as interrupted rather than failed on the store; the run is
+    left RUNNING for ``doctor --repair``, and a warning says so."""
+    from mlflow.exceptions import MlflowException
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+
+    def locked(self, run_id, status=None, end_time=None):
+        if status != "FINISHED":
+            raise MlflowException("(sqlite3.OperationalError) database is locked")
+
+    monkeypatch.setattr(MlflowClient, "set_terminated", locked)
+    with pytest.raises(type(error)) as raised:
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={}, metrics={},
+                        tags={}, artifacts={"f.json": {"x": _Exploding(error)}})
+    assert raised.value is error
+    monkeypatch.undo()
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    [run] = client.search_runs([client.get_experiment_by_name("pwa-pipeline/d").experiment_id])
+    assert run.info.status == "RUNNING"
+    assert f"MLflow run {run.info.run_id} could not be marked" in caplog.text
+    assert "database is locked" in caplog.text and "doctor --repair" in caplog.text
+
+
 class _Server(BaseHTTPRequestHandler):
     """/health answers 200 (with the right credentials); the API answers 503."""
 

@@ -421,8 +421,14 @@ class MLflowTracker(dg.ConfigurableResource):
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
             # as KILLED rather than leave it RUNNING forever
-            client.set_terminated(run_id, "FAILED" if isinstance(exc, Exception) else "KILLED")
-            raise
+            status = "FAILED" if isinstance(exc, Exception) else "KILLED"
+            try:
+                client.set_terminated(run_id, status)
+            except Exception as why:  # e.g. a sqlite store still locked by the write it broke
+                logging.getLogger(__name__).warning(
+                    f"MLflow run {run_id} could not be marked {status} ({why}); it stays "
+                    f"RUNNING until `python -m pwa_pipeline doctor --repair`")
+            raise  # the error or interrupt itself, never the failure to mark the run
         return run_id
 
 
