@@ -226,8 +226,8 @@ def parameter_clusters_figure(local, clustering, target: np.ndarray,
     pcs[:, :min(2, axes.shape[1])] = centred @ axes[:, :2]
     share = 100 * var / max(float(np.sum(var)), np.finfo(float).tiny)
     # laid out by hand (below, once the legend's rows are known): the constrained layout
-    # measures every text first, which doubled the time to draw this figure (it is drawn
-    # for every set of a sweep)
+    # measures every text first, and took 1.7× as long to render this figure, which is
+    # drawn for every set of a sweep (benchmarks/figure_layout.py)
     fig = _figure(10, 4.0, layout=None)
     ax, ax_k = fig.subplots(1, 2, width_ratios=(1.25, 1))
     listed = []
