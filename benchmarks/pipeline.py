@@ -48,7 +48,10 @@ def _megabytes(folder: Path) -> float:
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6
 
 
-def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) -> list[dict]:
+def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
+                 instance: dg.DagsterInstance | None = None) -> list[dict]:
+    """Materialise every asset of each partition of ``keys`` with stores under ``tmp`` (the
+    caches on or off) on ``instance`` (default: a new ephemeral one); a row per run."""
     # create the MLflow store first: its one-off migration is not the pipeline's cost
     MlflowClient(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}").search_experiments()
     resources = {
@@ -60,7 +63,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool) 
                                      datasets_path=defs.resources["settings"].datasets_path),
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),
     }
-    instance = dg.DagsterInstance.ephemeral()
+    instance = instance or dg.DagsterInstance.ephemeral()
     quiet = {"loggers": {"console": {"config": {"log_level": "ERROR"}}}}
     rows = []
     stores = {"storage": tmp / "storage", "mlflow_artifacts": tmp / "mlartifacts",
@@ -102,17 +105,23 @@ SWEEPS = {
 """Per data set: its ε and MinPts, the rest of each set, and the baselines' table."""
 
 
-def sweep(dataset: str) -> dict:
+def sweep_definitions(dataset: str, folder: Path) -> tuple[dg.Definitions, list[str]]:
+    """Definitions of the 12-set sweep of ``dataset`` (its hyper-parameter file written to
+    ``folder``) and its partition keys."""
     eps_values, min_pts_values, setting, baselines = SWEEPS[dataset]
     lines = [f"[sweep_{i}{j}.{dataset}]\n{setting}clustering.eps = {eps}\n"
              f"clustering.min_pts = {mp}\n"
              for i, eps in enumerate(eps_values) for j, mp in enumerate(min_pts_values)]
     lines.append(baselines)
+    path = folder / "sweep.toml"
+    path.write_text("\n".join(lines))
+    defs = build_definitions(path)
+    return defs, [k for k in all_keys(partitions_of(defs)) if k.startswith(f"{dataset}|")]
+
+
+def sweep(dataset: str) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "sweep.toml"
-        path.write_text("\n".join(lines))
-        defs = build_definitions(path)
-        keys = [k for k in all_keys(partitions_of(defs)) if k.startswith(f"{dataset}|")]
+        defs, keys = sweep_definitions(dataset, Path(tmp))
         arms = {True: "with_cache", False: "without_cache"}
         out = {name: [] for name in arms.values()}
         for cache in arms:

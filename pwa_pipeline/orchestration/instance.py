@@ -5,14 +5,17 @@ at once leave two ``alembic_version`` rows, after which every run on that home f
 :func:`prepare_instance` serialises the first use.
 """
 
+import json
 import os
+import re
+from pathlib import Path
 
 import dagster as dg
 from filelock import FileLock
 
 from .paths import dagster_home
 
-DAGSTER_YAML = """telemetry:
+_SETTINGS = """telemetry:
   enabled: false
 nux:
   enabled: false
@@ -25,17 +28,54 @@ run_queue:
       value: "dask"
       limit: 1
 """
+#: What earlier versions wrote as ``dagster.yaml``: replaced by :func:`dagster_yaml`'s text.
+_EARLIER = (_SETTINGS,)
+
+
+def dagster_yaml(home: Path) -> str:
+    """The ``dagster.yaml`` of ``home``: the UI's and run queue's settings, and Dagster's
+    sqlite storage in the files its default puts there (``history/``, ``history/runs/``,
+    ``schedules/``), its event log through :class:`.event_log.PooledEventLogStorage`."""
+    home = Path(home).resolve()
+    return _SETTINGS + f"""run_storage:
+  module: dagster._core.storage.runs
+  class: SqliteRunStorage
+  config:
+    base_dir: {json.dumps(str(home / "history"))}
+event_log_storage:
+  module: pwa_pipeline.orchestration.event_log
+  class: PooledEventLogStorage
+  config:
+    base_dir: {json.dumps(str(home / "history" / "runs"))}
+schedule_storage:
+  module: dagster._core.storage.schedules
+  class: SqliteScheduleStorage
+  config:
+    base_dir: {json.dumps(str(home / "schedules"))}
+"""
+
+
+def _written_here(text: str) -> bool:
+    """Whether ``text`` is a ``dagster.yaml`` this module wrote (now or earlier, for this home
+    or for where it was before it moved) rather than one edited by hand, which is kept."""
+    first = re.search(r'^    base_dir: ("[^"\n]*")$', text, re.MULTILINE)
+    earlier_home = Path(json.loads(first.group(1))).parent if first else None
+    return text in _EARLIER or (earlier_home is not None
+                                and text == dagster_yaml(earlier_home))
 
 
 def prepare_instance() -> dg.DagsterInstance:
-    """``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) with its ``dagster.yaml`` and
-    schema created, under ``.init.lock``; sets ``DAGSTER_HOME`` and returns the instance."""
+    """``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) with its ``dagster.yaml``
+    (:func:`dagster_yaml`; one this module wrote earlier is brought up to date, one edited by
+    hand is kept) and schema created, under ``.init.lock``; sets ``DAGSTER_HOME`` and returns
+    the instance."""
     home = dagster_home()
     home.mkdir(parents=True, exist_ok=True)
     os.environ["DAGSTER_HOME"] = str(home)
     with FileLock(home / ".init.lock"):
-        if not (home / "dagster.yaml").exists():
-            (home / "dagster.yaml").write_text(DAGSTER_YAML)
+        config = home / "dagster.yaml"
+        if not config.exists() or _written_here(config.read_text()):
+            config.write_text(dagster_yaml(home))
         instance = dg.DagsterInstance.get()
         instance.get_runs(limit=1)  # the first query creates and migrates the schema
     return instance

@@ -1,0 +1,90 @@
+"""The robot's 12-set sweep on the command line's kind of Dagster home (sqlite files on disk),
+with Dagster's own sqlite event log and with the one that keeps its connections open.
+
+``benchmarks.pipeline`` materialises on an ephemeral (in-memory) Dagster instance; the
+command line (``python -m pwa_pipeline run``), ``dagster dev`` and the UI's runs store their
+events in ``$DAGSTER_HOME``'s sqlite files. Here every set of the robot sweep of
+``benchmarks.pipeline`` (default setting, 12 ε/MinPts sets) is materialised in four arms,
+each with its own Dagster home and stores, the arms alternating set by set so that they share
+the machine's load:
+
+- event log: Dagster's ``SqliteEventLogStorage`` (the ``dagster.yaml`` the command line
+  wrote before, Dagster's default storage) or
+  :class:`~pwa_pipeline.orchestration.event_log.PooledEventLogStorage` (the
+  ``dagster.yaml`` of :func:`~pwa_pipeline.orchestration.instance.dagster_yaml`);
+- the caches on or off, as in ``benchmarks.pipeline``.
+
+Reported per arm: the sweep's total seconds, its first set, the median of the later sets,
+each step's median; and the speed-up of the caches with each event log. How busy the machine
+was (``MachineLoad``) is recorded over the whole run.
+Writes results/event_log.json and results/event_log.md.
+Usage: python -m benchmarks.event_log
+"""
+
+import statistics
+import tempfile
+from pathlib import Path
+
+import dagster as dg
+import pandas as pd
+
+from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
+from benchmarks.pipeline import _materialise, sweep_definitions
+from pwa_pipeline.orchestration.instance import _SETTINGS, dagster_yaml
+
+EVENT_LOGS = {"dagster": lambda home: _SETTINGS, "pooled": dagster_yaml}
+"""Each event log arm: the dagster.yaml of its home."""
+
+
+def _instance(home: Path, event_log: str) -> dg.DagsterInstance:
+    home.mkdir(parents=True)
+    (home / "dagster.yaml").write_text(EVENT_LOGS[event_log](home))
+    return dg.DagsterInstance.from_config(str(home))
+
+
+def main() -> None:
+    load = MachineLoad()
+    runs: dict[str, list[dict]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        defs, keys = sweep_definitions("kuka_robot", Path(tmp))
+        arms = {f"{log}|{'with' if cache else 'without'}_cache": (log, cache)
+                for log in EVENT_LOGS for cache in (True, False)}
+        instances = {}
+        for name, (log, cache) in arms.items():
+            folder = Path(tmp) / name.replace("|", "_")
+            folder.mkdir()
+            instances[name] = _instance(folder / "dagster_home", log)
+            runs[name] = []
+        for key in keys:  # the arms alternate set by set, so that they share the load
+            for name, (log, cache) in arms.items():
+                folder = Path(tmp) / name.replace("|", "_")
+                runs[name] += _materialise(defs, [key], folder, cache, instances[name])
+        for instance in instances.values():
+            instance.dispose()
+    machine = load.summary()
+    summary = {name: {"total_seconds": sum(r["seconds"] for r in rows),
+                      "first_set_seconds": rows[0]["seconds"],
+                      "later_sets_median_seconds": statistics.median(r["seconds"]
+                                                                     for r in rows[1:]),
+                      "succeeded": sum(r["success"] for r in rows)}
+               for name, rows in runs.items()}
+    speed_up = {log: summary[f"{log}|without_cache"]["total_seconds"]
+                / summary[f"{log}|with_cache"]["total_seconds"] for log in EVENT_LOGS}
+    write_json({"runs": runs, "summary": summary, "cache_speed_up": speed_up,
+                "machine_load": machine}, "event_log")
+    steps = pd.DataFrame({name: pd.DataFrame([r["assets"] for r in rows[1:]]).median()
+                          for name, rows in runs.items()})
+    text = "\n".join([
+        f"The robot's 12-set sweep (benchmarks.pipeline's) on a Dagster home of sqlite files, "
+        f"four arms alternating set by set; one run; {describe_load(machine)}.\n",
+        pd.DataFrame(summary).T.to_markdown(floatfmt=".3g"), "",
+        "Speed-up of the caches over the whole sweep, with each event log: "
+        + ", ".join(f"{log} {value:.2f}x" for log, value in speed_up.items()) + ".\n",
+        "Median seconds of each step over the later sets:\n",
+        steps.to_markdown(floatfmt=".2f"), ""])
+    (RESULTS / "event_log.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

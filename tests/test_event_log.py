@@ -1,0 +1,133 @@
+"""The command line's Dagster home: its dagster.yaml, and the event log that reuses engines."""
+
+import os
+
+import dagster as dg
+import pytest
+from dagster._core.storage.event_log.sqlite.sqlite_event_log import SqliteEventLogStorage
+
+from pwa_pipeline.orchestration import event_log
+from pwa_pipeline.orchestration.instance import _SETTINGS, dagster_yaml, prepare_instance
+
+PARTS = dg.StaticPartitionsDefinition(["a", "b"])
+
+
+@dg.asset(partitions_def=PARTS)
+def source() -> int:
+    return 1
+
+
+@dg.asset(partitions_def=PARTS)
+def derived(source: int) -> int:
+    return source + 1
+
+
+@pytest.fixture
+def home(tmp_path, monkeypatch):
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    return tmp_path / "home"
+
+
+def _materialise(instance, partition: str):
+    return dg.materialize([source, derived], partition_key=partition, instance=instance,
+                          resources={"io_manager": dg.mem_io_manager})
+
+
+def test_the_home_stores_events_with_one_engine_per_file(home, monkeypatch):
+    created = []
+    real = event_log.create_engine
+    monkeypatch.setattr(event_log, "create_engine",
+                        lambda *a, **k: created.append(a[0]) or real(*a, **k))
+    instance = prepare_instance()
+    assert type(instance.event_log_storage) is event_log.PooledEventLogStorage
+    result = _materialise(instance, "a")
+    assert result.success
+    events = instance.all_logs(result.run_id)
+    assert len(events) > 20
+    # the run's file and the cross-run index: one engine each, however many events
+    run_shard = [c for c in created if result.run_id in c]
+    assert len(run_shard) == 1 and len(created) <= 3, created
+    # the same files and rows as Dagster's own class reads them
+    plain = SqliteEventLogStorage(str(home / "history" / "runs"))
+    assert [e.dagster_event_type for e in plain.get_logs_for_run(result.run_id)] == \
+        [e.dagster_event_type for e in events]
+    second = _materialise(instance, "b")
+    record = instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey("derived"), asset_partitions=["b"]),
+        limit=1).records[0]
+    assert record.run_id == second.run_id
+    assert plain.fetch_materializations(dg.AssetKey("derived"), limit=5).records[0].run_id \
+        == second.run_id
+
+
+def test_events_written_by_another_process_are_read_and_wipe_closes_the_files(home):
+    instance = prepare_instance()
+    storage = instance.event_log_storage
+    first = _materialise(instance, "a")
+    # another process (Dagster's own class on the same files) runs partition b meanwhile
+    (home / "dagster-default.yaml").write_text(_SETTINGS)
+    other = dg.DagsterInstance.from_config(str(home), config_filename="dagster-default.yaml")
+    assert type(other.event_log_storage) is SqliteEventLogStorage
+    other_run = _materialise(other, "b")
+    latest = instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey("derived"), asset_partitions=["b"]),
+        limit=1).records[0]
+    assert latest.run_id == other_run.run_id
+    runs_dir = home / "history" / "runs"
+    open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")}
+    assert str(runs_dir / f"{first.run_id}.db") in open_files
+    storage.wipe()
+    open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")}
+    # no run's file open (wipe empties the index through a connection of its own)
+    assert not [f for f in open_files if f.startswith(str(runs_dir))
+                and not os.path.basename(f).startswith("index.db")]
+    assert not (runs_dir / f"{first.run_id}.db").exists()
+    again = _materialise(instance, "a")
+    plain = SqliteEventLogStorage(str(runs_dir))
+    assert len(plain.get_logs_for_run(again.run_id)) == len(instance.all_logs(again.run_id))
+
+
+def test_the_engines_kept_are_bounded(home, monkeypatch):
+    monkeypatch.setattr(event_log, "KEPT_ENGINES", 3)
+    storage = prepare_instance().event_log_storage
+    disposed = []
+    for shard in ["r1", "r2", "r3", "r4", "r5"]:
+        with storage.run_connection(shard) as conn:
+            conn.exec_driver_sql("select 1")
+        engine = storage._engines[shard]
+        engine.dispose = lambda e=engine: disposed.append(e)
+    assert list(storage._engines) == ["r3", "r4", "r5"]
+    # the UI's threads share the storage: r5's open connection used from another thread
+    from concurrent.futures import ThreadPoolExecutor
+
+    def query():
+        with storage.run_connection("r5") as conn:
+            return conn.exec_driver_sql("select 2").scalar()
+
+    with ThreadPoolExecutor(1) as pool:
+        assert pool.submit(query).result() == 2
+    assert list(storage._engines) == ["r3", "r4", "r5"]
+    with storage.run_connection("r3"):  # used again: the most recent
+        pass
+    with storage.run_connection("r6"):
+        pass
+    assert list(storage._engines) == ["r5", "r3", "r6"]
+    assert [e.url.database.rsplit("/", 1)[1] for e in disposed] == ["r1.db", "r2.db", "r4.db"]
+
+
+def test_dagster_yaml_written_earlier_is_brought_up_to_date_and_one_edited_is_kept(
+        home, tmp_path):
+    home.mkdir()
+    config = home / "dagster.yaml"
+    config.write_text(_SETTINGS)  # what the command line wrote before
+    prepare_instance()
+    assert config.read_text() == dagster_yaml(home)
+    config.write_text(dagster_yaml(tmp_path / "moved-from"))  # a home moved here
+    prepare_instance()
+    assert config.read_text() == dagster_yaml(home)
+    edited = dagster_yaml(home) + "run_monitoring:\n  enabled: true\n"
+    config.write_text(edited)
+    instance = prepare_instance()
+    assert config.read_text() == edited
+    assert instance.run_monitoring_enabled
+    assert os.environ["DAGSTER_HOME"] == str(home)
