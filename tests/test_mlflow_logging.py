@@ -5,15 +5,49 @@ def test_training_dataset_is_the_one_mlflow_builds_from_every_row():
     import mlflow
 
     from pwa_pipeline.datasets.registry import load_dataset
-    from pwa_pipeline.orchestration.mlflow_models import _SCHEMA_ROWS, ModelToLog
+    from pwa_pipeline.orchestration.mlflow_models import _SCHEMA_ROWS, table_dataset
     from pwa_pipeline.orchestration.reporting import training_table
 
     table = training_table(load_dataset("hure_vasak"))
     assert len(table) > 10 * _SCHEMA_ROWS
-    logged = ModelToLog(simulator=None, input_example=None, training=table).dataset()
+    logged = table_dataset(table)
     full = mlflow.data.from_pandas(table, name="training")
     assert logged.schema == full.schema
     assert logged.to_dict() == full.to_dict()  # name, digest, source, schema, profile
+
+
+def test_a_data_sets_training_dataset_is_built_once_and_again_for_other_data(monkeypatch):
+    import dataclasses
+
+    import numpy as np
+
+    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.orchestration import mlflow_models
+    from pwa_pipeline.orchestration.reporting import training_table
+
+    built = []
+    monkeypatch.setattr(mlflow_models, "training_table",
+                        lambda data: built.append(data.name) or training_table(data))
+    monkeypatch.setattr(mlflow_models, "_TRAINING_DATASETS", type(
+        mlflow_models._TRAINING_DATASETS)())
+    data = load_dataset("hure_vasak")
+    first = mlflow_models.training_dataset(data)
+    assert mlflow_models.training_dataset(data) is first and len(built) == 1
+    assert first.to_dict() == mlflow_models.table_dataset(training_table(data)).to_dict()
+    y = [a.copy() for a in data.y_train]
+    y[0][0, 0] += 1e-9  # one sample of the training data
+    edited = dataclasses.replace(data, y_train=y)
+    other = mlflow_models.training_dataset(edited)
+    assert len(built) == 2 and other.digest != first.digest
+    np.testing.assert_array_equal(other.df.iloc[0, len(data.u_names)], y[0][0, 0])
+    # the four most recently used are kept
+    for k in range(2):
+        mlflow_models.training_dataset(dataclasses.replace(data, name=f"copy{k}"))
+    assert mlflow_models.training_dataset(data) is first and len(built) == 4
+    for k in range(2, 6):  # four more: edited, copy0 and copy1 go, then data
+        mlflow_models.training_dataset(dataclasses.replace(data, name=f"copy{k}"))
+        assert (data.digest in mlflow_models._TRAINING_DATASETS) == (k < 5)
+    assert mlflow_models.training_dataset(data) is not first and len(built) == 9
 
 
 def test_the_logged_simulator_keeps_what_simulation_needs_and_not_the_fit_record():
@@ -50,7 +84,12 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     from mlflow.tracking import MlflowClient
 
     from pwa_pipeline import LinearARX, make_hure_vasak
-    from pwa_pipeline.orchestration.mlflow_models import ModelToLog, Simulator, example_table
+    from pwa_pipeline.orchestration.mlflow_models import (
+        ModelToLog,
+        Simulator,
+        example_table,
+        table_dataset,
+    )
     from pwa_pipeline.orchestration.resources import MLflowTracker
 
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
@@ -58,7 +97,8 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
     model = LinearARX(na=1, nb=1).fit(data.u, data.y)
     table = example_table(data.u, data.y, data.u_names, data.y_names, 5)
-    to_log = ModelToLog(Simulator(model, data.u_names, data.y_names), table, table)
+    to_log = ModelToLog(Simulator(model, data.u_names, data.y_names), table,
+                        table_dataset(table))
 
     def log(hparams: str) -> str:
         return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},

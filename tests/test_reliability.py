@@ -289,7 +289,12 @@ def _log_model_once_at(args):
     """Log a run of one fitted linear ARX model once ``barrier`` lets every process go."""
     uri, hparams, barrier = args
     from pwa_pipeline import LinearARX, make_hure_vasak
-    from pwa_pipeline.orchestration.mlflow_models import ModelToLog, Simulator, example_table
+    from pwa_pipeline.orchestration.mlflow_models import (
+        ModelToLog,
+        Simulator,
+        example_table,
+        table_dataset,
+    )
 
     data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
     model = LinearARX(na=1, nb=1).fit(data.u, data.y)
@@ -300,7 +305,7 @@ def _log_model_once_at(args):
     return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
                            metrics={}, tags={}, artifacts={},
                            model=ModelToLog(Simulator(model, data.u_names, data.y_names),
-                                            table, table))
+                                            table, table_dataset(table)))
 
 
 def test_runs_scoring_one_model_at_once_log_it_once(tmp_path, mlflow_template):

@@ -47,7 +47,13 @@ from .figures import (
     to_png,
 )
 from .jobs import LEADERBOARD
-from .mlflow_models import ModelToLog, Simulator, example_table, predictor_fingerprint
+from .mlflow_models import (
+    ModelToLog,
+    Simulator,
+    example_table,
+    predictor_fingerprint,
+    training_dataset,
+)
 from .partitions import split_key
 from .reporting import (
     leaderboard_markdown,
@@ -58,7 +64,6 @@ from .reporting import (
     rounded,
     score_metrics,
     theta_table,
-    training_table,
 )
 from .resources import MLflowTracker, PipelineSettings
 from .storage import (
@@ -478,7 +483,7 @@ def _scores_asset(method: Method, partitions_def):
                 simulator=Simulator(model, data.u_names, data.y_names),
                 input_example=example_table(data.u_test[0], data.y_test[0], data.u_names,
                                             data.y_names, configuration.warmup),
-                training=training_table(data)))
+                training=training_dataset(data)))
         log_seconds = time.perf_counter() - t0
         context.add_output_metadata(rounded({
             "prediction": dg.MetadataValue.md(png_markdown(png, title)),

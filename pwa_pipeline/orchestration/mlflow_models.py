@@ -11,6 +11,8 @@ clusters, step 5, the rows' labels) stays in the ``pwa_model`` asset.
 """
 
 import copy
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import joblib
@@ -18,6 +20,9 @@ import mlflow.pyfunc
 import numpy as np
 import pandas as pd
 from pandas.api.types import is_numeric_dtype
+
+from ..datasets import Dataset
+from .reporting import training_table
 
 _SCHEMA_ROWS = 100
 """Rows of the training table from which its MLflow schema is inferred."""
@@ -94,11 +99,11 @@ def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: lis
 class ModelToLog:
     """What :meth:`~pwa_pipeline.orchestration.resources.MLflowTracker.log_run` logs as the
     run's model: the simulator, an input example (for the signature), and the training
-    table (logged as the run's dataset, :meth:`dataset`)."""
+    data as an MLflow dataset (:func:`training_dataset`), logged as the run's dataset."""
 
     simulator: Simulator
     input_example: pd.DataFrame
-    training: pd.DataFrame
+    training: "mlflow.data.pandas_dataset.PandasDataset"
 
     def fingerprint(self) -> str:
         """:func:`predictor_fingerprint` of the simulator's model and columns, so that a
@@ -106,20 +111,43 @@ class ModelToLog:
         sim = self.simulator
         return predictor_fingerprint(sim.model, sim.u_names, sim.y_names)
 
-    def dataset(self) -> "mlflow.data.pandas_dataset.PandasDataset":
-        """The training table as an MLflow dataset, its schema taken from the first rows.
 
-        MLflow infers a dataset's schema by testing every cell for a missing value (1.3 s
-        a run on the robot's 40k × 13 table); the table has no missing value (the data are
-        validated finite) and one type per column, so its first rows give the same schema.
-        Its digest is :func:`pandas_digest`'s, MLflow's without testing numeric cells.
-        """
-        from mlflow.data import from_pandas
-        from mlflow.models import infer_signature
+def table_dataset(table: pd.DataFrame) -> "mlflow.data.pandas_dataset.PandasDataset":
+    """A training table as an MLflow dataset named ``training``, its schema taken from the
+    first rows.
 
-        data = from_pandas(self.training, name="training", digest=pandas_digest(self.training))
-        data.__dict__["schema"] = infer_signature(self.training.head(_SCHEMA_ROWS)).inputs
-        return data
+    MLflow infers a dataset's schema by testing every cell for a missing value (1.3 s a run
+    on the robot's 40k × 13 table); the table has no missing value (the data are validated
+    finite) and one type per column, so its first rows give the same schema. Its digest is
+    :func:`pandas_digest`'s, MLflow's without testing numeric cells.
+    """
+    from mlflow.data import from_pandas
+    from mlflow.models import infer_signature
+
+    data = from_pandas(table, name="training", digest=pandas_digest(table))
+    data.__dict__["schema"] = infer_signature(table.head(_SCHEMA_ROWS)).inputs
+    return data
+
+
+_TRAINING_DATASETS: OrderedDict[str, "mlflow.data.pandas_dataset.PandasDataset"] = OrderedDict()
+_KEPT_DATASETS = 4
+_DATASETS_LOCK = threading.Lock()
+
+
+def training_dataset(data: Dataset) -> "mlflow.data.pandas_dataset.PandasDataset":
+    """:func:`table_dataset` of ``data``'s :func:`~.reporting.training_table`, built once per
+    :attr:`~pwa_pipeline.datasets.Dataset.digest` in a process (the ``_KEPT_DATASETS`` most
+    recently used are kept): the three runs of every set of a sweep log the same one,
+    neither stacking the experiments nor hashing the table again."""
+    with _DATASETS_LOCK:
+        kept = _TRAINING_DATASETS.pop(data.digest, None)
+    if kept is None:
+        kept = table_dataset(training_table(data))
+    with _DATASETS_LOCK:
+        _TRAINING_DATASETS[data.digest] = kept  # most recently used last
+        while len(_TRAINING_DATASETS) > _KEPT_DATASETS:
+            _TRAINING_DATASETS.popitem(last=False)
+    return kept
 
 
 def pandas_digest(table: pd.DataFrame) -> str:

@@ -329,7 +329,7 @@ class MLflowTracker(dg.ConfigurableResource):
         client = self.client()
         # as mlflow.log_input does, without making the run the active one
         client.log_inputs(run_id, datasets=[DatasetInput(
-            model.dataset()._to_mlflow_entity(),
+            model.training._to_mlflow_entity(),
             tags=[InputTag(MLFLOW_DATASET_CONTEXT, "training")])])
         if logged is None:
             with mlflow.start_run(run_id=run_id):  # the fluent log_model needs an active run
