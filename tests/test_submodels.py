@@ -685,3 +685,20 @@ def test_a_memory_without_a_cache_method_is_refused_by_name():
                        match="'memory' parameter of RefinedSubModels must be None, an instance "
                              "of 'str' or an object implementing 'cache'"):
         RefinedSubModels(memory=3).fit(phi, target, local, absorbed, SVMRegions())
+
+
+def test_array_digest_tells_apart_values_shapes_types_and_order():
+    """The digest caches key on in place of arrays (step 5's local models, the local-model
+    cache's regressors, a data set's experiments)."""
+    from pwa_pipeline._arrays import array_digest
+
+    a = np.arange(12.0).reshape(3, 4)
+    b = np.ones(2)
+    key = array_digest(a, b)
+    assert array_digest(np.asfortranarray(a), b.copy()) == key  # the same values, any layout
+    assert array_digest(a.T.copy().T, b) == key
+    edited = a.copy()
+    edited[2, 3] += 1e-12
+    others = [array_digest(edited, b), array_digest(a.reshape(4, 3), b),
+              array_digest(a.view(np.int64), b), array_digest(b, a), array_digest(a)]
+    assert len({key, *others}) == 1 + len(others)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import joblib
 import numpy as np
 
+from .._arrays import array_digest
 from .._typing import Float2D
 from .kuka import load_kuka
 from .simulated import HURE_VASAK_THETAS, make_hure_vasak
@@ -58,12 +59,10 @@ class Dataset:
         """Hash of the name, channel names, experiments and ground truth: what the
         pipeline's caches key on in place of the data, so that the arrays are hashed once
         per loaded data set, not at every cache lookup."""
-        h = hashlib.sha256(repr((self.name, self.u_names, self.y_names)).encode())
-        for part in (self.u_train, self.y_train, self.u_test, self.y_test):
-            h.update(str(len(part)).encode())
-            for a in map(np.ascontiguousarray, part):
-                h.update(f"{a.dtype}{a.shape}".encode())
-                h.update(a.tobytes())
+        parts = (self.u_train, self.y_train, self.u_test, self.y_test)
+        h = hashlib.sha256(repr((self.name, self.u_names, self.y_names,
+                                 [len(part) for part in parts])).encode())
+        h.update(array_digest(*(a for part in parts for a in part)).encode())
         h.update(joblib.hash(self.truth).encode())
         return h.hexdigest()[:24]
 

@@ -37,6 +37,7 @@ import joblib
 import numpy as np
 import pandas as pd
 
+from .._arrays import array_digest
 from .._validation import check_name
 from .partitions import split_key
 from .paths import default_storage_dir
@@ -271,9 +272,7 @@ def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:
     """Content hash of the regressors, the numerical core's source (:func:`core_fingerprint`)
     and the settings local models depend on."""
     h = hashlib.sha256(core_fingerprint().encode())
-    for arr in (phi, target):
-        h.update(np.ascontiguousarray(arr).tobytes())
-        h.update(str(arr.shape).encode())
+    h.update(array_digest(phi, target).encode())
     h.update(repr(sorted(settings.items())).encode())
     return h.hexdigest()[:24]
 

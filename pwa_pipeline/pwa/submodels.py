@@ -17,7 +17,7 @@ from sklearn.cluster import KMeans
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_memory
 
-from .._arrays import relabel_by_size
+from .._arrays import array_digest, relabel_by_size
 from .._typing import Float2D
 from ._blas import _controller, single_threaded_blas
 from .neighbours import distinct_rows
@@ -839,11 +839,11 @@ class RefinedSubModels(BaseEstimator):
             labels = refine(phi, target, labels, min_size, self.n_refine, memo=memo)[1]
             labels, more = merge_indistinguishable(phi, target, labels, **merge)
             n_merged += more
-        # the cache's key holds the local models as a SHA-256 of the estimated samples and
-        # their θ_k (which give theta_, NaN elsewhere), 2.5× faster than joblib's hash and
-        # read without spreading a loaded step's arrays (5,000 of the robot's 40k rows)
-        local_key = None if self.memory is None else _array_key(local.estimated_,
-                                                                local.estimated_theta())
+        # the cache's key holds the local models as the digest of the estimated samples and
+        # their θ_k (which give theta_, NaN elsewhere), read without spreading a loaded
+        # step's arrays (5,000 of the robot's 40k rows)
+        local_key = None if self.memory is None else array_digest(local.estimated_,
+                                                                  local.estimated_theta())
         consolidated = check_memory(self.memory).cache(_from_consolidated, ignore=["local"])
         (self.thetas_, self.labels_, margin, merged, self.n_iter_,
          self.n_split_) = consolidated(clone(self).set_params(memory=None), phi, target, labels,
@@ -983,16 +983,8 @@ def _from_consolidated(step: RefinedSubModels, phi: Float2D, target: Float2D,
                        min_pts: int, search_local, search_clustering, regions) -> tuple:
     """:meth:`RefinedSubModels._from_consolidated` of ``step`` (no ``memory``) with the
     fitted local-model step's ``theta_``: a function of its arguments alone, for
-    ``RefinedSubModels.memory`` to cache, ``local_key`` (:func:`_array_key` of its estimated
-    samples and their θ_k) standing for ``local`` in its key."""
+    ``RefinedSubModels.memory`` to cache, ``local_key`` (the
+    :func:`~pwa_pipeline._arrays.array_digest` of its estimated samples and their θ_k)
+    standing for ``local`` in its key."""
     return step._from_consolidated(phi, target, labels, local.theta_, min_pts, search_local,
                                    search_clustering, regions)
-
-
-def _array_key(*arrays: np.ndarray) -> str:
-    """SHA-256 of the arrays' shapes, types and bytes."""
-    h = hashlib.sha256()
-    for a in map(np.ascontiguousarray, arrays):
-        h.update(f"{a.shape}{a.dtype}".encode())
-        h.update(memoryview(a).cast("B"))
-    return h.hexdigest()
