@@ -29,7 +29,7 @@ import dagster as dg
 import pandas as pd
 
 from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
-from benchmarks.pipeline import _materialise, sweep_definitions
+from benchmarks.pipeline import _materialise, asset_medians, sweep_definitions
 from pwa_pipeline.orchestration.instance import _SETTINGS, dagster_yaml
 
 EVENT_LOGS = {"dagster": lambda home: _SETTINGS, "pooled": dagster_yaml}
@@ -49,16 +49,15 @@ def main() -> None:
         defs, keys = sweep_definitions("kuka_robot", Path(tmp))
         arms = {f"{log}|{'with' if cache else 'without'}_cache": (log, cache)
                 for log in EVENT_LOGS for cache in (True, False)}
+        folders = {name: Path(tmp) / name.replace("|", "_") for name in arms}
         instances = {}
         for name, (log, cache) in arms.items():
-            folder = Path(tmp) / name.replace("|", "_")
-            folder.mkdir()
-            instances[name] = _instance(folder / "dagster_home", log)
+            folders[name].mkdir()
+            instances[name] = _instance(folders[name] / "dagster_home", log)
             runs[name] = []
         for key in keys:  # the arms alternate set by set, so that they share the load
             for name, (log, cache) in arms.items():
-                folder = Path(tmp) / name.replace("|", "_")
-                runs[name] += _materialise(defs, [key], folder, cache, instances[name])
+                runs[name] += _materialise(defs, [key], folders[name], cache, instances[name])
         for instance in instances.values():
             instance.dispose()
     machine = load.summary()
@@ -72,8 +71,7 @@ def main() -> None:
                 / summary[f"{log}|with_cache"]["total_seconds"] for log in EVENT_LOGS}
     write_json({"runs": runs, "summary": summary, "cache_speed_up": speed_up,
                 "machine_load": machine}, "event_log")
-    steps = pd.DataFrame({name: pd.DataFrame([r["assets"] for r in rows[1:]]).median()
-                          for name, rows in runs.items()})
+    steps = asset_medians({name: rows[1:] for name, rows in runs.items()})
     text = "\n".join([
         f"The robot's 12-set sweep (benchmarks.pipeline's) on a Dagster home of sqlite files, "
         f"four arms alternating set by set; one run; {describe_load(machine)}.\n",

@@ -24,6 +24,8 @@ from dagster._core.storage.event_log.sqlite.sqlite_event_log import (
     SqliteEventLogStorage,
     create_engine,
 )
+from dagster._serdes import ConfigurableClassData
+from sqlalchemy.engine import Engine
 from sqlalchemy.pool import QueuePool
 
 #: Engines (each with its open connection) kept: the index's and the latest runs'.
@@ -36,13 +38,18 @@ class PooledEventLogStorage(SqliteEventLogStorage):
     compiled once and files opened once; its ``dagster.yaml`` configuration is the same
     (``base_dir``)."""
 
+    def __init__(self, base_dir: str, inst_data: ConfigurableClassData | None = None):
+        # before Dagster's __init__, which may index a new home through _connect
+        self._engines: OrderedDict[str, Engine] = OrderedDict()  # most recently used last
+        super().__init__(base_dir, inst_data)
+
     @classmethod
     def from_config_value(cls, inst_data, config_value) -> "PooledEventLogStorage":
         return cls(inst_data=inst_data, **config_value)
 
     def _dispose_engines(self) -> None:
         with self._db_lock:
-            engines = self.__dict__.pop("_engines", {})
+            engines, self._engines = self._engines, OrderedDict()
             for engine in engines.values():
                 engine.dispose()
 
@@ -62,15 +69,14 @@ class PooledEventLogStorage(SqliteEventLogStorage):
         """A connection in a transaction on ``shard``'s file, as Dagster's ``_connect``, from
         the shard's kept engine."""
         with self._db_lock:
-            engines = self.__dict__.setdefault("_engines", OrderedDict())
             # one connection (the lock lets one thread in at a time), more only if nested;
             # SQLAlchemy lets a pooled sqlite connection serve any thread
-            engine = engines.pop(shard, None) or create_engine(
+            engine = self._engines.pop(shard, None) or create_engine(
                 self.conn_string_for_shard(shard), poolclass=QueuePool, pool_size=1,
                 max_overflow=2, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_SECONDS})
-            engines[shard] = engine  # most recently used last
-            while len(engines) > KEPT_ENGINES:
-                engines.popitem(last=False)[1].dispose()
+            self._engines[shard] = engine
+            while len(self._engines) > KEPT_ENGINES:
+                self._engines.popitem(last=False)[1].dispose()
             if shard not in self._initialized_dbs:
                 self._initdb(engine)
                 self._initialized_dbs.add(shard)
