@@ -22,6 +22,11 @@ def derived(source: int) -> int:
     return source + 1
 
 
+def _open_files() -> set[str]:
+    """The files this process has open."""
+    return {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")}
+
+
 @pytest.fixture
 def home(tmp_path, monkeypatch):
     monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
@@ -74,12 +79,10 @@ def test_events_written_by_another_process_are_read_and_wipe_closes_the_files(ho
         limit=1).records[0]
     assert latest.run_id == other_run.run_id
     runs_dir = home / "history" / "runs"
-    open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")}
-    assert str(runs_dir / f"{first.run_id}.db") in open_files
+    assert str(runs_dir / f"{first.run_id}.db") in _open_files()
     storage.wipe()
-    open_files = {os.path.realpath(f"/proc/self/fd/{fd}") for fd in os.listdir("/proc/self/fd")}
     # no run's file open (wipe empties the index through a connection of its own)
-    assert not [f for f in open_files if f.startswith(str(runs_dir))
+    assert not [f for f in _open_files() if f.startswith(str(runs_dir))
                 and not os.path.basename(f).startswith("index.db")]
     assert not (runs_dir / f"{first.run_id}.db").exists()
     again = _materialise(instance, "a")
