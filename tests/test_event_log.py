@@ -1,9 +1,11 @@
 """The command line's Dagster home: its dagster.yaml, and the event log that reuses engines."""
 
 import os
+import sqlite3
 
 import dagster as dg
 import pytest
+from dagster._core.storage.event_log.sqlite import sqlite_event_log
 from dagster._core.storage.event_log.sqlite.sqlite_event_log import SqliteEventLogStorage
 
 from pwa_pipeline.orchestration import event_log
@@ -134,3 +136,36 @@ def test_dagster_yaml_written_earlier_is_brought_up_to_date_and_one_edited_is_ke
     assert config.read_text() == edited
     assert instance.run_monitoring_enabled
     assert os.environ["DAGSTER_HOME"] == str(home)
+
+
+def _pragmas(storage, shard: str) -> tuple[str, int]:
+    """Journal mode and synchronous level of the kept connection to ``shard``'s file."""
+    with storage._engines[shard].connect() as conn:
+        return (conn.exec_driver_sql("PRAGMA journal_mode").scalar(),
+                conn.exec_driver_sql("PRAGMA synchronous").scalar())
+
+
+def test_files_in_wal_mode_commit_without_waiting_for_the_disk(home):
+    instance = prepare_instance()
+    storage = instance.event_log_storage
+    result = _materialise(instance, "a")
+    # the run's new file (WAL only once Dagster has created it) and the index: NORMAL (1)
+    assert _pragmas(storage, result.run_id) == ("wal", 1)
+    assert _pragmas(storage, "index") == ("wal", 1)
+    # a file in another journal mode (set by another program) keeps sqlite's FULL (2)
+    storage.dispose()
+    with sqlite3.connect(home / "history" / "runs" / f"{result.run_id}.db") as conn:
+        conn.execute("PRAGMA journal_mode=DELETE")
+    assert len(instance.all_logs(result.run_id)) > 20
+    assert _pragmas(storage, result.run_id) == ("delete", 2)
+
+
+def test_has_table_asks_the_file_until_it_finds_the_table(home, monkeypatch):
+    storage = prepare_instance().event_log_storage
+    asked = []
+    real = sqlite_event_log.create_engine
+    monkeypatch.setattr(sqlite_event_log, "create_engine",
+                        lambda *a, **k: asked.append(a[0]) or real(*a, **k))
+    assert [storage.has_table("asset_event_tags") for _ in range(3)] == [True] * 3
+    assert [storage.has_table("no_such_table") for _ in range(2)] == [False] * 2
+    assert len(asked) == 3  # once for the table found, each time for the one missing
