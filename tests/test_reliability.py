@@ -347,11 +347,39 @@ def test_interrupted_logging_ends_the_run(tmp_path, mlflow_template, error, stat
     shutil.copy(mlflow_template, db)
     tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
     with pytest.raises(type(error)):
-        tracker.log_run(dataset="d", hparams="s", method="pwa", params={}, metrics={},
-                        tags={}, artifacts={"f.json": {"x": _Exploding(error)}})
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={"n_rho": 61},
+                        metrics={"nrmse": 0.25}, tags={"partition": "d|s"},
+                        artifacts={"f.json": {"x": _Exploding(error)}})
     client = MlflowClient(tracking_uri=f"sqlite:///{db}")
     exp = client.get_experiment_by_name("pwa-pipeline/d")
-    assert [r.info.status for r in client.search_runs([exp.experiment_id])] == [status]
+    [run] = client.search_runs([exp.experiment_id])
+    assert run.info.status == status
+    # the scores computed before the failure are kept
+    assert run.data.metrics == {"nrmse": 0.25}
+    assert run.data.params == {"method": "pwa", "n_rho": "61"}
+    assert run.data.tags["partition"] == "d|s" and "latest" not in run.data.tags
+
+
+def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkeypatch):
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    batches = []
+    real = MlflowClient.log_batch
+    monkeypatch.setattr(MlflowClient, "log_batch",
+                        lambda self, run_id, **kw: batches.append(kw) or real(self, run_id, **kw))
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+    run_id = tracker.log_run(dataset="d", hparams="s", method="pwa", params={"n_rho": 61},
+                             metrics={"nrmse": float("inf")}, tags={"partition": "d|s"},
+                             artifacts={"f.json": {"x": 1}})
+    assert len(batches) == 1
+    run = MlflowClient(tracking_uri=f"sqlite:///{db}").get_run(run_id)
+    assert run.info.status == "FINISHED"
+    assert run.data.metrics == {"nrmse": 1e300}
+    assert run.data.params == {"method": "pwa", "n_rho": "61"}
+    assert {k: run.data.tags[k] for k in ("partition", "latest", "method")} == \
+        {"partition": "d|s", "latest": "true", "method": "pwa"}
 
 
 @pytest.mark.parametrize("error", [KeyboardInterrupt(), RuntimeError("disk full")])

@@ -386,17 +386,14 @@ class MLflowTracker(dg.ConfigurableResource):
                                 tags={"dataset": dataset, "hparams": hparams,
                                       "method": method, **tags})
         run_id = run.info.run_id
+        # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
+        # scores.csv artifact keeps the exact value).
+        values = {k: float(v) for k, v in metrics.items() if v is not None}
+        batch = {"metrics": [Metric(k, float(np.clip(v, -1e300, 1e300)), 0, 0)
+                             for k, v in values.items()],
+                 "params": [Param(k, str(v)) for k, v in {"method": method, **params}.items()]}
+        batched = False
         try:
-            # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
-            # scores.csv artifact keeps the exact value).
-            values = {k: float(v) for k, v in metrics.items() if v is not None}
-            finite = {k: float(np.clip(v, -1e300, 1e300)) for k, v in values.items()}
-            client.log_batch(
-                run_id,
-                metrics=[Metric(k, v, 0, 0) for k, v in finite.items()],
-                params=[Param(k, str(v)) for k, v in {"method": method, **params}.items()],
-                tags=[RunTag(k, str(v)) for k, v in tags.items()],
-            )
             for name, obj in artifacts.items():
                 if isinstance(obj, bytes):
                     _log_bytes(client, run_id, obj, name)
@@ -415,14 +412,19 @@ class MLflowTracker(dg.ConfigurableResource):
                     self._logged_model(client, exp_id, method, fingerprint)),
                     "model_fingerprint": fingerprint}
                 self._unmark_earlier(client, exp_id, run_id, hparams, method)
-                client.log_batch(run_id, tags=[RunTag(k, v) for k, v in
-                                               {**last, "latest": "true"}.items()])
+                # one batch (each is a round trip to the store): the metrics, parameters and
+                # the tags known last (``tags`` were set when the run was created)
+                batched = True
+                client.log_batch(run_id, **batch, tags=[
+                    RunTag(k, v) for k, v in {**last, "latest": "true"}.items()])
                 client.set_terminated(run_id, "FINISHED")
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
-            # as KILLED rather than leave it RUNNING forever
+            # as KILLED rather than leave it RUNNING forever, with the scores it has
             status = "FAILED" if isinstance(exc, Exception) else "KILLED"
             try:
+                if not batched:
+                    client.log_batch(run_id, **batch)
                 client.set_terminated(run_id, status)
             except Exception as why:  # e.g. a sqlite store still locked by the write it broke
                 logging.getLogger(__name__).warning(
