@@ -123,7 +123,7 @@ def main() -> None:
     steps = asset_medians({name: rows[1:] for name, rows in runs.items()})
     text = "\n".join([
         f"The robot's 12-set sweep (benchmarks.pipeline's) on a Dagster home of sqlite files, "
-        f"four arms alternating set by set; one run; {describe_load(machine)}.\n",
+        f"four arms and the floor alternating set by set; one run; {describe_load(machine)}.\n",
         pd.DataFrame(summary).T.to_markdown(floatfmt=".3g"), "",
         "Speed-up of the caches over the whole sweep, with each event log: "
         + ", ".join(f"{log} {value:.2f}x" for log, value in speed_up.items()) + ". "
