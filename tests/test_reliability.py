@@ -360,6 +360,20 @@ def test_interrupted_logging_ends_the_run(tmp_path, mlflow_template, error, stat
     assert run.data.tags["partition"] == "d|s" and "latest" not in run.data.tags
 
 
+def test_a_metric_that_is_not_a_number_fails_the_run(tmp_path, mlflow_template):
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+    with pytest.raises(ValueError, match="could not convert"):
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={},
+                        metrics={"nrmse": "high"}, tags={}, artifacts={})
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    [run] = client.search_runs([client.get_experiment_by_name("pwa-pipeline/d").experiment_id])
+    assert run.info.status == "FAILED"
+
+
 def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkeypatch):
     from mlflow.tracking import MlflowClient
 

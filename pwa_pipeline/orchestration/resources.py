@@ -386,14 +386,15 @@ class MLflowTracker(dg.ConfigurableResource):
                                 tags={"dataset": dataset, "hparams": hparams,
                                       "method": method, **tags})
         run_id = run.info.run_id
-        # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
-        # scores.csv artifact keeps the exact value).
-        values = {k: float(v) for k, v in metrics.items() if v is not None}
-        batch = {"metrics": [Metric(k, float(np.clip(v, -1e300, 1e300)), 0, 0)
-                             for k, v in values.items()],
-                 "params": [Param(k, str(v)) for k, v in {"method": method, **params}.items()]}
-        batched = False
+        batch, batched = None, False
         try:
+            # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
+            # scores.csv artifact keeps the exact value).
+            values = {k: float(v) for k, v in metrics.items() if v is not None}
+            batch = {"metrics": [Metric(k, float(np.clip(v, -1e300, 1e300)), 0, 0)
+                                 for k, v in values.items()],
+                     "params": [Param(k, str(v))
+                                for k, v in {"method": method, **params}.items()]}
             for name, obj in artifacts.items():
                 if isinstance(obj, bytes):
                     _log_bytes(client, run_id, obj, name)
@@ -423,7 +424,7 @@ class MLflowTracker(dg.ConfigurableResource):
             # as KILLED rather than leave it RUNNING forever, with the scores it has
             status = "FAILED" if isinstance(exc, Exception) else "KILLED"
             try:
-                if not batched:
+                if batch is not None and not batched:
                     client.log_batch(run_id, **batch)
                 client.set_terminated(run_id, status)
             except Exception as why:  # e.g. a sqlite store still locked by the write it broke
