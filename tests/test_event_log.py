@@ -171,12 +171,13 @@ def test_has_table_asks_the_file_until_it_finds_the_table(home, monkeypatch):
     assert len(asked) == 3  # once for the table found, each time for the one missing
 
 
-def _schema(path) -> tuple[list, list, str]:
-    """Tables and indexes, the alembic stamp and the journal mode of a sqlite file."""
+def _schema(path) -> tuple[list, list, str, int]:
+    """Tables and indexes, the alembic stamp, the journal mode and the permissions of a
+    sqlite file."""
     with sqlite3.connect(path) as conn:
         return (sorted(conn.execute("select type, name, sql from sqlite_master")),
                 conn.execute("select version_num from alembic_version").fetchall(),
-                conn.execute("PRAGMA journal_mode").fetchone()[0])
+                conn.execute("PRAGMA journal_mode").fetchone()[0], path.stat().st_mode & 0o777)
 
 
 def test_new_run_files_are_copies_of_one_made_by_dagster(home, tmp_path, monkeypatch):
@@ -187,18 +188,19 @@ def test_new_run_files_are_copies_of_one_made_by_dagster(home, tmp_path, monkeyp
     monkeypatch.setattr(storage, "_initdb", lambda *a, **k: initialised.append(a) or real(*a, **k))
     runs = [_materialise(instance, p) for p in ("a", "b", "a")]
     assert len(initialised) == 1  # once for the process, not once per run
-    # each run's file as Dagster's own class creates one: schema, stamp, journal mode
+    # each run's file as Dagster's own class creates one: schema, stamp, journal mode and
+    # permissions (those sqlite gives a new file, not mkstemp's 0600)
     plain = SqliteEventLogStorage(str(tmp_path / "plain"))
     with plain.run_connection("r") as conn:
         conn.exec_driver_sql("select 1")
     reference = _schema(tmp_path / "plain" / "r.db")
-    assert reference[1] and reference[2] == "wal"
+    assert reference[1] and reference[2] == "wal" and reference[3] != 0o600
     runs_dir = home / "history" / "runs"
+    other = SqliteEventLogStorage(str(runs_dir))  # Dagster's class, as another process
     for run in runs:
         assert _schema(runs_dir / f"{run.run_id}.db") == reference
-        assert len(SqliteEventLogStorage(str(runs_dir)).get_logs_for_run(run.run_id)) > 20
+        assert len(other.get_logs_for_run(run.run_id)) > 20
     # a run's file another process created first is kept, events and all
-    other = SqliteEventLogStorage(str(runs_dir))
     other.store_event(instance.all_logs(runs[0].run_id)[0]._replace(run_id="elsewhere"))
     with storage.run_connection("elsewhere") as conn:
         assert conn.exec_driver_sql("select count(*) from event_logs").scalar() == 1

@@ -97,6 +97,15 @@ def test_a_planted_pickle_is_never_loaded(tmp_path):
         io.load_input(ctx)
 
 
+def test_create_new_never_replaces_a_file_and_leaves_no_temporary_one(tmp_path):
+    path = tmp_path / "f.db"
+    assert storage.create_new(path, b"first", 0o640)
+    assert path.read_bytes() == b"first" and path.stat().st_mode & 0o777 == 0o640
+    assert not storage.create_new(path, b"second", 0o600)  # another process's file: kept
+    assert path.read_bytes() == b"first" and path.stat().st_mode & 0o777 == 0o640
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.db"]
+
+
 def test_signed_files_round_trip_and_damage_is_detected(tmp_path):
     key = signing_key(tmp_path)
     assert signing_key(tmp_path) == key and len(key) == 32

@@ -31,7 +31,6 @@ process created meanwhile (that file is then initialised as Dagster does). Measu
 ``benchmarks/event_log.py``.
 """
 
-import os
 import tempfile
 from collections import OrderedDict
 from collections.abc import Iterator
@@ -63,7 +62,7 @@ class PooledEventLogStorage(SqliteEventLogStorage):
         # before Dagster's __init__, which may index a new home through _connect
         self._engines: OrderedDict[str, Engine] = OrderedDict()  # most recently used last
         self._tables: set[str] = set()
-        self._new_run_file: bytes | None = None  # a new run's file, made once
+        self._new_run_file: tuple[bytes, int] | None = None  # made once: bytes, mode
         super().__init__(base_dir, inst_data)
 
     @classmethod
@@ -117,6 +116,9 @@ class PooledEventLogStorage(SqliteEventLogStorage):
     def _created_from_copy(self, shard: str) -> bool:
         """Create the file of a new run ``shard`` as a copy of the one :meth:`_initdb` made
         once in this process; False (nothing done) for the index or a file that exists."""
+        # imported here: the UI's and daemon's processes load this class, not the pipeline
+        from .storage import create_new
+
         path = Path(self.path_for_shard(shard))
         if shard == INDEX_SHARD_NAME or path.exists():
             return False
@@ -126,17 +128,9 @@ class PooledEventLogStorage(SqliteEventLogStorage):
                 engine = create_engine(f"sqlite:///{made}")
                 self._initdb(engine)
                 engine.dispose()  # the last connection closed moves its WAL into the file
-                self._new_run_file = made.read_bytes()
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(self._new_run_file)
-            os.link(tmp, path)  # atomic, and never replaces a file another process made
-            return True
-        except FileExistsError:
-            return False
-        finally:
-            os.unlink(tmp)
+                # the bytes, and the permissions sqlite gave the file (the umask's)
+                self._new_run_file = made.read_bytes(), made.stat().st_mode & 0o777
+        return create_new(path, *self._new_run_file)
 
 
 def _engine(conn_string: str) -> Engine:

@@ -80,22 +80,29 @@ def sweep_stale_tmp(folder: Path, older_than: float = STALE_SECONDS) -> list[Pat
     return stale
 
 
+def create_new(path: Path, data: bytes, mode: int) -> bool:
+    """Create ``path`` holding ``data``, with permissions ``mode``, unless it exists: written
+    to a temporary file beside it, then hard-linked into place, which is atomic and never
+    replaces a file another process created meanwhile. True if this call created it."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.chmod(tmp, mode)
+        os.link(tmp, path)
+        return True
+    except FileExistsError:
+        return False
+    finally:
+        os.unlink(tmp)
+
+
 def signing_key(root: Path) -> bytes:
     """The store's HMAC key (``<root>/.signing-key``), created on first use (mode 0600)."""
     path = root / KEY_FILE
     if not path.is_file():
         root.mkdir(parents=True, exist_ok=True)
-        key = secrets.token_bytes(32)
-        fd, tmp = tempfile.mkstemp(dir=root, prefix=".key.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(key)
-        os.chmod(tmp, 0o600)
-        try:
-            os.link(tmp, path)  # atomic, and never replaces a key another process created
-        except FileExistsError:
-            pass
-        finally:
-            os.unlink(tmp)
+        create_new(path, secrets.token_bytes(32), 0o600)  # or another process's key
     return path.read_bytes()
 
 
