@@ -36,7 +36,13 @@ import dagster as dg
 import pandas as pd
 
 from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write_json
-from benchmarks.pipeline import _materialise, asset_medians, sweep_definitions
+from benchmarks.pipeline import (
+    QUIET,
+    _materialise,
+    asset_medians,
+    step_seconds,
+    sweep_definitions,
+)
 from pwa_pipeline.orchestration.instance import _SETTINGS, dagster_yaml
 from pwa_pipeline.orchestration.jobs import LEADERBOARD
 from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
@@ -76,10 +82,9 @@ def _floor_run(assets: list, key: str, folder: Path, instance: dg.DagsterInstanc
         result = dg.materialize(
             assets, partition_key=key, instance=instance,
             resources={"io_manager": PartitionedFileIOManager(base_dir=str(folder / "storage"))},
-            run_config={"loggers": {"console": {"config": {"log_level": "ERROR"}}}})
+            run_config=QUIET)
     return {"partition": key, "seconds": t.seconds, "success": result.success,
-            "assets": {e.step_key: e.event_specific_data.duration_ms / 1000
-                       for e in result.get_step_success_events()}}
+            "assets": step_seconds(result)}
 
 
 def main() -> None:

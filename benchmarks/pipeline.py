@@ -48,6 +48,16 @@ def _megabytes(folder: Path) -> float:
     return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6
 
 
+QUIET = {"loggers": {"console": {"config": {"log_level": "ERROR"}}}}
+"""Run configuration of a timed run: Dagster's console log at errors only."""
+
+
+def step_seconds(result: dg.ExecuteInProcessResult) -> dict[str, float]:
+    """Each succeeded step's seconds in a run."""
+    return {e.step_key: e.event_specific_data.duration_ms / 1000
+            for e in result.get_step_success_events()}
+
+
 def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
                  instance: dg.DagsterInstance | None = None) -> list[dict]:
     """Materialise every asset of each partition of ``keys`` with stores under ``tmp`` (the
@@ -64,7 +74,6 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
         "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp / 'mlflow.db'}"),
     }
     instance = instance or dg.DagsterInstance.ephemeral()
-    quiet = {"loggers": {"console": {"config": {"log_level": "ERROR"}}}}
     rows = []
     stores = {"storage": tmp / "storage", "mlflow_artifacts": tmp / "mlartifacts",
               "cache": tmp / "cache"}
@@ -73,7 +82,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
         with Timer() as t:
             result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
                                     selection=SWEEP_SELECTION, instance=instance,
-                                    run_config=quiet, raise_on_error=False)
+                                    run_config=QUIET, raise_on_error=False)
         local = result.asset_materializations_for_node("local_models")[0].metadata
         subs = result.asset_materializations_for_node("sub_models")
         scored = result.asset_materializations_for_node("pwa_scores")
@@ -85,8 +94,7 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
                          scored and scored[0].metadata["scores_from_cache"].value),
                      **{f"{name}_mb_added": _megabytes(folder) - before[name]
                         for name, folder in stores.items()},
-                     "assets": {e.step_key: e.event_specific_data.duration_ms / 1000
-                                for e in result.get_step_success_events()}})
+                     "assets": step_seconds(result)})
     return rows
 
 
