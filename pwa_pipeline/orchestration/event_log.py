@@ -26,7 +26,7 @@ Each run gets a file of its own, which Dagster's ``_initdb`` creates through its
 tool (alembic: the schema's revisions read from its scripts, the tables created, the file
 stamped with the latest revision) at the run's first event. This class does that once per
 process, on a file of its own, and gives each new run's file a copy of it: the same schema,
-stamp and journal mode, put in place with a hard link, which never replaces a file another
+stamp, journal mode and permissions, put in place with a hard link, which never replaces a file another
 process created meanwhile (that file is then initialised as Dagster does). Measured by
 ``benchmarks/event_log.py``.
 """
