@@ -102,7 +102,7 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
 
     def log(hparams: str) -> str:
         return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
-                               metrics={}, tags={}, artifacts={}, model=to_log)
+                               metrics={}, tags={}, artifacts={}, model=to_log).run_id
 
     first = log("a")
     real_get_run = MlflowClient.get_run

@@ -20,6 +20,7 @@ import pytest
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.orchestration import storage
 from pwa_pipeline.orchestration.resources import (
+    LoggedRun,
     MLflowTracker,
     PipelineSettings,
     mask_credentials,
@@ -260,7 +261,7 @@ def _log_one(args):
     uri, i = args
     tracker = MLflowTracker(tracking_uri=uri)
     return tracker.log_run(dataset="d", hparams=f"s{i}", method="pwa", params={}, metrics={"m": i},
-                           tags={}, artifacts={})
+                           tags={}, artifacts={}).run_id
 
 
 @contextlib.contextmanager
@@ -314,7 +315,7 @@ def _log_model_once_at(args):
     return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
                            metrics={}, tags={}, artifacts={},
                            model=ModelToLog(Simulator(model, data.u_names, data.y_names),
-                                            table, table_dataset(table)))
+                                            table, table_dataset(table))).run_id
 
 
 def test_runs_scoring_one_model_at_once_log_it_once(tmp_path, mlflow_template):
@@ -395,7 +396,7 @@ def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkey
     tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
     run_id = tracker.log_run(dataset="d", hparams="s", method="pwa", params={"n_rho": 61},
                              metrics={"nrmse": float("inf")}, tags={"partition": "d|s"},
-                             artifacts={"f.json": {"x": 1}})
+                             artifacts={"f.json": {"x": 1}}).run_id
     assert len(batches) == 1
     run = MlflowClient(tracking_uri=f"sqlite:///{db}").get_run(run_id)
     assert run.info.status == "FINISHED"
@@ -468,6 +469,9 @@ def test_credentials_are_used_for_the_probe_and_never_shown(broken_server):
     assert url == f"http://127.0.0.1:{broken_server}"
     assert base64.b64decode(token) == b"ana:s3cret"
     MLflowTracker(tracking_uri=uri).check_reachable()  # live: the probe sends the password
+    # a run's link is made without the store (whose API fails here) and without the password
+    assert MLflowTracker(tracking_uri=uri).run_url(LoggedRun("r1", "7")) == (
+        f"http://127.0.0.1:{broken_server}/#/experiments/7/runs/r1?workflowType=machine_learning")
     wrong = uri.replace("s3cret", "guess")
     with pytest.raises(dg.Failure) as info:
         MLflowTracker(tracking_uri=wrong).check_reachable()

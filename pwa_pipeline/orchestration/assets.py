@@ -473,7 +473,7 @@ def _scores_asset(method: Method, partitions_def):
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
                 "outputs": data.y_names}
         t0 = time.perf_counter()
-        run_id = mlflow.log_run(
+        run = mlflow.log_run(
             dataset=dataset, hparams=hparams, method=method.name,
             params={**configuration.params(method.name), **model.resolved_params()},
             metrics={**score_metrics(ev.table), **extra_metrics},
@@ -488,7 +488,7 @@ def _scores_asset(method: Method, partitions_def):
         context.add_output_metadata(rounded({
             "prediction": dg.MetadataValue.md(png_markdown(png, title)),
             "scores_from_cache": memory.hits > 0,
-            "mlflow_run_id": run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run_id)),
+            "mlflow_run_id": run.run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run)),
             "mlflow_log_seconds": log_seconds,
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))
         return ev.table
@@ -542,7 +542,7 @@ def _leaderboard_asset(partitions_def):
         links = {}
         for dataset, rows in table.groupby("dataset", sort=False):
             scored = rows[~rows["free_run_diverged"]]["free_run_nrmse"]
-            run_id = mlflow.log_run(
+            run = mlflow.log_run(
                 dataset=dataset, hparams="all", method=LEADERBOARD, run_name=LEADERBOARD,
                 params={"partitions": ", ".join(dict.fromkeys(
                     f"{dataset}|{h}" for h in rows["hparams"]))},
@@ -551,7 +551,7 @@ def _leaderboard_asset(partitions_def):
                 tags={"dagster_run_id": context.run.run_id},
                 artifacts={"leaderboard.csv": rows.reset_index(drop=True),
                            "leaderboard.md": leaderboard_markdown(rows)})
-            links[f"mlflow_run {dataset}"] = dg.MetadataValue.url(mlflow.run_url(run_id))
+            links[f"mlflow_run {dataset}"] = dg.MetadataValue.url(mlflow.run_url(run))
         context.log.info(f"leaderboard: {len(table)} rows from {len(keys) - len(missing)} of "
                          f"{len(keys)} partitions ({len(missing)} not (fully) materialised)")
         context.add_output_metadata({

@@ -11,7 +11,7 @@ import urllib.parse
 import urllib.request
 from importlib.metadata import version
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import dagster as dg
 import numpy as np
@@ -339,13 +339,13 @@ class MLflowTracker(dg.ConfigurableResource):
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
         return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
 
-    def run_url(self, run_id: str) -> str:
+    def run_url(self, run: "LoggedRun") -> str:
         """The link to a run in the MLflow UI (credentials never included)."""
         uri = self.uri()
         base = split_credentials(uri)[0] if uri.startswith(("http://", "https://")) \
             else self.ui_url or default_mlflow_ui_url()
-        experiment = self.client().get_run(run_id).info.experiment_id
-        return f"{base.rstrip('/')}/#/experiments/{experiment}/runs/{run_id}{MLFLOW_TRAINING_VIEW}"
+        return (f"{base.rstrip('/')}/#/experiments/{run.experiment_id}/runs/{run.run_id}"
+                f"{MLFLOW_TRAINING_VIEW}")
 
     def log_run(
         self,
@@ -359,8 +359,8 @@ class MLflowTracker(dg.ConfigurableResource):
         artifacts: dict[str, object],
         model: "ModelToLog | None" = None,
         run_name: str | None = None,
-    ) -> str:
-        """Create, fill and close one run; returns its id.
+    ) -> "LoggedRun":
+        """Create, fill and close one run; returns its id and its experiment's.
 
         ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
         matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are).
@@ -432,7 +432,15 @@ class MLflowTracker(dg.ConfigurableResource):
                     f"MLflow run {run_id} could not be marked {status} ({why}); it stays "
                     f"RUNNING until `python -m pwa_pipeline doctor --repair`")
             raise  # the error or interrupt itself, never the failure to mark the run
-        return run_id
+        return LoggedRun(run_id, exp_id)
+
+
+class LoggedRun(NamedTuple):
+    """A run :meth:`MLflowTracker.log_run` logged (what :meth:`MLflowTracker.run_url` links
+    to, without asking the store)."""
+
+    run_id: str
+    experiment_id: str
 
 
 def _log_pyfunc(model: "ModelToLog", registered_name: str):
