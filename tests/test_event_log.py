@@ -171,6 +171,28 @@ def test_has_table_asks_the_file_until_it_finds_the_table(home, monkeypatch):
     assert len(asked) == 3  # once for the table found, each time for the one missing
 
 
+def test_schema_checks_ask_the_index_until_they_find_and_forget_at_wipe(home, monkeypatch):
+    """Dagster asks, at every asset event and input, whether a data migration is complete and
+    whether the asset-key table has a column: each is asked of the index until found."""
+    storage = prepare_instance().event_log_storage
+    asked = []
+    for name in ("has_secondary_index", "_has_asset_key_col_on_connection"):
+        real = getattr(SqliteEventLogStorage, name)
+        monkeypatch.setattr(SqliteEventLogStorage, name,
+                            lambda *a, real=real, name=name: asked.append(name) or real(*a))
+    checks = [lambda: storage.has_secondary_index("asset_key_table"),
+              lambda: storage.has_asset_key_col("cached_status_data")]
+    assert [check() for check in checks for _ in range(3)] == [True] * 6
+    assert asked == ["has_secondary_index", "_has_asset_key_col_on_connection"]
+    assert [storage.has_secondary_index("no_such_migration") for _ in range(2)] == [False] * 2
+    assert [storage.has_asset_key_col("no_such_column") for _ in range(2)] == [False] * 2
+    assert len(asked) == 6  # what is missing is asked each time
+    storage.wipe()  # empties the index and forgets what was found
+    asked.clear()
+    assert [check() for check in checks] == [True, True]
+    assert len(asked) == 2
+
+
 def _schema(path) -> tuple[list, list, str, int]:
     """Tables and indexes, the alembic stamp, the journal mode and the permissions of a
     sqlite file."""

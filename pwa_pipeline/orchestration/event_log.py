@@ -18,9 +18,12 @@ sets ``journal_mode=WAL``) commit with ``PRAGMA synchronous=NORMAL`` rather than
 default ``FULL``: a commit then writes the log without waiting for the disk to flush it, which
 the disk does at each checkpoint. In WAL mode this cannot corrupt the file; what a power cut
 or operating-system crash (not a crash of the process) can lose is the last events committed
-before it, as sqlite documents. A file in any other journal mode keeps ``FULL``. And
-:meth:`has_table` remembers the tables it has found (Dagster's migrations add tables, never
-drop them) rather than opening the index anew for each asset event.
+before it, as sqlite documents. A file in any other journal mode keeps ``FULL``. And the
+schema checks Dagster makes at every asset event and input (:meth:`has_table`,
+:meth:`has_secondary_index`, the asset-key table's columns) remember what they have found:
+Dagster's migrations add tables, columns and completed data migrations, never remove them;
+only :meth:`wipe` empties the index, and forgets. What is not found is asked again each time,
+so a migration by another process is seen.
 
 Each run gets a file of its own, which Dagster's ``_initdb`` creates through its migration
 tool (alembic: the schema's revisions read from its scripts, the tables created, the file
@@ -33,7 +36,7 @@ process created meanwhile (that file is then initialised as Dagster does). Measu
 
 import tempfile
 from collections import OrderedDict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -50,6 +53,8 @@ from sqlalchemy.pool import QueuePool
 
 #: Engines (each with its open connection) kept: the index's and the latest runs'.
 KEPT_ENGINES = 16
+_DAGSTERS = SqliteEventLogStorage
+"""The class whose schema checks :class:`PooledEventLogStorage` remembers."""
 
 
 class PooledEventLogStorage(SqliteEventLogStorage):
@@ -61,7 +66,7 @@ class PooledEventLogStorage(SqliteEventLogStorage):
     def __init__(self, base_dir: str, inst_data: ConfigurableClassData | None = None):
         # before Dagster's __init__, which may index a new home through _connect
         self._engines: OrderedDict[str, Engine] = OrderedDict()  # most recently used last
-        self._tables: set[str] = set()
+        self._found: set[tuple[str, str]] = set()  # (kind, name) the schema checks found
         self._new_run_file: tuple[bytes, int] | None = None  # made once: bytes, mode
         super().__init__(base_dir, inst_data)
 
@@ -79,6 +84,7 @@ class PooledEventLogStorage(SqliteEventLogStorage):
         """Close the connections, then delete the runs' files and empty the index as
         Dagster's class does."""
         self._dispose_engines()
+        self._found.clear()  # the index is emptied: ask it again
         super().wipe()
 
     def dispose(self) -> None:
@@ -86,13 +92,28 @@ class PooledEventLogStorage(SqliteEventLogStorage):
         self._dispose_engines()
         super().dispose()
 
-    def has_table(self, table_name: str) -> bool:
-        """Whether the index has ``table_name``, asked of the file once it is found."""
-        if table_name not in self._tables:
-            if not super().has_table(table_name):
+    def _remembered(self, kind: str, name: str, ask: Callable[[], bool]) -> bool:
+        """``ask()``, until it answers True for this ``kind`` and ``name``: then True."""
+        if (kind, name) not in self._found:
+            if not ask():
                 return False
-            self._tables.add(table_name)
+            self._found.add((kind, name))
         return True
+
+    def has_table(self, table_name: str) -> bool:
+        """Whether the index has ``table_name``, asked of the file until it is found."""
+        return self._remembered("table", table_name,
+                                lambda: _DAGSTERS.has_table(self, table_name))
+
+    def has_secondary_index(self, name: str) -> bool:
+        """Whether the data migration ``name`` is complete, asked of the index until it is."""
+        return self._remembered("migration", name,
+                                lambda: _DAGSTERS.has_secondary_index(self, name))
+
+    def _has_asset_key_col_on_connection(self, conn, column_name: str) -> bool:
+        """Whether the asset-key table has ``column_name``, asked of ``conn`` until it has."""
+        return self._remembered("column", column_name, lambda: _DAGSTERS.
+                                _has_asset_key_col_on_connection(self, conn, column_name))
 
     @contextmanager
     def _connect(self, shard: str) -> Iterator:
