@@ -1,5 +1,8 @@
 """What the MLflow logging sends, built cheaply (issue 12): the same as MLflow's own."""
 
+import contextlib
+import shutil
+
 
 def test_training_dataset_is_the_one_mlflow_builds_from_every_row():
     import mlflow
@@ -78,8 +81,6 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     """Two runs of one fitted model: the second links the model the first logged; with the
     first run gone from the store (``mlflow gc``), its description says so instead of
     linking it, and the run is still logged."""
-    import shutil
-
     from mlflow.exceptions import MlflowException
     from mlflow.tracking import MlflowClient
 
@@ -117,6 +118,43 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     assert second["model_run_id"] == first
     assert f"{first} (no longer in the store)" in second["mlflow.note.content"]
     assert second["model_uri"] in second["mlflow.note.content"]
+
+
+def _journal_mode(db) -> str:
+    import sqlite3
+
+    with contextlib.closing(sqlite3.connect(db)) as conn:
+        return conn.execute("PRAGMA journal_mode").fetchone()[0]
+
+
+def test_the_embedded_store_logs_in_write_ahead_log_mode_unless_it_is_being_read(
+        tmp_path, mlflow_template, monkeypatch):
+    """The tracker puts a store in WAL mode when it first uses it; a store another process is
+    reading at that moment keeps its mode, and runs are logged all the same."""
+    import sqlite3
+
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration import resources
+
+    monkeypatch.setattr(resources, "WAL_WAIT_SECONDS", 0.1)
+    for name, read in (("free.db", False), ("read.db", True)):
+        db = tmp_path / name
+        shutil.copy(mlflow_template, db)
+        assert _journal_mode(db) == "delete"  # MLflow's own
+        tracker = resources.MLflowTracker(tracking_uri=f"sqlite:///{db}")
+        with contextlib.closing(sqlite3.connect(db, isolation_level=None)) as reader:
+            if read:  # a read transaction: its shared lock bars the change of mode
+                reader.execute("BEGIN")
+                reader.execute("SELECT count(*) FROM experiments").fetchone()
+            tracker.client()  # the store's first use in this process
+            if read:
+                reader.execute("COMMIT")
+        run = tracker.log_run(dataset="d", hparams="s", method="pwa", params={},
+                              metrics={"m": 1.0}, tags={}, artifacts={})
+        assert _journal_mode(db) == ("delete" if read else "wal")
+        stored = MlflowClient(tracking_uri=f"sqlite:///{db}").get_run(run.run_id)
+        assert stored.info.status == "FINISHED" and stored.data.metrics == {"m": 1.0}
 
 
 def test_the_digest_is_mlflows_for_text_numeric_and_other_columns():

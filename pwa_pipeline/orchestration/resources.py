@@ -40,6 +40,8 @@ MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 #: sqlite tracking stores whose schema this process has created or checked.
 _READY_STORES: set[str] = set()
+#: How long :func:`_write_ahead_log` waits for a store that another process is reading.
+WAL_WAIT_SECONDS = 5.0
 #: Lock files of :meth:`MLflowTracker._models_lock` per sqlite store.
 _MODEL_LOCKS = 16
 
@@ -156,7 +158,8 @@ class MLflowTracker(dg.ConfigurableResource):
     (MLflow's own defaults, 120 s and 7 retries, stall an asset for minutes on a broken
     server). Credentials in the URI (``http://user:password@host``) are used for the probe and
     never printed. A new sqlite store is created under a file lock, so runs that start at once
-    do not race in MLflow's schema migration.
+    do not race in MLflow's schema migration, and is put in sqlite's write-ahead-log mode
+    (:func:`_write_ahead_log`).
 
     Attributes
     ----------
@@ -232,6 +235,7 @@ class MLflowTracker(dg.ConfigurableResource):
             with FileLock(f"{db}.lock"):
                 client = MlflowClient(tracking_uri=uri)
                 client.search_experiments(max_results=1)
+                _write_ahead_log(db)
             _READY_STORES.add(uri)
             return client
         return MlflowClient(tracking_uri=uri)
@@ -464,6 +468,21 @@ def _log_pyfunc(model: "ModelToLog", registered_name: str):
             pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
     finally:
         pyfunc_log.setLevel(level)
+
+
+def _write_ahead_log(db: Path) -> None:
+    """Put the sqlite store ``db`` in write-ahead-log mode, as Dagster's sqlite files beside
+    it are: a commit then writes the log once instead of a rollback journal and the file,
+    and readers (the MLflow UI) no longer block a run's writes, nor it theirs. The mode is
+    kept in the file, so MLflow's own connections and the UI's use it; the file's
+    ``-wal`` and ``-shm`` companions are part of the store while a process has it open. A
+    store another process is reading at that moment stays in its mode until the next
+    process that readies it."""
+    import sqlite3
+
+    with contextlib.closing(sqlite3.connect(db, timeout=WAL_WAIT_SECONDS)) as conn:
+        with contextlib.suppress(sqlite3.OperationalError):  # "database is locked"
+            conn.execute("PRAGMA journal_mode=WAL")
 
 
 def _reuse_note(client, logged: dict) -> str:
