@@ -227,3 +227,13 @@ def test_new_run_files_are_copies_of_one_made_by_dagster(home, tmp_path, monkeyp
     with storage.run_connection("elsewhere") as conn:
         assert conn.exec_driver_sql("select count(*) from event_logs").scalar() == 1
     assert len(initialised) == 2  # that file initialised (checked) as Dagster does
+
+
+def test_the_seconds_to_3x_bring_the_caches_speed_up_to_3x():
+    from benchmarks.event_log import seconds_to_target
+
+    needed = seconds_to_target(109.0, 41.7, 12)
+    assert 109.0 / (41.7 - 11 * needed["with_cache_only"]) == pytest.approx(3.0)
+    saved = 12 * needed["every_set"]
+    assert (109.0 - saved) / (41.7 - saved) == pytest.approx(3.0)
+    assert seconds_to_target(120.0, 30.0, 12) == {"with_cache_only": 0.0, "every_set": 0.0}
