@@ -3,6 +3,7 @@ or damaged pickles, runs started at once, interrupts, broken or password-protect
 
 import base64
 import contextlib
+import json
 import multiprocessing
 import os
 import pickle
@@ -385,19 +386,31 @@ def test_a_metric_that_is_not_a_number_fails_the_run(tmp_path, mlflow_template):
 
 
 def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkeypatch):
+    import mlflow
     from mlflow.tracking import MlflowClient
 
     db = tmp_path / "mlflow.db"
     shutil.copy(mlflow_template, db)
-    batches = []
+    batches, stored = [], []
     real = MlflowClient.log_batch
     monkeypatch.setattr(MlflowClient, "log_batch",
                         lambda self, run_id, **kw: batches.append(kw) or real(self, run_id, **kw))
+    for name in ("log_artifact", "log_artifacts", "log_text"):  # artifacts: one call for all
+        monkeypatch.setattr(MlflowClient, name, lambda self, *a, real=getattr(
+            MlflowClient, name), name=name, **kw: stored.append(name) or real(self, *a, **kw))
     tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+    artifacts = {"f.json": {"x": 1.5}, "t.csv": pd.DataFrame({"a": [1, 2]}),
+                 "n.md": "# n", "p.png": b"\x89PNG\x00"}
     run_id = tracker.log_run(dataset="d", hparams="s", method="pwa", params={"n_rho": 61},
                              metrics={"nrmse": float("inf")}, tags={"partition": "d|s"},
-                             artifacts={"f.json": {"x": 1}}).run_id
-    assert len(batches) == 1
+                             artifacts=artifacts).run_id
+    assert len(batches) == 1 and stored == ["log_artifacts"]
+    folder = Path(mlflow.artifacts.download_artifacts(run_id=run_id,
+                                                      tracking_uri=f"sqlite:///{db}"))
+    assert json.loads((folder / "f.json").read_text()) == {"x": 1.5}
+    assert pd.read_csv(folder / "t.csv").equals(artifacts["t.csv"])
+    assert (folder / "n.md").read_text() == "# n"
+    assert (folder / "p.png").read_bytes() == b"\x89PNG\x00"
     run = MlflowClient(tracking_uri=f"sqlite:///{db}").get_run(run_id)
     assert run.info.status == "FINISHED"
     assert run.data.metrics == {"nrmse": 1e300}

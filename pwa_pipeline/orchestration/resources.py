@@ -366,8 +366,8 @@ class MLflowTracker(dg.ConfigurableResource):
     ) -> "LoggedRun":
         """Create, fill and close one run; returns its id and its experiment's.
 
-        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV),
-        matplotlib figures (as PNG), text or bytes (e.g. a rendered PNG; as they are).
+        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV), text
+        or bytes (e.g. a rendered PNG; as they are), stored in one call.
         ``model`` is logged as the run's MLflow model (a pyfunc with signature and input
         example, registered as ``<prefix>.<dataset>.<method>``) and its training table as the
         run's dataset, unless a finished run of the method in the data set's experiment has
@@ -399,17 +399,11 @@ class MLflowTracker(dg.ConfigurableResource):
                                  for k, v in values.items()],
                      "params": [Param(k, str(v))
                                 for k, v in {"method": method, **params}.items()]}
-            for name, obj in artifacts.items():
-                if isinstance(obj, bytes):
-                    _log_bytes(client, run_id, obj, name)
-                elif hasattr(obj, "savefig"):
-                    client.log_figure(run_id, obj, name)
-                elif isinstance(obj, pd.DataFrame):
-                    client.log_text(run_id, obj.to_csv(index=False), name)
-                elif isinstance(obj, str):
-                    client.log_text(run_id, obj, name)
-                else:
-                    client.log_text(run_id, json.dumps(obj, indent=2, default=float), name)
+            if artifacts:  # one call to the store for all of them
+                with tempfile.TemporaryDirectory() as tmp:
+                    for name, obj in artifacts.items():
+                        _write_artifact(Path(tmp) / name, obj)
+                    client.log_artifacts(run_id, tmp)
             fingerprint = model.fingerprint() if model is not None else None
             with self._models_lock(fingerprint):
                 last = {} if model is None else {**self._log_model(
@@ -500,9 +494,14 @@ def _reuse_note(client, logged: dict) -> str:
             f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`.")
 
 
-def _log_bytes(client, run_id: str, data: bytes, name: str) -> None:
-    """Store ``data`` as the run's artifact file ``name``."""
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / name
-        path.write_bytes(data)
-        client.log_artifact(run_id, str(path))
+def _write_artifact(path: Path, obj) -> None:
+    """Write an artifact of :meth:`MLflowTracker.log_run` to ``path``: bytes as they are, a
+    DataFrame as CSV, text as it is, anything else as JSON."""
+    if isinstance(obj, bytes):
+        path.write_bytes(obj)
+    elif isinstance(obj, pd.DataFrame):
+        path.write_text(obj.to_csv(index=False), encoding="utf-8")
+    elif isinstance(obj, str):
+        path.write_text(obj, encoding="utf-8")
+    else:
+        path.write_text(json.dumps(obj, indent=2, default=float), encoding="utf-8")
