@@ -9,7 +9,12 @@ from dagster._core.storage.event_log.sqlite import sqlite_event_log
 from dagster._core.storage.event_log.sqlite.sqlite_event_log import SqliteEventLogStorage
 
 from pwa_pipeline.orchestration import event_log
-from pwa_pipeline.orchestration.instance import _SETTINGS, dagster_yaml, prepare_instance
+from pwa_pipeline.orchestration.instance import (
+    _SETTINGS,
+    _storage_yaml,
+    dagster_yaml,
+    prepare_instance,
+)
 
 PARTS = dg.StaticPartitionsDefinition(["a", "b"])
 
@@ -130,11 +135,15 @@ def test_dagster_yaml_written_earlier_is_brought_up_to_date_and_one_edited_is_ke
     config.write_text(dagster_yaml(tmp_path / "moved-from"))  # a home moved here
     prepare_instance()
     assert config.read_text() == dagster_yaml(home)
+    config.write_text(_SETTINGS + _storage_yaml(home))  # before the compute logs' entry
+    prepare_instance()
+    assert config.read_text() == dagster_yaml(home)
     edited = dagster_yaml(home) + "run_monitoring:\n  enabled: true\n"
     config.write_text(edited)
     instance = prepare_instance()
     assert config.read_text() == edited
     assert instance.run_monitoring_enabled
+    assert type(instance.compute_log_manager).__name__ == "ThreadMirroredComputeLogManager"
     assert os.environ["DAGSTER_HOME"] == str(home)
 
 

@@ -32,12 +32,11 @@ run_queue:
 _EARLIER = (_SETTINGS,)
 
 
-def dagster_yaml(home: Path) -> str:
-    """The ``dagster.yaml`` of ``home``: the UI's and run queue's settings, and Dagster's
-    sqlite storage in the files its default puts there (``history/``, ``history/runs/``,
-    ``schedules/``), its event log through :class:`.event_log.PooledEventLogStorage`."""
-    home = Path(home).resolve()
-    return _SETTINGS + f"""run_storage:
+def _storage_yaml(home: Path) -> str:
+    """Dagster's sqlite storage of ``home`` in the files its default puts there
+    (``history/``, ``history/runs/``, ``schedules/``), its event log through
+    :class:`.event_log.PooledEventLogStorage`."""
+    return f"""run_storage:
   module: dagster._core.storage.runs
   class: SqliteRunStorage
   config:
@@ -55,13 +54,29 @@ schedule_storage:
 """
 
 
+def dagster_yaml(home: Path) -> str:
+    """The ``dagster.yaml`` of ``home``: the UI's and run queue's settings, Dagster's sqlite
+    storage (:func:`_storage_yaml`), and the compute logs in the folder Dagster's default
+    puts them in (``storage/``), mirrored by
+    :class:`.compute_logs.ThreadMirroredComputeLogManager`."""
+    home = Path(home).resolve()
+    return _SETTINGS + _storage_yaml(home) + f"""compute_logs:
+  module: pwa_pipeline.orchestration.compute_logs
+  class: ThreadMirroredComputeLogManager
+  config:
+    base_dir: {json.dumps(str(home / "storage"))}
+"""
+
+
 def _written_here(text: str) -> bool:
     """Whether ``text`` is a ``dagster.yaml`` this module wrote (now or earlier, for this home
     or for where it was before it moved) rather than one edited by hand, which is kept."""
     first = re.search(r'^    base_dir: ("[^"\n]*")$', text, re.MULTILINE)
-    earlier_home = Path(json.loads(first.group(1))).parent if first else None
-    return text in _EARLIER or (earlier_home is not None
-                                and text == dagster_yaml(earlier_home))
+    if first is None:
+        return text in _EARLIER
+    earlier_home = Path(json.loads(first.group(1))).parent
+    # now, or before the compute logs' entry
+    return text in (dagster_yaml(earlier_home), _SETTINGS + _storage_yaml(earlier_home))
 
 
 def prepare_instance() -> dg.DagsterInstance:
