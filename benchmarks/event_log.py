@@ -9,15 +9,18 @@ each with its own Dagster home and stores, the arms alternating set by set so th
 the machine's load:
 
 - event log: Dagster's ``SqliteEventLogStorage`` (the ``dagster.yaml`` the command line
-  wrote before, Dagster's default storage) or
+  wrote before: Dagster's default storage and compute logs) or
   :class:`~pwa_pipeline.orchestration.event_log.PooledEventLogStorage` (the
-  ``dagster.yaml`` of :func:`~pwa_pipeline.orchestration.instance.dagster_yaml`);
+  ``dagster.yaml`` of :func:`~pwa_pipeline.orchestration.instance.dagster_yaml`, whose compute
+  logs are
+  :class:`~pwa_pipeline.orchestration.compute_logs.ThreadMirroredComputeLogManager`'s);
 - the caches on or off, as in ``benchmarks.pipeline``;
 
 and a fifth arm, ``floor``: the same graph with every asset a no-op (same keys, partitions
-and inputs, each returning 0; without the 4 asset checks) on a home with the pooled event
-log and the same asset store: what Dagster's own work costs a set of this graph, the part of
-a later set that no cache of ours can remove.
+and inputs, each returning 0; without the 4 asset checks) on a home of
+:func:`~pwa_pipeline.orchestration.instance.dagster_yaml` and the same asset store: what
+Dagster's own work costs a set of this graph, the part of a later set that no cache of ours
+can remove.
 
 Reported per arm: the sweep's total seconds, its first set, the median of the later sets,
 each step's median; the speed-up of the caches with each event log; and the best speed-up
