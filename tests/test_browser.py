@@ -119,6 +119,16 @@ def test_a_partition_launched_from_the_sweep_job_succeeds(launched):
     assert "Success" in text and PARTITION in text  # what the run's page shows
 
 
+def test_the_runs_stderr_view_shows_its_captured_log(page, stack, launched):
+    """The run worker's stdout and stderr, captured in Dagster's files by the command line's
+    compute log manager, are what the run page's *stderr* view shows."""
+    run, _ = launched
+    (err,) = (stack.root / ".dagster_home" / "storage" / run["runId"]).rglob("*.err")
+    assert "Materialized value comparison." in err.read_text()
+    page.goto(f"{stack.dagster_url}/runs/{run['runId']}?logType=stderr&logFileKey={err.stem}")
+    page.get_by_text("Materialized value comparison.").first.wait_for()
+
+
 @pytest.mark.parametrize("asset, key", [
     ("pwa_scores", "prediction"),
     ("clusters", "local models by cluster"),
