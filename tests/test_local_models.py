@@ -240,6 +240,38 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
     assert sizes["some"] < 0.2 * sizes["every"]
 
 
+def test_rows_of_estimated_samples_are_read_without_spreading_a_loaded_step():
+    """``at_estimated`` (what the clustering step, its figure and the cluster centres read)
+    gives the rows of the spread arrays, by mask or index, leaves a loaded step compact,
+    and refuses a row whose local model was not estimated; the clustering step fitted on a
+    loaded step labels as on the fitted one."""
+    import pickle
+
+    from pwa_pipeline.pwa import DBSCANClustering
+
+    rng = np.random.default_rng(8)
+    phi = np.tile(rng.normal(size=(500, 3)), (2, 1))  # a repeated record: copies too
+    target = np.where(phi[:, :1] > 0, phi @ [[1.0], [2.0], [0.5]], phi @ [[-1.0], [0.0], [3.0]])
+    some = LocalLeastSquares(n_rho=10, max_sets=200).fit(phi, target)
+    back = pickle.loads(pickle.dumps(some, protocol=5))
+    mask = some.estimated_ & (rng.random(some.estimated_.size) < 0.5)
+    index = rng.permutation(np.flatnonzero(some.estimated_))[:40]  # any order
+    for name in ("theta_", "neighbours_", "residual_var_"):
+        for rows in (mask, index):
+            np.testing.assert_array_equal(back.at_estimated(name, rows), getattr(some, name)[rows])
+            np.testing.assert_array_equal(some.at_estimated(name, rows), getattr(some, name)[rows])
+    assert "_compact" in vars(back) and not {"theta_", "residual_var_"} & set(vars(back))
+    unestimated = np.flatnonzero(~some.estimated_)
+    with pytest.raises(ValueError, match=rf"theta_: rows \[{unestimated[0]}\] are not estimated"):
+        back.at_estimated("theta_", np.r_[index[:3], unestimated[0]])
+    with pytest.raises(ValueError, match="are not estimated"):
+        back.at_estimated("theta_", [some.estimated_.size])  # past the last sample
+    clustering = DBSCANClustering(min_pts=6)
+    np.testing.assert_array_equal(clustering.fit(back, target).labels_,
+                                  clustering.fit(some, target).labels_)
+    assert not {"theta_", "residual_var_"} & set(vars(back))
+
+
 def test_the_paper_setting_estimates_every_local_model():
     from pwa_pipeline import PWARX
 

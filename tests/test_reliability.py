@@ -163,7 +163,8 @@ def test_the_memory_of_verified_files_keeps_the_recently_used_within_its_bound(t
     key = b"k"
 
     def put(name, size):
-        memory.put(files[name], key, name.encode() * size, memory.identity(files[name]))
+        memory.put(files[name], key, name.encode() * size, memory.identity(files[name]),
+                   name.encode())
 
     for name in "abcd":
         put(name, 100)
@@ -175,6 +176,54 @@ def test_the_memory_of_verified_files_keeps_the_recently_used_within_its_bound(t
     put("f", 101)  # over a quarter of the bound: not kept, nothing dropped
     assert memory.get(files["f"], key) is None
     assert sum(memory.get(files[n], key) is not None for n in "acde") == 4
+
+
+def test_the_same_payload_is_linked_to_the_file_that_holds_it_and_behaves_as_a_copy(
+        tmp_path, monkeypatch):
+    """A pickle with the same bytes and key as a kept file (the sets of a sweep store the
+    same regressors) becomes a hard link to that file: one inode, no write, both names
+    loaded from memory. Replacing either name leaves the other as it was; another key, a
+    different payload, a source replaced since it was kept, or a file system that refuses
+    links get a file of their own."""
+    key = signing_key(tmp_path)
+    theta = np.arange(5000.0)
+    a, b, c, d = (tmp_path / "s" / f"{n}.pkl" for n in "abcd")
+    save_object(a, {"theta": theta}, key)
+    writes = []
+    write_bytes = Path.write_bytes
+    monkeypatch.setattr(Path, "write_bytes",
+                        lambda p, data: writes.append(p.name.split(".")[1]) or write_bytes(p, data))
+    save_object(b, {"theta": theta.copy()}, key)
+    assert writes == [] and a.stat().st_ino == b.stat().st_ino and b.stat().st_nlink == 2
+    assert not [p for p in a.parent.iterdir() if p.suffix == ".tmp"]
+    reads = []
+    read_bytes = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda p: reads.append(p.name) or read_bytes(p))
+    for name in (a, b):
+        np.testing.assert_array_equal(load_object(name, key)["theta"], theta)
+    assert reads == []  # both kept with the identity the link gave the file
+    save_object(a, {"theta": theta + 1}, key)  # a different payload: written
+    assert writes == ["a"] and b.stat().st_nlink == 1
+    np.testing.assert_array_equal(load_object(b, key)["theta"], theta)
+    np.testing.assert_array_equal(load_object(a, key)["theta"], theta + 1)
+    other = signing_key(tmp_path / "other")
+    save_object(tmp_path / "other" / "b.pkl", {"theta": theta}, other)  # another store's key
+    assert writes[-1] == "b" and b.stat().st_nlink == 1
+    # a kept source replaced since by another process (its signature is the store's): never
+    # linked to, as the identity it was kept with is gone
+    save_object(c, {"theta": theta * 2}, key)
+    stale = storage._VERIFIED.signed_as(key, storage.hmac.new(
+        key, pickle.dumps({"theta": theta * 2}, protocol=5), "sha256").digest())
+    assert stale is not None and stale[0] == c
+    os.replace(b, c)
+    assert not storage._link_same(d, key, *stale, b"")
+    assert not d.exists() and not [p for p in c.parent.iterdir() if p.suffix == ".tmp"]
+    save_object(d, {"theta": theta * 2}, key)
+    assert writes[-1] == "d" and d.stat().st_nlink == 1
+    monkeypatch.setattr(os, "link", lambda *_: (_ for _ in ()).throw(OSError(31, "links")))
+    save_object(tmp_path / "s" / "e.pkl", {"theta": theta * 2}, key)
+    assert writes[-1] == "e"
+    np.testing.assert_array_equal(load_object(tmp_path / "s" / "e.pkl", key)["theta"], theta * 2)
 
 
 @pytest.fixture()

@@ -193,7 +193,7 @@ def _identification_assets(partitions_def) -> list:
             path, root, lambda: configuration.pwa.fit_step("local_models", regressors),
             context.log.warning, "local-model cache entry", settings.cache_local_models)
         context.log.info(
-            f"local models: {local.n_estimated_:,} of {len(local.theta_):,} local sets of "
+            f"local models: {local.n_estimated_:,} of {local.estimated_.size:,} local sets of "
             f"n_rho = {local.n_rho_}{' from the cache' if cached else ''} "
             f"({local.n_degenerate_:,} degenerate) in {time.perf_counter() - t0:.1f} s")
         context.add_output_metadata(rounded({

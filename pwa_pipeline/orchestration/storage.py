@@ -9,7 +9,11 @@ HMAC-SHA256 of the payload under the store's key, then the pickle (protocol 5). 
 :data:`pwa_pipeline._validation.NAME_PATTERN` and every path is resolved and checked to stay
 inside the store. Every write goes to a temporary file in the same folder and is moved into place
 with ``os.replace``, so a failed or killed run never leaves a half-written file; temporary
-files a killed run left behind are removed once they are an hour old.
+files a killed run left behind are removed once they are an hour old. A pickle with the same
+bytes and key as a file this process wrote or verified, still unchanged, is not written
+again but hard-linked to that file (the sets of a sweep store the same regressors and local
+models): files are only ever replaced, never written in place, so the names behave as
+copies.
 
 Trust boundary. A pickle can run code when loaded, so only files carrying a valid signature
 are unpickled: ones this store wrote. The key is ``<store>/.signing-key``, created on first
@@ -114,12 +118,14 @@ class _VerifiedPayloads:
     the robot). Rewriting, replacing or touching a file changes its identity (its change
     time at least), so it is then read and verified anew. Only payloads this process signed
     or verified are ever kept: the identity tells whether the file still holds one, never
-    lets an unverified one in. Payloads over a quarter of
-    ``max_bytes`` are not kept; the least recently used beyond ``max_bytes`` are dropped."""
+    lets an unverified one in. Each is kept with its signature, by which :meth:`signed_as`
+    finds a file to link to in place of writing the same payload again. Payloads over a
+    quarter of ``max_bytes`` are not kept; the least recently used beyond ``max_bytes`` (a
+    payload kept for several files counted once) are dropped."""
 
     def __init__(self, max_bytes: int):
         self.max_bytes = max_bytes
-        self._kept: dict[tuple[str, bytes], tuple[tuple, bytes]] = {}
+        self._kept: dict[tuple[str, bytes], tuple[tuple, bytes, bytes]] = {}
         self._lock = threading.Lock()  # (steps of one process may run in threads)
 
     @staticmethod
@@ -138,15 +144,31 @@ class _VerifiedPayloads:
             self._kept[(str(path), key)] = kept  # most recently used last
             return kept[1]
 
-    def put(self, path: Path, key: bytes, payload: bytes, identity: tuple) -> None:
+    def signed_as(self, key: bytes, digest: bytes) -> tuple[Path, tuple, bytes] | None:
+        """A kept file, unchanged, whose payload has signature ``digest`` under ``key``, with
+        its identity and that payload; None if there is none."""
+        with self._lock:
+            for (name, k), (identity, payload, signed) in reversed(self._kept.items()):
+                if k == key and hmac.compare_digest(signed, digest):
+                    try:
+                        if self.identity(Path(name)) == identity:
+                            return Path(name), identity, payload
+                    except FileNotFoundError:
+                        continue
+            return None
+
+    def put(self, path: Path, key: bytes, payload: bytes, identity: tuple,
+            digest: bytes) -> None:
         """Keep the payload written to or verified at ``path`` when the file had
-        ``identity``, unless the file has changed since (another process replaced it)."""
+        ``identity``, with its signature ``digest``, unless the file has changed since
+        (another process replaced it)."""
         with self._lock:
             self._kept.pop((str(path), key), None)
             if len(payload) > self.max_bytes // 4 or self.identity(path) != identity:
                 return
-            self._kept[(str(path), key)] = (identity, payload)
-            while sum(len(p) for _, p in self._kept.values()) > self.max_bytes:
+            self._kept[(str(path), key)] = (identity, payload, digest)
+            while sum(len(p) for p in {id(p): p for _, p, _ in self._kept.values()}.values()
+                      ) > self.max_bytes:
                 del self._kept[next(iter(self._kept))]
 
 
@@ -154,9 +176,14 @@ _VERIFIED = _VerifiedPayloads(max_bytes=128 * 2**20)
 
 
 def save_object(path: Path, obj, key: bytes) -> None:
-    """Pickle ``obj`` to ``path`` atomically, signed with ``key``."""
+    """Pickle ``obj`` to ``path`` atomically, signed with ``key``; hard-linked to a file
+    this process wrote or verified with the same signed payload, unchanged since, instead of
+    written again (:func:`_link_same`)."""
     payload = pickle.dumps(obj, protocol=5)
     digest = hmac.new(key, payload, hashlib.sha256).digest()
+    same = _VERIFIED.signed_as(key, digest)
+    if same is not None and _link_same(path, key, *same, digest):
+        return
     written = []
 
     def write(tmp: Path) -> None:
@@ -166,7 +193,32 @@ def save_object(path: Path, obj, key: bytes) -> None:
     atomic_write(path, write)
     identity = _VERIFIED.identity(path)
     if identity[1] == written[0]:  # the file is the one just written, not another's since
-        _VERIFIED.put(path, key, payload, identity)
+        _VERIFIED.put(path, key, payload, identity, digest)
+
+
+def _link_same(path: Path, key: bytes, source: Path, identity: tuple, payload: bytes,
+               digest: bytes) -> bool:
+    """Put a hard link to ``source`` (a kept file that had ``identity`` and holds
+    ``payload``, signed ``digest``) in place of ``path``, atomically as :func:`atomic_write`
+    would write it; False, and ``path`` unchanged, where the file system refuses the link
+    (another device, no hard links, too many of them) or ``source`` was replaced since it
+    was kept. Both names are then kept with the file's new identity (the link changed its
+    change time)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
+    try:
+        os.link(source, tmp)
+        if _VERIFIED.identity(tmp)[:4] != identity[:4]:  # device, inode, size, mtime
+            return False
+        os.replace(tmp, path)
+        linked = _VERIFIED.identity(path)
+    except OSError:
+        return False
+    finally:
+        tmp.unlink(missing_ok=True)
+    for name in (source, path):
+        _VERIFIED.put(name, key, payload, linked, digest)
+    return True
 
 
 def load_object(path: Path, key: bytes):
@@ -191,7 +243,7 @@ def load_object(path: Path, key: bytes):
                 f"copied from another store, or damaged); it was not loaded. Delete it and "
                 f"materialise again"
             )
-        _VERIFIED.put(path, key, payload, identity)  # kept if not replaced while read
+        _VERIFIED.put(path, key, payload, identity, digest)  # kept if not replaced meanwhile
     return pickle.loads(payload)
 
 

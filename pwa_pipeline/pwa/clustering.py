@@ -238,8 +238,10 @@ class DBSCANClustering(BaseEstimator):
         Parameters
         ----------
         local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
-            Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_``,
-            ``estimated_`` and ``original_`` are used; only estimated local models are
+            Its ``theta_`` and ``residual_var_`` (on the estimated samples, read by
+            :meth:`~pwa_pipeline.pwa.local_models.LocalLeastSquares.at_estimated`),
+            ``phi_scale_``, ``degenerate_``, ``estimated_`` and ``original_`` are used;
+            only estimated local models are
             clustered, degenerate ones never, and each
             distinct sample is clustered once (MinPts, the confidence median and the subset
             count it once): a repeated sample takes its first occurrence's label, so a
@@ -247,9 +249,8 @@ class DBSCANClustering(BaseEstimator):
         target : ndarray of shape (n, m)
             The outputs y(k) (their RMS makes θ unit-free).
         """
-        theta = local.theta_
-        n = theta.shape[0]
-        self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * theta.shape[1]
+        n = local.estimated_.size
+        self.min_pts_ = self.min_pts if self.min_pts is not None else 2 * local.phi_scale_.size
         original = local.original_
         distinct = original == np.arange(n)
         estimated = distinct & local.estimated_
@@ -263,14 +264,15 @@ class DBSCANClustering(BaseEstimator):
                 f"excite the system with an input that changes more often"
             )
         if self.confidence is not None:
-            keep[keep] = confident_models(local.residual_var_[keep], self.confidence)
+            keep[keep] = confident_models(local.at_estimated("residual_var_", keep),
+                                          self.confidence)
         if self.max_clustered is not None and keep.sum() > self.max_clustered:
             rows = np.random.default_rng(self.random_state).choice(
                 np.nonzero(keep)[0], self.max_clustered, replace=False)
             keep = np.zeros(n, bool)
             keep[rows] = True
         rows = np.flatnonzero(keep)
-        theta = theta[rows]
+        theta = local.at_estimated("theta_", rows)
         if self.unit_free:
             theta = theta * local.phi_scale_[None, :, None] / column_rms(target[distinct])
         labels = np.full(n, -1)

@@ -321,6 +321,30 @@ class LocalLeastSquares(BaseEstimator):
             return compact["theta_"]
         return self.theta_ if self.estimated_.all() else self.theta_[self.estimated_]
 
+    def at_estimated(self, name: str, rows: np.ndarray) -> np.ndarray:
+        """``getattr(self, name)[rows]`` for ``name`` one of ``theta_``, ``neighbours_``,
+        ``residual_var_`` and ``rows`` (indices or a boolean mask over the samples) of
+        estimated samples only, read without spreading the compact arrays of an unpickled
+        step (:meth:`__setstate__`): the clustering step and its figure read a few thousand
+        of the robot's 40k rows.
+
+        Raises
+        ------
+        ValueError
+            If a row is not an estimated sample (its value is the fill, not a fit).
+        """
+        rows = np.asarray(rows)
+        if rows.dtype == bool:
+            rows = np.flatnonzero(rows)
+        estimated = np.flatnonzero(self.estimated_)
+        at = np.searchsorted(estimated, rows)
+        found = np.append(estimated, -1)[at] == rows  # (-1: past the last estimated row)
+        if not found.all():
+            raise ValueError(f"{name}: rows {rows[~found][:5].tolist()} are not estimated "
+                             f"samples")
+        compact = self.__dict__.get("_compact", {})
+        return compact[name][at] if name in compact else getattr(self, name)[rows]
+
     def __getstate__(self) -> dict:
         """The state to pickle: ``theta_``, ``neighbours_`` and ``residual_var_`` only on the
         estimated samples when some were not (their other rows hold no information), so a

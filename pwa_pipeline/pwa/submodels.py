@@ -687,7 +687,9 @@ class ClusterCentres(BaseEstimator):
         sub-model step.
         """
         self.labels_ = clustering.labels_
-        self.thetas_ = cluster_centres(local.theta_, self.labels_)
+        clustered = self.labels_ >= 0  # (estimated samples: read without spreading θ_k)
+        self.thetas_ = cluster_centres(local.at_estimated("theta_", clustered),
+                                       self.labels_[clustered])
         self.weights_ = None
         self.n_submodels_ = self.thetas_.shape[0]
         self.n_merged_ = self.n_split_ = self.n_iter_ = 0
