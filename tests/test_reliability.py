@@ -189,10 +189,11 @@ def test_the_same_payload_is_linked_to_the_file_that_holds_it_and_behaves_as_a_c
     theta = np.arange(5000.0)
     a, b, c, d = (tmp_path / "s" / f"{n}.pkl" for n in "abcd")
     save_object(a, {"theta": theta}, key)
-    writes = []
+    writes = []  # the names written to (the temporary file is .<name>.pkl.<random>.tmp)
     write_bytes = Path.write_bytes
     monkeypatch.setattr(Path, "write_bytes",
-                        lambda p, data: writes.append(p.name.split(".")[1]) or write_bytes(p, data))
+                        lambda p, data: writes.append(p.name.split(".")[1])
+                        or write_bytes(p, data))
     save_object(b, {"theta": theta.copy()}, key)
     assert writes == [] and a.stat().st_ino == b.stat().st_ino and b.stat().st_nlink == 2
     assert not [p for p in a.parent.iterdir() if p.suffix == ".tmp"]
@@ -212,7 +213,7 @@ def test_the_same_payload_is_linked_to_the_file_that_holds_it_and_behaves_as_a_c
     # a kept source replaced since by another process (its signature is the store's): never
     # linked to, as the identity it was kept with is gone
     save_object(c, {"theta": theta * 2}, key)
-    stale = storage._VERIFIED.signed_as(key, storage.hmac.new(
+    stale = storage._VERIFIED.signed_as(storage.hmac.new(
         key, pickle.dumps({"theta": theta * 2}, protocol=5), "sha256").digest())
     assert stale is not None and stale[0] == c
     os.replace(b, c)

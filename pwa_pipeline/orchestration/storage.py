@@ -144,12 +144,13 @@ class _VerifiedPayloads:
             self._kept[(str(path), key)] = kept  # most recently used last
             return kept[1]
 
-    def signed_as(self, key: bytes, digest: bytes) -> tuple[Path, tuple, bytes] | None:
-        """A kept file, unchanged, whose payload has signature ``digest`` under ``key``, with
-        its identity and that payload; None if there is none."""
+    def signed_as(self, digest: bytes) -> tuple[Path, tuple, bytes] | None:
+        """A kept file, unchanged, whose payload has signature ``digest`` (an HMAC: the same
+        payload signed with another store's key has another), with its identity and that
+        payload; None if there is none."""
         with self._lock:
-            for (name, k), (identity, payload, signed) in reversed(self._kept.items()):
-                if k == key and hmac.compare_digest(signed, digest):
+            for (name, _), (identity, payload, signed) in reversed(self._kept.items()):
+                if hmac.compare_digest(signed, digest):
                     try:
                         if self.identity(Path(name)) == identity:
                             return Path(name), identity, payload
@@ -181,7 +182,7 @@ def save_object(path: Path, obj, key: bytes) -> None:
     written again (:func:`_link_same`)."""
     payload = pickle.dumps(obj, protocol=5)
     digest = hmac.new(key, payload, hashlib.sha256).digest()
-    same = _VERIFIED.signed_as(key, digest)
+    same = _VERIFIED.signed_as(digest)
     if same is not None and _link_same(path, key, *same, digest):
         return
     written = []
