@@ -23,29 +23,25 @@ import dagster as dg
 import pandas as pd
 
 from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
-from benchmarks.event_log import _floor_run, noop_assets
+from benchmarks.event_log import _floor_run, home_instance, noop_assets
 from benchmarks.pipeline import sweep_definitions
 from pwa_pipeline.orchestration.instance import dagster_yaml
 
 MANAGERS = {
-    "dagster": ("dagster._core.storage.local_compute_log_manager", "LocalComputeLogManager"),
-    "thread": ("pwa_pipeline.orchestration.compute_logs", "ThreadMirroredComputeLogManager"),
+    "dagster": "module: dagster._core.storage.local_compute_log_manager\n"
+               "  class: LocalComputeLogManager",
+    "thread": "module: pwa_pipeline.orchestration.compute_logs\n"
+              "  class: ThreadMirroredComputeLogManager",
 }
-"""Each arm's compute log manager: module and class."""
+"""Each arm's compute log manager: its module and class lines in ``dagster.yaml``."""
 
 
 def _instance(home: Path, manager: str) -> dg.DagsterInstance:
     """A home of ``dagster_yaml`` with the compute logs of ``manager``."""
-    home.mkdir(parents=True)
-    ours = "\n  ".join(f"{k}: {v}" for k, v in zip(("module", "class"), MANAGERS["thread"],
-                                                      strict=True))
-    theirs = "\n  ".join(f"{k}: {v}" for k, v in zip(("module", "class"), MANAGERS[manager],
-                                                        strict=True))
     text = dagster_yaml(home)
-    assert ours in text
-    (home / "dagster.yaml").write_text(text.replace(ours, theirs))
-    instance = dg.DagsterInstance.from_config(str(home))
-    assert type(instance.compute_log_manager).__name__ == MANAGERS[manager][1]
+    assert MANAGERS["thread"] in text
+    instance = home_instance(home, text.replace(MANAGERS["thread"], MANAGERS[manager]))
+    assert type(instance.compute_log_manager).__name__ == MANAGERS[manager].split()[-1]
     return instance
 
 

@@ -55,10 +55,15 @@ EVENT_LOGS = {"dagster": lambda home: _SETTINGS, "pooled": dagster_yaml}
 """Each event log arm: the dagster.yaml of its home."""
 
 
-def _instance(home: Path, event_log: str) -> dg.DagsterInstance:
+def home_instance(home: Path, yaml: str) -> dg.DagsterInstance:
+    """A Dagster instance on the new home ``home`` whose ``dagster.yaml`` is ``yaml``."""
     home.mkdir(parents=True)
-    (home / "dagster.yaml").write_text(EVENT_LOGS[event_log](home))
+    (home / "dagster.yaml").write_text(yaml)
     return dg.DagsterInstance.from_config(str(home))
+
+
+def _instance(home: Path, event_log: str) -> dg.DagsterInstance:
+    return home_instance(home, EVENT_LOGS[event_log](home))
 
 
 def noop_assets(defs: dg.Definitions) -> list[dg.AssetsDefinition]:
