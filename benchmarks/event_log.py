@@ -22,16 +22,21 @@ and inputs, each returning 0; without the 4 asset checks) on a home of
 Dagster's own work costs a set of this graph, the part of a later set that no cache of ours
 can remove.
 
-Reported per arm: the sweep's total seconds, its first set, the median of the later sets,
-each step's median; the speed-up of the caches with each event log; and the best speed-up
-the floor leaves the pooled arm, were everything but Dagster's work free in the later sets:
-the sweep without the caches over (its first set with them + 11 floor sets); and what a set
-would have to save for the pooled arm to reach issue 12's 3x (:func:`seconds_to_target`).
-How busy the machine was (``MachineLoad``) is recorded over the whole run.
+The whole sweep is run ``--sweeps`` times, one after the other: the first set of a sweep
+(which computes everything) is one sample, which moved the speed-up by 0.27 between two
+runs of the same code. Reported per sweep and arm: the total seconds, the first set, the
+median of the later sets; per sweep: the speed-up of the caches with each event log
+(:func:`summarise`), the best speed-up the floor leaves the pooled arm, were everything but
+Dagster's work free in the later sets (the sweep without the caches over its first set with
+them + 11 floor sets), and what a set would have to save for the pooled arm to reach issue
+12's 3x (:func:`seconds_to_target`); the median speed-up over the sweeps; each step's median
+over the later sets of every sweep. How busy the machine was (``MachineLoad``) is recorded
+over the whole run.
 Writes results/event_log.json and results/event_log.md.
-Usage: python -m benchmarks.event_log
+Usage: python -m benchmarks.event_log [--sweeps 3] [--logs dagster pooled]
 """
 
+import argparse
 import statistics
 import tempfile
 from pathlib import Path
@@ -109,62 +114,96 @@ def seconds_to_target(without: float, with_: float, sets: int) -> dict[str, floa
             "every_set": max(TARGET * with_ - without, 0.0) / ((TARGET - 1) * sets)}
 
 
-def main() -> None:
-    load = MachineLoad()
+def sweep(logs: tuple[str, ...]) -> dict[str, list[dict]]:
+    """One robot sweep in each arm (event logs ``logs``, the caches on and off) and the floor,
+    each on a new home with new stores, the arms alternating set by set so that they share
+    the machine's load; a row per set and arm."""
     runs: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         defs, keys = sweep_definitions("kuka_robot", Path(tmp))
         arms = {f"{log}|{'with' if cache else 'without'}_cache": (log, cache)
-                for log in EVENT_LOGS for cache in (True, False)}
-        folders = {name: Path(tmp) / name.replace("|", "_") for name in arms}
-        instances = {}
-        for name, (log, cache) in arms.items():
+                for log in logs for cache in (True, False)}
+        folders, instances = {}, {}
+        for name, (log, _) in [*arms.items(), ("floor", ("pooled", None))]:
+            folders[name] = Path(tmp) / name.replace("|", "_")
             folders[name].mkdir()
             instances[name] = _instance(folders[name] / "dagster_home", log)
             runs[name] = []
         floor = noop_assets(defs)
-        folders["floor"] = Path(tmp) / "floor"
-        folders["floor"].mkdir()
-        instances["floor"] = _instance(folders["floor"] / "dagster_home", "pooled")
-        runs["floor"] = []
-        for key in keys:  # the arms alternate set by set, so that they share the load
+        for key in keys:
             for name, (log, cache) in arms.items():
                 runs[name] += _materialise(defs, [key], folders[name], cache, instances[name])
             runs["floor"].append(_floor_run(floor, key, folders["floor"], instances["floor"]))
         for instance in instances.values():
             instance.dispose()
+    return runs
+
+
+def summarise(runs: dict[str, list[dict]], logs: tuple[str, ...]) -> dict:
+    """One sweep's totals per arm, the caches' speed-up with each event log, the best the
+    floor leaves the pooled arm, and what 3x needs (:func:`seconds_to_target`)."""
+    arms = {name: {"total_seconds": sum(r["seconds"] for r in rows),
+                   "first_set_seconds": rows[0]["seconds"],
+                   "later_sets_median_seconds": statistics.median(r["seconds"]
+                                                                  for r in rows[1:]),
+                   "succeeded": sum(r["success"] for r in rows)}
+            for name, rows in runs.items()}
+    n = len(runs["floor"])
+    total = {name: arm["total_seconds"] for name, arm in arms.items()}
+    return {"arms": arms,
+            "speed_up": {log: total[f"{log}|without_cache"] / total[f"{log}|with_cache"]
+                         for log in logs},
+            "best_speed_up_over_floor": total["pooled|without_cache"] / (
+                arms["pooled|with_cache"]["first_set_seconds"]
+                + (n - 1) * arms["floor"]["later_sets_median_seconds"]),
+            "seconds_to_3x": seconds_to_target(total["pooled|without_cache"],
+                                               total["pooled|with_cache"], n)}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sweeps", type=int, default=3,
+                        help="whole sweeps, one after the other (default 3)")
+    parser.add_argument("--logs", nargs="+", choices=list(EVENT_LOGS), default=list(EVENT_LOGS),
+                        help="the event logs' arms (default both; the floor is always run)")
+    args = parser.parse_args(argv)
+    logs = tuple(args.logs)
+    if "pooled" not in logs:
+        parser.error("--logs must include pooled (the floor and the 3x arithmetic are its)")
+    load = MachineLoad()
+    sweeps = [sweep(logs) for _ in range(args.sweeps)]
     machine = load.summary()
-    summary = {name: {"total_seconds": sum(r["seconds"] for r in rows),
-                      "first_set_seconds": rows[0]["seconds"],
-                      "later_sets_median_seconds": statistics.median(r["seconds"]
-                                                                     for r in rows[1:]),
-                      "succeeded": sum(r["success"] for r in rows)}
-               for name, rows in runs.items()}
-    speed_up = {log: summary[f"{log}|without_cache"]["total_seconds"]
-                / summary[f"{log}|with_cache"]["total_seconds"] for log in EVENT_LOGS}
-    best = summary["pooled|without_cache"]["total_seconds"] / (
-        summary["pooled|with_cache"]["first_set_seconds"]
-        + (len(keys) - 1) * summary["floor"]["later_sets_median_seconds"])
-    needed = seconds_to_target(summary["pooled|without_cache"]["total_seconds"],
-                               summary["pooled|with_cache"]["total_seconds"], len(keys))
-    write_json({"runs": runs, "summary": summary, "cache_speed_up": speed_up,
-                "best_speed_up_over_floor": best, "seconds_to_3x": needed,
+    summaries = [summarise(runs, logs) for runs in sweeps]
+    median_speed_up = {log: statistics.median(s["speed_up"][log] for s in summaries)
+                       for log in logs}
+    write_json({"sweeps": sweeps, "summaries": summaries, "median_speed_up": median_speed_up,
                 "machine_load": machine}, "event_log")
-    steps = asset_medians({name: rows[1:] for name, rows in runs.items()})
+    totals = pd.DataFrame([{"sweep": i + 1, "arm": name, **arm}
+                           for i, s in enumerate(summaries) for name, arm in s["arms"].items()])
+    per_sweep = pd.DataFrame([{
+        "sweep": i + 1, **{f"speed-up, {log}": s["speed_up"][log] for log in logs},
+        "best over the floor": s["best_speed_up_over_floor"],
+        "3x: later sets less, caches only (s)": s["seconds_to_3x"]["with_cache_only"],
+        "3x: every set less, both arms (s)": s["seconds_to_3x"]["every_set"]}
+        for i, s in enumerate(summaries)])
+    steps = asset_medians({name: [row for runs in sweeps for row in runs[name][1:]]
+                           for name in sweeps[0]})
     text = "\n".join([
         f"The robot's 12-set sweep (benchmarks.pipeline's) on a Dagster home of sqlite files, "
-        f"four arms and the floor alternating set by set; one run; {describe_load(machine)}.\n",
-        pd.DataFrame(summary).T.to_markdown(floatfmt=".3g"), "",
-        "Speed-up of the caches over the whole sweep, with each event log: "
-        + ", ".join(f"{log} {value:.2f}x" for log, value in speed_up.items()) + ". "
-        f"Were the later sets to cost the pooled arm no more than the floor (Dagster's work "
-        f"for this graph, every asset a no-op: "
-        f"{summary['floor']['later_sets_median_seconds']:.2f} s a set), its speed-up would be "
-        f"{best:.2f}x. For {TARGET:g}x, the pooled arm's later sets would have to cost "
-        f"{needed['with_cache_only']:.2f} s less each with the caches only, or every set "
-        f"{needed['every_set']:.2f} s less in both arms (work that a set does with the caches "
-        f"as without, such as its figures and MLflow runs).\n",
-        "Median seconds of each step over the later sets:\n",
+        f"{args.sweeps} sweep(s) one after the other, each with the arms "
+        f"({', '.join(logs)} event log, the caches on and off) and the floor alternating set "
+        f"by set on new homes and stores; {describe_load(machine)}.\n",
+        totals.to_markdown(index=False, floatfmt=".3g"), "",
+        "Per sweep: the caches' speed-up over the whole sweep with each event log; the best the "
+        "floor (Dagster's work for this graph, every asset a no-op) leaves the pooled arm, were "
+        "its later sets to cost no more than the floor; and what the pooled arm's sets would "
+        f"have to save for {TARGET:g}x: the later sets with the caches only, or every set in "
+        "both arms (work a set does with the caches as without, such as its figures and "
+        "MLflow runs).\n",
+        per_sweep.to_markdown(index=False, floatfmt=".3g"), "",
+        "Median speed-up of the caches over the sweeps: "
+        + ", ".join(f"{log} {value:.2f}x" for log, value in median_speed_up.items()) + ".\n",
+        "Median seconds of each step over the later sets of every sweep:\n",
         steps.to_markdown(floatfmt=".2f"), ""])
     (RESULTS / "event_log.md").write_text(text)
     print(text)

@@ -246,3 +246,20 @@ def test_the_seconds_to_3x_bring_the_caches_speed_up_to_3x():
     saved = 12 * needed["every_set"]
     assert (109.0 - saved) / (41.7 - saved) == pytest.approx(3.0)
     assert seconds_to_target(120.0, 30.0, 12) == {"with_cache_only": 0.0, "every_set": 0.0}
+
+
+def test_a_sweeps_summary_divides_the_totals_of_its_arms():
+    from benchmarks.event_log import summarise
+
+    def arm(first, later):
+        return [{"seconds": first, "success": True}] + [{"seconds": later, "success": True}] * 11
+
+    runs = {"pooled|with_cache": arm(8.0, 2.0), "pooled|without_cache": arm(9.0, 8.0),
+            "floor": arm(1.0, 0.5)}
+    summary = summarise(runs, ("pooled",))
+    assert summary["arms"]["pooled|with_cache"] == {
+        "total_seconds": 30.0, "first_set_seconds": 8.0, "later_sets_median_seconds": 2.0,
+        "succeeded": 12}
+    assert summary["speed_up"] == {"pooled": pytest.approx(97.0 / 30.0)}
+    assert summary["best_speed_up_over_floor"] == pytest.approx(97.0 / (8.0 + 11 * 0.5))
+    assert summary["seconds_to_3x"] == {"with_cache_only": 0.0, "every_set": 0.0}
