@@ -197,26 +197,29 @@ def save_object(path: Path, obj, key: bytes) -> None:
         _VERIFIED.put(path, key, payload, identity, digest)
 
 
+class _SourceChanged(OSError):
+    """The file :func:`_link_same` linked to is no longer the one that was verified."""
+
+
 def _link_same(path: Path, key: bytes, source: Path, identity: tuple, payload: bytes,
                digest: bytes) -> bool:
     """Put a hard link to ``source`` (a kept file that had ``identity`` and holds
-    ``payload``, signed ``digest``) in place of ``path``, atomically as :func:`atomic_write`
-    would write it; False, and ``path`` unchanged, where the file system refuses the link
-    (another device, no hard links, too many of them) or ``source`` was replaced since it
-    was kept. Both names are then kept with the file's new identity (the link changed its
-    change time)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp"
-    try:
+    ``payload``, signed ``digest``) in place of ``path`` through :func:`atomic_write`;
+    False, and ``path`` unchanged, where the file system refuses the link (another device,
+    no hard links, too many of them) or ``source`` was replaced since it was kept. Both
+    names are then kept with the file's new identity (the link changed its change time)."""
+
+    def link(tmp: Path) -> None:
+        tmp.unlink()  # (atomic_write's empty temporary file: the link takes its name)
         os.link(source, tmp)
         if _VERIFIED.identity(tmp)[:4] != identity[:4]:  # device, inode, size, mtime
-            return False
-        os.replace(tmp, path)
-        linked = _VERIFIED.identity(path)
+            raise _SourceChanged(source)
+
+    try:
+        atomic_write(path, link)
     except OSError:
         return False
-    finally:
-        tmp.unlink(missing_ok=True)
+    linked = _VERIFIED.identity(path)
     for name in (source, path):
         _VERIFIED.put(name, key, payload, linked, digest)
     return True
