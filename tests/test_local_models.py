@@ -216,13 +216,25 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
         sizes[name] = len(data)
         for back in (pickle.loads(data), copy.deepcopy(step)):
             for name in ("theta_", "neighbours_", "residual_var_"):
-                getattr(back, name)  # (kept compact until read)
+                getattr(back, name), getattr(step, name)  # (kept compact until read)
             assert set(vars(back)) == set(vars(step))
             np.testing.assert_equal(vars(back), vars(step))  # NaN, −1 and dtypes as fitted
             assert all(getattr(back, a).dtype == getattr(step, a).dtype
                        for a in ("theta_", "neighbours_", "residual_var_"))
-    # loaded, the per-sample arrays stay compact until read; pickled again unread or half
-    # read, the same bytes
+    # fitted or loaded, the per-sample arrays stay compact until read; pickled again unread
+    # or half read, the same bytes
+    fitted = LocalLeastSquares(n_rho=12, max_sets=60).fit(phi, target)
+    assert "_compact" in vars(fitted) and "theta_" not in vars(fitted)
+    assert pickle.dumps(fitted, protocol=5) == pickle.dumps(some, protocol=5)
+    # fitted again, nothing of the previous fit is left, read or unread
+    fitted.set_params(max_sets=None).fit(phi, target)
+    assert "_compact" not in vars(fitted)
+    np.testing.assert_array_equal(fitted.estimated_theta(), every.theta_)
+    fitted.neighbours_  # (spread before the next fit)
+    fitted.set_params(max_sets=60, random_state=1).fit(phi, target)
+    other = LocalLeastSquares(n_rho=12, max_sets=60, random_state=1).fit(phi, target)
+    np.testing.assert_array_equal(fitted.neighbours_, other.neighbours_)
+    np.testing.assert_array_equal(fitted.estimated_theta(), other.estimated_theta())
     back = pickle.loads(pickle.dumps(some, protocol=5))
     assert not {"theta_", "neighbours_", "residual_var_"} & set(vars(back))
     assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)

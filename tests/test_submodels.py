@@ -621,6 +621,13 @@ def test_the_k_means_start_places_rows_without_a_local_model_by_their_fit():
 
     assert agreement(_kmeans_start(phi, y, every.theta_, 3)) == 1.0
     part = _kmeans_start(phi, y, some.theta_, 3)
+    # the same start from the θ_k read without spreading them, by mask and by index too
+    np.testing.assert_array_equal(_kmeans_start(phi, y, some.local_thetas(), 3), part)
+    rows = np.flatnonzero(far)[::-2]
+    for select in (far, rows):
+        np.testing.assert_array_equal(
+            _kmeans_start(phi[select], y[select], some.local_thetas()[select], 3),
+            _kmeans_start(phi[select], y[select], some.theta_[select], 3))
     assert agreement(part) > 0.95
     rest = far & ~some.estimated_
     agree = np.mean(part[rest] == mode[rest])
@@ -674,6 +681,36 @@ def test_steps_2_to_4_are_cached_by_their_consolidated_state(tmp_path):
                                                             SVMRegions())
     assert len(list(tmp_path.rglob("output.pkl"))) == 6 and "theta_" not in vars(restored)
     np.testing.assert_array_equal(hit.thetas_, plain.thetas_)
+
+
+def test_step_5_reads_the_local_models_of_a_fit_without_spreading_them(monkeypatch):
+    """A local-model step fitted on a subset keeps its per-sample arrays on the estimated
+    samples until read (as a loaded one does), and step 5's split search reads their θ_k
+    through ``local_thetas``: the same sub-models as from the spread ``theta_``, and the step
+    left compact."""
+    from pwa_pipeline.pwa import submodels
+
+    phi, target, _, absorbed = _four_percent_mode()
+    subset = LocalLeastSquares(max_sets=1500).fit(phi, target)
+    spread = {"theta_", "neighbours_", "residual_var_"}
+    assert "_compact" in vars(subset) and not spread & set(vars(subset))
+    read = []
+    with_local_model = submodels._with_local_model
+
+    def spy(local_theta):
+        have, theta = with_local_model(local_theta)
+        read.append((type(local_theta).__name__, have.all()))
+        return have, theta
+
+    monkeypatch.setattr(submodels, "_with_local_model", spy)
+    lazy = RefinedSubModels().fit(phi, target, subset, absorbed, SVMRegions())
+    assert not spread & set(vars(subset))
+    assert ("LocalThetas", False) in read  # the k-means start ran on rows without one too
+    monkeypatch.setattr(LocalLeastSquares, "local_thetas", lambda step: step.theta_)
+    dense = RefinedSubModels().fit(phi, target, subset, absorbed, SVMRegions())
+    assert lazy.n_split_ == dense.n_split_ >= 1
+    for name in ("thetas_", "labels_", "weights_"):
+        np.testing.assert_array_equal(getattr(lazy, name), getattr(dense, name))
 
 
 def test_a_memory_without_a_cache_method_is_refused_by_name():

@@ -291,20 +291,26 @@ class LocalLeastSquares(BaseEstimator):
                 len(first), self.max_sets, replace=False))
         idx = local_sets(p, self.n_rho_, self.standardize, sets)
         theta, resvar, self.phi_scale_, degenerate = local_least_squares(p, t, idx, self.ridge)
-        estimated = np.ones(len(idx), bool)
+        estimated = np.ones(len(first), bool)
         if sets is not None:  # the samples not in the subset: no local model
-            idx, theta, resvar, degenerate, estimated = (
-                _spread(a, sets, len(first), fill) for a, fill in
-                ((idx, -1), (theta, np.nan), (resvar, np.nan), (degenerate, False),
-                 (estimated, False)))
-        if repeats:
-            idx, theta, resvar, degenerate, estimated = (
-                np.where(idx >= 0, first[idx], -1)[inverse], theta[inverse], resvar[inverse],
-                degenerate[inverse], estimated[inverse])
-            idx[estimated, 0] = np.flatnonzero(estimated)
-        self.neighbours_, self.theta_, self.residual_var_ = idx, theta, resvar
+            estimated = np.zeros(len(first), bool)
+            estimated[sets] = True
+            degenerate = _spread(degenerate, sets, len(first), False)
+        if repeats:  # every copy of an estimated sample: its original's, its own index first
+            at = (np.cumsum(estimated) - 1)[inverse]  # row → its original's estimated row
+            degenerate, estimated = degenerate[inverse], estimated[inverse]
+            at = at[estimated]
+            idx, theta, resvar = first[idx][at], theta[at], resvar[at]
+            idx[:, 0] = np.flatnonzero(estimated)
         self.degenerate_, self.original_ = degenerate, first[inverse]
         self.estimated_ = estimated
+        fitted = {"neighbours_": idx, "theta_": theta, "residual_var_": resvar}
+        for name in (*fitted, "_compact"):  # (a previous fit's)
+            vars(self).pop(name, None)
+        if estimated.all():
+            vars(self).update(fitted)
+        else:  # kept on the estimated samples, as a loaded step's (:meth:`__setstate__`)
+            self._compact = fitted
         self.n_degenerate_ = int(degenerate.sum())
         self.n_estimated_ = int(estimated.sum())
         return self
@@ -345,6 +351,11 @@ class LocalLeastSquares(BaseEstimator):
         compact = self.__dict__.get("_compact", {})
         return compact[name][at] if name in compact else getattr(self, name)[rows]
 
+    def local_thetas(self) -> "LocalThetas":
+        """The θ_k of every sample as a :class:`LocalThetas`: rows selected and read without
+        spreading ``theta_`` (what step 5's split search reads)."""
+        return LocalThetas(self, np.arange(self.estimated_.size))
+
     def __getstate__(self) -> dict:
         """The state to pickle: ``theta_``, ``neighbours_`` and ``residual_var_`` only on the
         estimated samples when some were not (their other rows hold no information), so a
@@ -380,6 +391,40 @@ class LocalLeastSquares(BaseEstimator):
         if not compact:
             del self._compact
         return value
+
+
+class LocalThetas:
+    """The θ_k of some samples of a fitted :class:`LocalLeastSquares`, read without spreading
+    its arrays: ``thetas[rows]`` selects among these samples (indices or a boolean mask), and
+    :meth:`estimated` reads which of them have a local model, and their θ_k.
+
+    Step 5's split search (:func:`~pwa_pipeline.pwa.submodels.split_gain`) takes it in place
+    of ``theta_``: on the robot it reads the θ_k of a 2,000-row subsample of the 40k samples,
+    where ``theta_`` spread (46 MB, NaN on the 35k samples without a local model) and its
+    rows copied for every sub-model searched cost a process's first fit its first touch of
+    that memory.
+
+    Parameters
+    ----------
+    local : fitted LocalLeastSquares
+    rows : ndarray of shape (n,), int
+        The samples, in the order read.
+    """
+
+    def __init__(self, local: LocalLeastSquares, rows: np.ndarray):
+        self._local, self._rows = local, rows
+
+    def __len__(self) -> int:
+        return self._rows.size
+
+    def __getitem__(self, rows: np.ndarray) -> "LocalThetas":
+        return LocalThetas(self._local, self._rows[rows])
+
+    def estimated(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which of the samples have a local model (bool, shape (n,)), and their θ_k (shape
+        (that many, d, m))."""
+        have = self._local.estimated_[self._rows]
+        return have, self._local.at_estimated("theta_", self._rows[have])
 
 
 def _spread(values: np.ndarray, rows: np.ndarray, n: int, fill) -> np.ndarray:

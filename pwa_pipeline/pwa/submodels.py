@@ -8,6 +8,7 @@ imports no other step.
 import hashlib
 from concurrent.futures import ThreadPoolExecutor
 from numbers import Integral, Real
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
@@ -21,6 +22,9 @@ from .._arrays import array_digest, relabel_by_size
 from .._typing import Float2D
 from ._blas import _controller, single_threaded_blas
 from .neighbours import distinct_rows
+
+if TYPE_CHECKING:
+    from .local_models import LocalThetas
 
 
 def _prediction_gaps(phi: Float2D, thetas: np.ndarray, labels: np.ndarray,
@@ -481,8 +485,8 @@ SPLIT_CANDIDATES = 2
 SCREEN_TOL, SCREEN, SCREEN_SIZE = 0.1, 0.8, 20_000
 
 
-def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size: int,
-               n_iter: int, regions, merge_tol: float = 1.0, max_rows: int = 2000,
+def split_gain(phi: Float2D, target: Float2D, local_theta: "np.ndarray | LocalThetas",
+               min_size: int, n_iter: int, regions, merge_tol: float = 1.0, max_rows: int = 2000,
                seed: int = 0, at_least: float = -np.inf, tol: float = 0.0,
                settle: float = 0.0) -> tuple[float, np.ndarray | None]:
     """Whether the rows of one sub-model hold two modes that the regions separate.
@@ -507,7 +511,9 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     when the gain exceeds ``at_least`` (a split the caller would reject is not extended).
     With ``at_least`` > 0 a large search is screened first (:data:`SCREEN_SIZE`; ``regions``
     with a ``tol`` parameter, as :class:`~.regions.SVMRegions`). ``tol`` and ``settle`` are
-    those of :func:`refine`.
+    those of :func:`refine`. ``local_theta`` holds the rows' θ_k: an array of shape
+    (n, d, m), NaN where a row has no local model, or a fitted step's
+    :meth:`~pwa_pipeline.pwa.local_models.LocalLeastSquares.local_thetas` of these rows.
 
     Returns
     -------
@@ -553,15 +559,15 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_size:
     return gain, labels
 
 
-def _kmeans_start(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_rows: int
-                  ) -> np.ndarray | None:
+def _kmeans_start(phi: Float2D, target: Float2D, local_theta: "np.ndarray | LocalThetas",
+                  min_rows: int) -> np.ndarray | None:
     """0/1 of each row: its local model θ_k's side of a k-means split of the rows' local
     models (z-scored); a row without a local model (``LocalLeastSquares.max_sets``) takes
     the side whose rows' least-squares sub-model fits it better (smaller Σ_p r_p²). None
     when fewer than 2·``min_rows`` rows have a local model, or, where some rows have none,
     when a side has fewer than ``min_rows``."""
-    have = ~np.isnan(local_theta[:, 0, 0])
-    emb = local_theta[have].reshape(int(have.sum()), -1)
+    have, emb = _with_local_model(local_theta)
+    emb = emb.reshape(len(emb), -1)
     if len(emb) < 2 * min_rows:
         return None
     scale = emb.std(axis=0)
@@ -578,6 +584,17 @@ def _kmeans_start(phi: Float2D, target: Float2D, local_theta: np.ndarray, min_ro
     out[have] = side
     out[~have] = _argmin_labels(_sq_residuals(phi[~have], target[~have], two), None)
     return out
+
+
+def _with_local_model(local_theta: "np.ndarray | LocalThetas"
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Which rows of ``local_theta`` have a local model, and their θ_k: of an array of shape
+    (n, d, m) the rows without NaN, of a
+    :class:`~pwa_pipeline.pwa.local_models.LocalThetas` its :meth:`estimated`."""
+    if isinstance(local_theta, np.ndarray):
+        have = ~np.isnan(local_theta[:, 0, 0])
+        return have, local_theta[have]
+    return local_theta.estimated()
 
 
 def _axis_start(phi: Float2D, target: Float2D, min_size: int,
@@ -984,9 +1001,10 @@ def _from_consolidated(step: RefinedSubModels, phi: Float2D, target: Float2D,
                        labels: np.ndarray, local, local_key: str | None,
                        min_pts: int, search_local, search_clustering, regions) -> tuple:
     """:meth:`RefinedSubModels._from_consolidated` of ``step`` (no ``memory``) with the
-    fitted local-model step's ``theta_``: a function of its arguments alone, for
+    fitted local-model step's θ_k (:meth:`~pwa_pipeline.pwa.local_models.LocalLeastSquares.local_thetas`,
+    read without spreading ``theta_``): a function of its arguments alone, for
     ``RefinedSubModels.memory`` to cache, ``local_key`` (the
     :func:`~pwa_pipeline._arrays.array_digest` of its estimated samples and their θ_k)
     standing for ``local`` in its key."""
-    return step._from_consolidated(phi, target, labels, local.theta_, min_pts, search_local,
-                                   search_clustering, regions)
+    return step._from_consolidated(phi, target, labels, local.local_thetas(), min_pts,
+                                   search_local, search_clustering, regions)
