@@ -26,6 +26,10 @@ twice in its process too, so that its ratio to steps 1–4 is given both ways: f
 - ``previous ...``: the default and the paper setting with the code of ``--previous`` (a
   commit before issue 12's changes, unpacked with ``git archive``), if git can provide it.
 
+Before the timed runs, the default and the paper setting are fitted once in each tree,
+untimed, so that no timed fit compiles the numba kernels (a tree just unpacked has no numba
+cache; its first fit took 7.8 s instead of 1.1 s and peaked 0.13 GB higher).
+
 Then the paper setting's region SVM alone (in this process) at the preset's tolerance 1e-2,
 the former 1e-4 and a tight reference (1e-5, ten times the iterations): seconds, whether
 the solver converged, the primal objective, and how many regions agree with the
@@ -240,6 +244,10 @@ def main(argv=None) -> None:
         jobs = [(v, ROOT) for v in VARIANTS]
         if old is not None:
             jobs += [(v, old) for v in PREVIOUS]
+        for variant, path in {(v, path) for _, path in jobs for v in PREVIOUS}:
+            # untimed: the kernels compiled into each tree's numba cache (a tree just
+            # unpacked has none, and its first fit would compile them: about 8 s and 0.1 GB)
+            in_fresh_process("benchmarks.speed", [variant], tmp, path)
         for i in range(args.repeats):
             for variant, path in jobs:
                 name = variant if path == ROOT else f"previous {variant}"
