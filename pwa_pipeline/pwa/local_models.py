@@ -414,9 +414,6 @@ class LocalThetas:
     def __init__(self, local: LocalLeastSquares, rows: np.ndarray):
         self._local, self._rows = local, rows
 
-    def __len__(self) -> int:
-        return self._rows.size
-
     def __getitem__(self, rows: np.ndarray) -> "LocalThetas":
         return LocalThetas(self._local, self._rows[rows])
 
