@@ -200,7 +200,9 @@ class LocalLeastSquares(BaseEstimator):
     ----------
     theta_ : ndarray of shape (n, d, m)
         θ_k of every local set, in the regressors' own units; NaN for the samples whose local
-        model was not estimated.
+        model was not estimated. Where some were not, this and the next two arrays are kept
+        on the estimated samples and spread to every sample when first read; steps that
+        read a few rows use :meth:`at_estimated` or :meth:`local_thetas` instead.
     residual_var_ : ndarray of shape (n, m)
         Residual variance of each local fit, SSR / (n_ρ − d), per output (NaN where not
         estimated).
@@ -400,9 +402,9 @@ class LocalThetas:
 
     Step 5's split search (:func:`~pwa_pipeline.pwa.submodels.split_gain`) takes it in place
     of ``theta_``: on the robot it reads the θ_k of a 2,000-row subsample of the 40k samples,
-    where ``theta_`` spread (46 MB, NaN on the 35k samples without a local model) and its
-    rows copied for every sub-model searched cost a process's first fit its first touch of
-    that memory.
+    where ``theta_`` spread is 46 MB (NaN on the 35k samples without a local model), its
+    rows copied again for every sub-model searched (the peak and time this saves are in the
+    README's *Speed*).
 
     Parameters
     ----------
