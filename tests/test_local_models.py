@@ -252,6 +252,34 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
     assert sizes["some"] < 0.2 * sizes["every"]
 
 
+def test_an_array_read_while_another_reader_spreads_it_is_found(monkeypatch):
+    """A compact array read again while a first read is spreading it (another thread, here
+    a read from inside the spreading) is found, compact or spread, and equal to the fit's;
+    every array read, the step holds no compact copy."""
+    from pwa_pipeline.pwa import local_models
+
+    rng = np.random.default_rng(9)
+    phi = rng.normal(size=(300, 3))
+    target = phi @ rng.normal(size=(3, 2))
+    step = LocalLeastSquares(n_rho=10, max_sets=50).fit(phi, target)
+    expected = LocalLeastSquares(n_rho=10, max_sets=None).fit(phi, target).theta_
+    spread, inner = local_models._spread, []
+
+    def interleaved(values, rows, n, fill):
+        if not inner:
+            inner.append(None)
+            inner[0] = step.theta_  # the other reader, while this one spreads
+        return spread(values, rows, n, fill)
+
+    monkeypatch.setattr(local_models, "_spread", interleaved)
+    outer = step.theta_
+    np.testing.assert_array_equal(outer[step.estimated_], expected[step.estimated_])
+    np.testing.assert_array_equal(inner[0], outer)
+    assert np.isnan(outer[~step.estimated_]).all()
+    step.neighbours_, step.residual_var_
+    assert "_compact" not in vars(step)
+
+
 def test_rows_of_estimated_samples_are_read_without_spreading_a_loaded_step():
     """``at_estimated`` (what the clustering step, its figure and the cluster centres read)
     gives the rows of the spread arrays, by mask or index, leaves a loaded step compact,

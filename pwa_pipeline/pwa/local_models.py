@@ -382,16 +382,19 @@ class LocalLeastSquares(BaseEstimator):
         super().__setstate__(state)
 
     def __getattr__(self, name: str):
-        """``theta_``, ``neighbours_`` or ``residual_var_`` of an unpickled step, spread to
-        every sample when first read (:meth:`__setstate__` keeps them compact)."""
+        """``theta_``, ``neighbours_`` or ``residual_var_`` of a step fitted on a subset or
+        unpickled, spread to every sample when first read (:meth:`fit` and
+        :meth:`__setstate__` keep them compact). The spread array is set before its compact
+        copy is dropped, so that a reader in another thread finds one or the other."""
         compact = self.__dict__.get("_compact")
         if compact is None or name not in compact:
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        value = _spread(compact.pop(name), np.flatnonzero(self.estimated_),
+        value = _spread(compact[name], np.flatnonzero(self.estimated_),
                         len(self.estimated_), _UNESTIMATED[name])
         setattr(self, name, value)
+        compact.pop(name, None)
         if not compact:
-            del self._compact
+            vars(self).pop("_compact", None)
         return value
 
 
