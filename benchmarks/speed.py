@@ -244,10 +244,11 @@ def main(argv=None) -> None:
         jobs = [(v, ROOT) for v in VARIANTS]
         if old is not None:
             jobs += [(v, old) for v in PREVIOUS]
-        for variant, path in {(v, path) for _, path in jobs for v in PREVIOUS}:
+        for path in dict.fromkeys(path for _, path in jobs):
             # untimed: the kernels compiled into each tree's numba cache (a tree just
             # unpacked has none, and its first fit would compile them: about 8 s and 0.1 GB)
-            in_fresh_process("benchmarks.speed", [variant], tmp, path)
+            for variant in PREVIOUS:
+                in_fresh_process("benchmarks.speed", [variant], tmp, path)
         for i in range(args.repeats):
             for variant, path in jobs:
                 name = variant if path == ROOT else f"previous {variant}"
