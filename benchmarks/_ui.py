@@ -25,7 +25,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pwa_pipeline.orchestration.instance import dagster_yaml
+from pwa_pipeline.orchestration.instance import DAGSTER_YAML
 from pwa_pipeline.orchestration.paths import MLFLOW_TRAINING_VIEW
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -146,7 +146,7 @@ class UIStack:
         home.mkdir(exist_ok=True)
         # what `python -m pwa_pipeline run` writes on first use (no newsletter dialog, the
         # run queue's limits); dagster dev creates the schema itself, in one process
-        (home / "dagster.yaml").write_text(dagster_yaml(home))
+        (home / "dagster.yaml").write_text(DAGSTER_YAML)
         ports = {"dagster": free_port(), "mlflow": free_port()}
         for name in ports:
             self.servers[name] = Server(name, f"http://127.0.0.1:{ports[name]}", None,
