@@ -34,10 +34,11 @@ from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write
 from benchmarks.sweep import EPS as ROBOT_EPS
 from benchmarks.sweep import MIN_PTS as ROBOT_MIN_PTS
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.jobs import SWEEP_SELECTION
 from pwa_pipeline.orchestration.partitions import DEFAULT_SETS, all_keys, runnable_keys
-from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
-from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
+from pwa_pipeline.orchestration.tracking import MLflowTracker
 
 EPS = (0.1, 0.15, 0.2, 0.3)
 MIN_PTS = (10, 15, 20)

@@ -37,7 +37,7 @@ from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
 from pwa_pipeline import load_kuka
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.config import HParamsFile
-from pwa_pipeline.orchestration.storage import SignedMemory
+from pwa_pipeline.orchestration.caches import SignedMemory
 from pwa_pipeline.pwa.regressors import build_regressors
 
 EPS = (15.0, 20.0, 25.0, 30.0)

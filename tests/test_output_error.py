@@ -70,8 +70,9 @@ def test_the_pipeline_refines_pwa_and_linear_arx_when_the_set_asks(tmp_path, mlf
     import dagster as dg
 
     from pwa_pipeline.orchestration.definitions import build_definitions
-    from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
-    from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+    from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+    from pwa_pipeline.orchestration.settings import PipelineSettings
+    from pwa_pipeline.orchestration.tracking import MLflowTracker
 
     path = tmp_path / "oe.toml"
     path.write_text('[oe.hure_vasak]\npreset = "default"\nna = 1\nnb = 1\n'

@@ -19,24 +19,19 @@ import pandas as pd
 import pytest
 
 from pwa_pipeline.definitions import defs
-from pwa_pipeline.orchestration import storage
-from pwa_pipeline.orchestration.resources import (
-    LoggedRun,
-    MLflowTracker,
-    PipelineSettings,
-    mask_credentials,
-    split_credentials,
-)
-from pwa_pipeline.orchestration.storage import (
-    PartitionedFileIOManager,
-    SignedMemory,
+from pwa_pipeline.orchestration import caches, files
+from pwa_pipeline.orchestration.caches import SignedMemory
+from pwa_pipeline.orchestration.credentials import mask_credentials, split_credentials
+from pwa_pipeline.orchestration.files import inside, sweep_stale_tmp
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
+from pwa_pipeline.orchestration.signed_pickles import (
     UnsignedFileError,
-    inside,
     load_object,
     save_object,
     signing_key,
-    sweep_stale_tmp,
 )
+from pwa_pipeline.orchestration.tracking import LoggedRun, MLflowTracker
 
 IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
 
@@ -101,9 +96,9 @@ def test_a_planted_pickle_is_never_loaded(tmp_path):
 
 def test_create_new_never_replaces_a_file_and_leaves_no_temporary_one(tmp_path):
     path = tmp_path / "f.db"
-    assert storage.create_new(path, b"first", 0o640)
+    assert files.create_new(path, b"first", 0o640)
     assert path.read_bytes() == b"first" and path.stat().st_mode & 0o777 == 0o640
-    assert not storage.create_new(path, b"second", 0o600)  # another process's file: kept
+    assert not files.create_new(path, b"second", 0o600)  # another process's file: kept
     assert path.read_bytes() == b"first" and path.stat().st_mode & 0o777 == 0o640
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.db"]
 
@@ -118,113 +113,6 @@ def test_signed_files_round_trip_and_damage_is_detected(tmp_path):
     (tmp_path / "a.pkl").write_bytes(data[:-5])  # truncated
     with pytest.raises(UnsignedFileError, match="a.pkl is not a file this store wrote"):
         load_object(tmp_path / "a.pkl", key)
-
-
-def test_a_file_this_process_signed_is_loaded_from_memory_until_it_changes(tmp_path,
-                                                                           monkeypatch):
-    """The payload a process wrote or verified is unpickled again without reading the file;
-    a file replaced (another process's write), touched or planted since is read and
-    verified anew."""
-    key = signing_key(tmp_path)
-    path = tmp_path / "a.pkl"
-    save_object(path, {"theta": 1.0}, key)
-    reads = []
-    read_bytes = Path.read_bytes
-    monkeypatch.setattr(Path, "read_bytes", lambda p: reads.append(p.name) or read_bytes(p))
-    first, second = load_object(path, key), load_object(path, key)
-    assert first == second == {"theta": 1.0} and first is not second and reads == []
-    save_object(tmp_path / "b.pkl", {"theta": 2.0}, key)
-    os.replace(tmp_path / "b.pkl", path)  # what another process's atomic write does
-    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl"]
-    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl"]  # verified: kept
-    os.utime(path, ns=(0, 0))
-    assert load_object(path, key) == {"theta": 2.0} and reads == ["a.pkl", "a.pkl"]
-    marker = tmp_path / "marker"
-    planted = tmp_path / "c.pkl"
-    planted.write_bytes(pickle.dumps(_Planted(marker)))
-    os.replace(planted, path)
-    with pytest.raises(UnsignedFileError, match="a.pkl is not a file this store wrote"):
-        load_object(path, key)
-    assert not marker.exists()
-    # another store's key never gets this store's payload from memory
-    save_object(path, {"theta": 3.0}, key)
-    with pytest.raises(UnsignedFileError):
-        load_object(path, signing_key(tmp_path / "other"))
-
-
-def test_the_memory_of_verified_files_keeps_the_recently_used_within_its_bound(tmp_path):
-    """At most ``max_bytes`` of payloads, the least recently used dropped first; a payload
-    over a quarter of the bound is never kept."""
-    memory = storage._VerifiedPayloads(max_bytes=400)
-    files = {}
-    for name in "abcdef":
-        files[name] = tmp_path / name
-        files[name].write_bytes(b"x")
-    key = b"k"
-
-    def put(name, size):
-        memory.put(files[name], key, name.encode() * size, memory.identity(files[name]),
-                   name.encode())
-
-    for name in "abcd":
-        put(name, 100)
-    assert [memory.get(files[n], key) is not None for n in "abcd"] == [True] * 4
-    assert memory.get(files["a"], key) == b"a" * 100  # a: the most recently used now
-    put("e", 100)  # over the bound: b, the least recently used, is dropped
-    assert [memory.get(files[n], key) is not None for n in "abcde"] == [
-        True, False, True, True, True]
-    put("f", 101)  # over a quarter of the bound: not kept, nothing dropped
-    assert memory.get(files["f"], key) is None
-    assert sum(memory.get(files[n], key) is not None for n in "acde") == 4
-
-
-def test_the_same_payload_is_linked_to_the_file_that_holds_it_and_behaves_as_a_copy(
-        tmp_path, monkeypatch):
-    """A pickle with the same bytes and key as a kept file (the sets of a sweep store the
-    same regressors) becomes a hard link to that file: one inode, no write, both names
-    loaded from memory. Replacing either name leaves the other as it was; another key, a
-    different payload, a source replaced since it was kept, or a file system that refuses
-    links get a file of their own."""
-    key = signing_key(tmp_path)
-    theta = np.arange(5000.0)
-    a, b, c, d = (tmp_path / "s" / f"{n}.pkl" for n in "abcd")
-    save_object(a, {"theta": theta}, key)
-    writes = []  # the names written to (the temporary file is .<name>.pkl.<random>.tmp)
-    write_bytes = Path.write_bytes
-    monkeypatch.setattr(Path, "write_bytes",
-                        lambda p, data: writes.append(p.name.split(".")[1])
-                        or write_bytes(p, data))
-    save_object(b, {"theta": theta.copy()}, key)
-    assert writes == [] and a.stat().st_ino == b.stat().st_ino and b.stat().st_nlink == 2
-    assert not [p for p in a.parent.iterdir() if p.suffix == ".tmp"]
-    reads = []
-    read_bytes = Path.read_bytes
-    monkeypatch.setattr(Path, "read_bytes", lambda p: reads.append(p.name) or read_bytes(p))
-    for name in (a, b):
-        np.testing.assert_array_equal(load_object(name, key)["theta"], theta)
-    assert reads == []  # both kept with the identity the link gave the file
-    save_object(a, {"theta": theta + 1}, key)  # a different payload: written
-    assert writes == ["a"] and b.stat().st_nlink == 1
-    np.testing.assert_array_equal(load_object(b, key)["theta"], theta)
-    np.testing.assert_array_equal(load_object(a, key)["theta"], theta + 1)
-    other = signing_key(tmp_path / "other")
-    save_object(tmp_path / "other" / "b.pkl", {"theta": theta}, other)  # another store's key
-    assert writes[-1] == "b" and b.stat().st_nlink == 1
-    # a kept source replaced since by another process (its signature is the store's): never
-    # linked to, as the identity it was kept with is gone
-    save_object(c, {"theta": theta * 2}, key)
-    stale = storage._VERIFIED.signed_as(storage.hmac.new(
-        key, pickle.dumps({"theta": theta * 2}, protocol=5), "sha256").digest())
-    assert stale is not None and stale[0] == c
-    os.replace(b, c)
-    assert not storage._link_same(d, key, *stale, b"")
-    assert not d.exists() and not [p for p in c.parent.iterdir() if p.suffix == ".tmp"]
-    save_object(d, {"theta": theta * 2}, key)
-    assert writes[-1] == "d" and d.stat().st_nlink == 1
-    monkeypatch.setattr(os, "link", lambda *_: (_ for _ in ()).throw(OSError(31, "links")))
-    save_object(tmp_path / "s" / "e.pkl", {"theta": theta * 2}, key)
-    assert writes[-1] == "e"
-    np.testing.assert_array_equal(load_object(tmp_path / "s" / "e.pkl", key)["theta"], theta * 2)
 
 
 @pytest.fixture()
@@ -288,7 +176,7 @@ def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_pa
         assert len(calls) == computed
     assert (memory.hits, memory.misses) == (2, 2)
     np.testing.assert_array_equal(cached(np.arange(4.0)), np.arange(4.0))  # other data
-    monkeypatch.setattr(storage, "core_fingerprint", lambda: "other code")
+    monkeypatch.setattr(caches, "core_fingerprint", lambda: "other code")
     cached(np.arange(3.0), factor=1.0)
     assert len(calls) == 4 and len(list((tmp_path / "m").glob("*.pkl"))) == 4
     salted = SignedMemory(tmp_path, "m", salt="other figures").cache(scaled)
@@ -344,49 +232,6 @@ def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
     runs = client.search_runs([exps[0].experiment_id])
     assert sorted(r.info.run_id for r in runs) == sorted(ids)
     assert {r.info.status for r in runs} == {"FINISHED"}
-
-
-def _log_model_once_at(args):
-    """Log a run of one fitted linear ARX model once ``barrier`` lets every process go."""
-    uri, hparams, barrier = args
-    from pwa_pipeline import LinearARX, make_hure_vasak
-    from pwa_pipeline.orchestration.mlflow_models import (
-        ModelToLog,
-        Simulator,
-        example_table,
-        table_dataset,
-    )
-
-    data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
-    model = LinearARX(na=1, nb=1).fit(data.u, data.y)
-    table = example_table(data.u, data.y, data.u_names, data.y_names, 5)
-    tracker = MLflowTracker(tracking_uri=uri)
-    tracker.client()  # the store ready before the race
-    barrier.wait()
-    return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
-                           metrics={}, tags={}, artifacts={},
-                           model=ModelToLog(Simulator(model, data.u_names, data.y_names),
-                                            table, table_dataset(table))).run_id
-
-
-def test_runs_scoring_one_model_at_once_log_it_once(tmp_path, mlflow_template):
-    """Three processes score the same model at the same moment (as ``run --jobs 2`` does with
-    a baseline two partitions share): on the sqlite store one run logs and registers it, the
-    others link it."""
-    from mlflow.tracking import MlflowClient
-
-    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
-    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
-    barrier = multiprocessing.get_context("fork").Manager().Barrier(3)
-    with _fork_pool(3) as pool:
-        ids = pool.map(_log_model_once_at, [(uri, f"s{i}", barrier) for i in range(3)])
-    client = MlflowClient(tracking_uri=uri)
-    tags = [client.get_run(i).data.tags for i in ids]
-    logged = {t["model_run_id"] for t in tags}
-    assert len(logged) == 1 and logged <= set(ids)
-    assert len({t["model_id"] for t in tags}) == 1
-    versions = client.search_model_versions("name = 'pwa-pipeline.d.linear_arx'")
-    assert [v.run_id for v in versions] == list(logged)
 
 
 class _Exploding:

@@ -12,10 +12,10 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration.definitions import partitions_of
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.jobs import LEADERBOARD, SCHEDULER_ENV, build_jobs
 from pwa_pipeline.orchestration.partitions import all_keys
 from pwa_pipeline.orchestration.reporting import leaderboard_markdown
-from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
 from pwa_pipeline.scoring.comparison import leaderboard
 
 KEYS = ["hure_vasak|paper", "hure_vasak|default"]

@@ -11,9 +11,10 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.partitions import all_keys, runnable_keys
-from pwa_pipeline.orchestration.resources import MLflowTracker, PipelineSettings
-from pwa_pipeline.orchestration.storage import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
+from pwa_pipeline.orchestration.tracking import MLflowTracker
 
 COLUMNS = dict(u=("u1", "u2"), y=("y1", "y2"))
 

@@ -27,6 +27,7 @@ from ..scoring.comparison import leaderboard as leaderboard_table
 from ..scoring.comparison import mean_scores
 from ..scoring.evaluation import Evaluation, evaluate
 from ..scoring.truth import ground_truth_scores
+from .caches import SignedMemory, cache_key, load_or_compute
 from .checks import (
     CLUSTER_CHECKS,
     COMPARISON_CHECKS,
@@ -46,6 +47,8 @@ from .figures import (
     to_markdown,
     to_png,
 )
+from .files import inside
+from .io_manager import ALL_PARTITIONS
 from .jobs import LEADERBOARD
 from .mlflow_models import (
     ModelToLog,
@@ -65,14 +68,8 @@ from .reporting import (
     score_metrics,
     theta_table,
 )
-from .resources import MLflowTracker, PipelineSettings
-from .storage import (
-    ALL_PARTITIONS,
-    SignedMemory,
-    cache_key,
-    inside,
-    load_or_compute,
-)
+from .settings import PipelineSettings
+from .tracking import MLflowTracker
 
 GROUP = "identification"
 #: The asset holding each fitted step of :data:`pwa_pipeline.pwa.STEPS`, and the refinement.

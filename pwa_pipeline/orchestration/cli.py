@@ -1,5 +1,5 @@
 """Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end
-(``--jobs`` partitions at once, :mod:`.parallel_runs`); ``add-dataset``, ``list-datasets``
+(:mod:`.partition_runs`); ``add-dataset``, ``list-datasets``
 and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and
@@ -12,8 +12,9 @@ import sys
 import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
+from .credentials import mask_credentials, split_credentials
 from .instance import prepare_instance
-from .parallel_runs import default_jobs, run_resources, was_interrupted
+from .partition_runs import run_resources, was_interrupted
 from .paths import (
     MLFLOW_TRAINING_VIEW,
     default_datasets_path,
@@ -21,7 +22,6 @@ from .paths import (
     default_storage_dir,
     default_tracking_uri,
 )
-from .resources import mask_credentials, split_credentials
 
 
 def run(args: argparse.Namespace) -> int:
@@ -110,29 +110,21 @@ Open the UIs on the same stores:
 
 def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, resources: dict,
                     run_config: dict, selection):
-    """``(key, result, seconds)`` of each partition's run: in this process
-    (``dg.materialize``), ``--jobs`` at once with worker processes (:mod:`.parallel_runs`), or,
-    with ``--executor dask``, as ``sweep_dask`` runs on a dask cluster (a LocalCluster unless
-    ``--scheduler``). No partition starts after a run was interrupted (Ctrl-C)."""
-    from .parallel_runs import materialize_partition, partition_runs_at_once
+    """``(key, result, seconds)`` of each partition's run, one after the other: in this
+    process (``dg.materialize``), or, with ``--executor dask``, as ``sweep_dask`` runs whose
+    steps are tasks on a dask cluster (a LocalCluster unless ``--scheduler``). No partition
+    starts after a run was interrupted (Ctrl-C)."""
+    from .partition_runs import materialize_partition
 
     def announce(key: str) -> None:
         print(f"\n=== materialising {key} ===", flush=True)
 
-    def run_here(key: str):
-        return materialize_partition(defs, key, resources, instance, run_config, selection)
-
     if args.executor != "dask":
-        jobs = min(args.jobs, len(keys))
-        if jobs > 1:
-            yield from partition_runs_at_once(keys, jobs, run_here, run_config,
-                                              args.tracking_uri, resources["io_manager"],
-                                              announce)
-            return
         for key in keys:
             announce(key)
             t0 = time.perf_counter()
-            result = run_here(key)
+            result = materialize_partition(defs, key, resources, instance, run_config,
+                                           selection)
             yield key, result, time.perf_counter() - t0
             if was_interrupted(result):
                 return
@@ -233,7 +225,7 @@ def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
     from .doctor import find_orphans, repair
-    from .resources import MLflowTracker
+    from .tracking import MLflowTracker
 
     instance = prepare_instance()
     client = MLflowTracker(tracking_uri=args.tracking_uri).client()
@@ -268,14 +260,10 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
     p_run.add_argument("--executor", choices=("in-process", "dask"), default="in-process",
                        help="in-process (default): each partition one run, every step in "
-                            "one process (--jobs runs at once); dask: each partition one run "
-                            "of the sweep_dask job whose steps are tasks on a dask cluster (a LocalCluster "
-                            "started here, or --scheduler); partitions run one at a time")
-    p_run.add_argument("--jobs", type=int, default=default_jobs(), metavar="N",
-                       help=f"partitions run at once by the in-process executor: this process "
-                            f"runs one, N - 1 worker processes the others (default "
-                            f"{default_jobs()}: the CPUs this process may use, at most 2; 1: "
-                            f"one after the other in this process)")
+                            "this process; dask: each partition one run of the sweep_dask job "
+                            "whose steps are tasks on a dask cluster (a LocalCluster started "
+                            "here, or --scheduler). Partitions run one after the other; to run "
+                            "several at once, launch a backfill in the Dagster UI")
     p_run.add_argument("--scheduler", default="", metavar="ADDRESS",
                        help="address of a running dask scheduler, e.g. tcp://10.0.0.5:8786 "
                             "(implies --executor dask; its workers need pwa-pipeline installed "
@@ -331,8 +319,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "run" and args.scheduler:
         args.executor = "dask"
-    if args.command == "run" and args.jobs < 1:
-        parser.error(f"--jobs must be at least 1, got {args.jobs}")
     if args.command == "partitions":
         from .definitions import build_definitions, partitions_of
         from .partitions import all_keys

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import dagster as dg
 
+from .io_manager import PartitionedFileIOManager
 from .jobs import dask_run_config
-from .storage import PartitionedFileIOManager
 
 
 def sweep_dask_job() -> dg.JobDefinition:

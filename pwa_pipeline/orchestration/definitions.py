@@ -8,12 +8,13 @@ from ..config import HParamsFile
 from ..datasets import DATASETS
 from ..datasets.user import DatasetRegistry
 from .assets import build_assets
+from .io_manager import PartitionedFileIOManager
 from .jobs import build_jobs
 from .partitions import build_partitions
 from .paths import default_datasets_path
-from .resources import MLflowTracker, PipelineSettings
 from .schedules import build_sweep
-from .storage import PartitionedFileIOManager
+from .settings import PipelineSettings
+from .tracking import MLflowTracker
 
 
 def build_definitions(hparams_path: str | os.PathLike | None = None,

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import dagster as dg
 
-from .storage import STALE_SECONDS, sweep_stale_tmp
+from .files import STALE_SECONDS, sweep_stale_tmp
 
 
 @dataclass

@@ -21,7 +21,7 @@ from ..pwa.clustering import k_distances
 from ..pwa.embedding import EMBEDDINGS
 from ..pwa.regressors import lagged_matrix, n_initial
 from ..scoring.metrics import match_submodels
-from .storage import source_fingerprint
+from .caches import source_fingerprint
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

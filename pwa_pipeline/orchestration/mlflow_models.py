@@ -11,21 +11,15 @@ clusters, step 5, the rows' labels) stays in the ``pwa_model`` asset.
 """
 
 import copy
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import joblib
 import mlflow.pyfunc
 import numpy as np
 import pandas as pd
-from pandas.api.types import is_numeric_dtype
 
 from ..datasets import Dataset
 from .reporting import training_table
-
-_SCHEMA_ROWS = 100
-"""Rows of the training table from which its MLflow schema is inferred."""
 
 
 class Simulator(mlflow.pyfunc.PythonModel):
@@ -97,7 +91,7 @@ def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: lis
 
 @dataclass(frozen=True)
 class ModelToLog:
-    """What :meth:`~pwa_pipeline.orchestration.resources.MLflowTracker.log_run` logs as the
+    """What :meth:`~pwa_pipeline.orchestration.tracking.MLflowTracker.log_run` logs as the
     run's model: the simulator, an input example (for the signature), and the training
     data as an MLflow dataset (:func:`training_dataset`), logged as the run's dataset."""
 
@@ -112,56 +106,10 @@ class ModelToLog:
         return predictor_fingerprint(sim.model, sim.u_names, sim.y_names)
 
 
-def table_dataset(table: pd.DataFrame) -> "mlflow.data.pandas_dataset.PandasDataset":
-    """A training table as an MLflow dataset named ``training``, its schema taken from the
-    first rows.
-
-    MLflow infers a dataset's schema by testing every cell for a missing value (1.3 s a run
-    on the robot's 40k × 13 table); the table has no missing value (the data are validated
-    finite) and one type per column, so its first rows give the same schema. Its digest is
-    :func:`pandas_digest`'s, MLflow's without testing numeric cells.
-    """
-    from mlflow.data import from_pandas
-    from mlflow.models import infer_signature
-
-    data = from_pandas(table, name="training", digest=pandas_digest(table))
-    data.__dict__["schema"] = infer_signature(table.head(_SCHEMA_ROWS)).inputs
-    return data
-
-
-_TRAINING_DATASETS: OrderedDict[str, "mlflow.data.pandas_dataset.PandasDataset"] = OrderedDict()
-_KEPT_DATASETS = 4
-_DATASETS_LOCK = threading.Lock()
-
-
 def training_dataset(data: Dataset) -> "mlflow.data.pandas_dataset.PandasDataset":
-    """:func:`table_dataset` of ``data``'s :func:`~.reporting.training_table`, built once per
-    :attr:`~pwa_pipeline.datasets.Dataset.digest` in a process (the ``_KEPT_DATASETS`` most
-    recently used are kept): the three runs of every set of a sweep log the same one,
-    neither stacking the experiments nor hashing the table again."""
-    with _DATASETS_LOCK:
-        kept = _TRAINING_DATASETS.pop(data.digest, None)
-    if kept is None:
-        kept = table_dataset(training_table(data))
-    with _DATASETS_LOCK:
-        _TRAINING_DATASETS[data.digest] = kept  # most recently used last
-        while len(_TRAINING_DATASETS) > _KEPT_DATASETS:
-            _TRAINING_DATASETS.popitem(last=False)
-    return kept
+    """``data``'s :func:`~.reporting.training_table` as an MLflow dataset named ``training``,
+    digested by :attr:`~pwa_pipeline.datasets.Dataset.digest` (a hash of every sample, where
+    MLflow's own digest reads the first rows only)."""
+    from mlflow.data import from_pandas
 
-
-def pandas_digest(table: pd.DataFrame) -> str:
-    """MLflow's digest of a table (``mlflow.data.digest_utils.compute_pandas_digest``: its
-    first rows' text and numeric columns hashed with its length and column names), without
-    the type test of every cell of the numeric columns, which hold no text (on the robot's
-    40k × 13 training table, most of the time MLflow's digest takes).
-    """
-    from mlflow.data.digest_utils import MAX_ROWS, get_normalized_md5_digest
-
-    text = table.columns[[not is_numeric_dtype(table[c]) and bool(table[c].map(type).eq(str).all())
-                          for c in table.columns]]
-    head = table.head(MAX_ROWS)
-    head = head[text.union(head.select_dtypes(include=[np.number]).columns)]
-    return get_normalized_md5_digest([pd.util.hash_pandas_object(head).values,
-                                      np.int64(len(table))]
-                                     + [str(c).encode() for c in table.columns])
+    return from_pandas(training_table(data), name="training", digest=data.digest[:20])

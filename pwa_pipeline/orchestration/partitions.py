@@ -7,7 +7,7 @@ import dagster as dg
 from ..config import HParamsFile
 from ..datasets import DATASETS, default_kuka_path
 from ..datasets.kuka import find_kuka
-from .resources import PipelineSettings
+from .settings import PipelineSettings
 
 #: What ``python -m pwa_pipeline run`` materialises unless told otherwise.
 DEFAULT_SETS = ("paper", "default")

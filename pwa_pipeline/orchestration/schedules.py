@@ -4,7 +4,7 @@ import dagster as dg
 
 from .jobs import SWEEP_SELECTION
 from .partitions import runnable_keys
-from .resources import PipelineSettings
+from .settings import PipelineSettings
 
 
 def build_sweep(partitions_def: dg.MultiPartitionsDefinition, settings: PipelineSettings

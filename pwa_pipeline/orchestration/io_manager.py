@@ -1,0 +1,95 @@
+"""The asset store: each asset partition a file under one folder.
+
+A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step objects and
+estimators, the core's frozen dataclasses) as a signed pickle (:mod:`.signed_pickles`).
+Files live at ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}`` (an unpartitioned
+asset: ``<base_dir>/<asset>.{parquet,pkl}``); the names are checked against
+:data:`pwa_pipeline._validation.NAME_PATTERN` and every path is resolved and checked to stay
+inside the store. Every write goes to a temporary file in the same folder and is moved into
+place, so a failed or killed run never leaves a half-written file; temporary files a killed
+run left behind are removed once they are an hour old.
+"""
+
+from pathlib import Path
+
+import dagster as dg
+import pandas as pd
+
+from .._validation import check_name
+from .files import atomic_write, inside, sweep_stale_tmp
+from .partitions import split_key
+from .paths import default_storage_dir
+from .signed_pickles import load_object, save_object, signing_key
+
+#: Input metadata key: load every materialised partition of the upstream asset as a dict.
+ALL_PARTITIONS = "all_partitions"
+
+
+class PartitionedFileIOManager(dg.ConfigurableIOManager):
+    """Stores each asset partition as Parquet (tables) or a signed pickle (everything else).
+
+    ``base_dir`` empty means ``<project>/storage``. See the module doc for the layout.
+    """
+
+    base_dir: str = ""
+
+    def _root(self) -> Path:
+        return Path(self.base_dir).resolve() if self.base_dir else default_storage_dir()
+
+    def _paths(self, asset_key: dg.AssetKey, partition_key: str | None) -> dict[str, Path]:
+        """The two files one asset partition (or an unpartitioned asset) may be stored as, by
+        format."""
+        asset = [check_name(part, "asset") for part in asset_key.path]
+        if partition_key is None:
+            return {fmt: inside(self._root(), *asset[:-1], f"{asset[-1]}.{fmt}")
+                    for fmt in ("parquet", "pkl")}
+        dataset, hparams = split_key(partition_key)
+        check_name(dataset, "data set")
+        check_name(hparams, "hyper-parameter set")
+        return {fmt: inside(self._root(), *asset, dataset, f"{hparams}.{fmt}")
+                for fmt in ("parquet", "pkl")}
+
+    def handle_output(self, context: dg.OutputContext, obj) -> None:
+        key = context.asset_partition_key if context.has_asset_partitions else None
+        paths = self._paths(context.asset_key, key)
+        sweep_stale_tmp(paths["pkl"].parent)
+        if isinstance(obj, pd.DataFrame):
+            path = paths["parquet"]
+            atomic_write(path, lambda p: obj.to_parquet(p, index=False))
+        else:
+            path = paths["pkl"]
+            save_object(path, obj, signing_key(self._root()))
+        for other in paths.values():
+            if other != path:
+                other.unlink(missing_ok=True)
+        context.add_output_metadata({"path": dg.MetadataValue.path(str(path))})
+
+    def load(self, asset_key: dg.AssetKey, partition_key: str | None):
+        """The stored value of an asset (partition), or FileNotFoundError naming what was
+        never materialised."""
+        paths = self._paths(asset_key, partition_key)
+        if paths["parquet"].is_file():
+            return pd.read_parquet(paths["parquet"])
+        if not paths["pkl"].is_file():
+            raise FileNotFoundError(
+                f"{'/'.join(asset_key.path)}"
+                f"{'' if partition_key is None else f' for partition {partition_key}'} has not "
+                f"been materialised (no {paths['pkl']})"
+            )
+        return load_object(paths["pkl"], signing_key(self._root()))
+
+    def load_input(self, context: dg.InputContext):
+        """One stored value; for an input declared with ``metadata={ALL_PARTITIONS: True}``
+        (an unpartitioned asset reading every partition upstream), ``{partition key: value}``
+        of the partitions materialised, the others left out."""
+        if not context.has_asset_partitions:
+            return self.load(context.asset_key, None)
+        if not (context.definition_metadata or {}).get(ALL_PARTITIONS):
+            return self.load(context.asset_key, context.asset_partition_key)
+        found = {}
+        for key in context.asset_partition_keys:
+            try:
+                found[str(key)] = self.load(context.asset_key, str(key))
+            except FileNotFoundError:
+                continue
+        return found

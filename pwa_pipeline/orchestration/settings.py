@@ -1,0 +1,91 @@
+"""The ``settings`` resource: where the pipeline reads its inputs and keeps its caches."""
+
+import os
+from pathlib import Path
+
+import dagster as dg
+
+from ..config import Configuration, HParamsFile
+from ..datasets import Dataset, load_dataset
+from ..datasets.user import DatasetRegistry
+from .paths import default_datasets_path, default_storage_dir
+
+
+class PipelineSettings(dg.ConfigurableResource):
+    """Where the pipeline reads its inputs and caches local models.
+
+    Attributes
+    ----------
+    kuka_path : str
+        The KUKA ``.mat`` file or its folder; empty: ``$PWA_KUKA_DATA`` or
+        ``../shared/data/kuka-kr300`` beside the project.
+    hparams_path : str
+        The hyper-parameter file. :func:`~pwa_pipeline.orchestration.definitions.build_definitions`
+        sets it to the file its partitions were read from; empty: ``$PWA_HPARAMS`` or
+        ``data/hparams.toml``.
+    datasets_path : str
+        The registry of the user's data sets (``python -m pwa_pipeline add-dataset``); set by
+        ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
+        ``<project>/storage/datasets.json``.
+    cache_dir : str
+        Cache of local models, of step 5, of the baselines and of scores and figures; empty:
+        ``<project>/storage/cache``.
+    cache_local_models : bool
+        Reuse local models across hyper-parameter sets that differ only in later steps.
+    cache_sub_models : bool
+        Reuse step 5's refinement (``RefinedSubModels(memory=...)``) across sets whose
+        clusterings consolidate to the same sub-models (e.g. sets that differ only in ε).
+    cache_baselines : bool
+        Reuse the fitted baselines across the sets of a data set with the same baseline
+        settings.
+    cache_scores : bool
+        Reuse a model's scores and figures (prediction; for a PWA model also its switching
+        and regions figures) across sets whose fitted models predict alike
+        (:func:`~pwa_pipeline.orchestration.mlflow_models.predictor_fingerprint`): a
+        baseline shared by the sets of a data set, or a PWA model that sets differing only
+        in ε or MinPts end in.
+    """
+
+    kuka_path: str = ""
+    hparams_path: str = ""
+    datasets_path: str = ""
+    cache_dir: str = ""
+    cache_local_models: bool = True
+    cache_sub_models: bool = True
+    cache_baselines: bool = True
+    cache_scores: bool = True
+
+    def with_files(self, hparams_path: str | os.PathLike,
+                   datasets_path: str | os.PathLike) -> "PipelineSettings":
+        """A copy reading the hyper-parameter file and data-set registry given.
+
+        (pydantic's ``model_copy(update=...)`` changes the attribute but not the
+        configuration Dagster runs with, so the copy is built anew.)
+        """
+        values = {name: getattr(self, name) for name in type(self).model_fields}
+        return type(self)(**{**values, "hparams_path": str(hparams_path),
+                             "datasets_path": str(datasets_path)})
+
+    def hparams(self) -> HParamsFile:
+        """The hyper-parameter file, read and checked."""
+        return HParamsFile(self.hparams_path or None)
+
+    def registry(self) -> DatasetRegistry:
+        """The user's registered data sets."""
+        return DatasetRegistry(self.datasets_path or default_datasets_path())
+
+    def dataset(self, name: str) -> Dataset:
+        """The named data set (raises FileNotFoundError naming the path if its file is
+        absent)."""
+        return load_dataset(name, kuka_path=self.kuka_path or None, registry=self.registry())
+
+    def configuration(self, hparams: str, dataset: str) -> Configuration:
+        """The resolved configuration of one partition; a registered data set brings its
+        orders (see :meth:`HParamsFile.configuration`)."""
+        registry = self.registry()
+        orders = registry.get(dataset).orders() if dataset in registry.names() else None
+        return self.hparams().configuration(hparams, dataset, orders)
+
+    def cache_root(self) -> Path:
+        """The cache folder (local models, step 5, baselines, scores and figures)."""
+        return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"

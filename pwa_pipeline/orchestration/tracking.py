@@ -1,0 +1,362 @@
+"""The ``mlflow`` resource: one MLflow run per method and partition materialisation."""
+
+import json
+import logging
+import os
+import tempfile
+import urllib.error
+import urllib.request
+from importlib.metadata import version
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+
+from .credentials import mask_credentials, split_credentials, user_and_password
+from .paths import MLFLOW_TRAINING_VIEW, default_mlflow_ui_url, default_tracking_uri
+
+if TYPE_CHECKING:
+    from .mlflow_models import ModelToLog
+
+#: What a logged model needs to load elsewhere (pinned to the versions that logged it).
+REQUIREMENTS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn", "pandas")
+#: Run tags that say where a run's model is (see :meth:`MLflowTracker.log_run`).
+MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
+#: The experiment tag of MLflow 3 for classic model training (not GenAI); MLflow 3.17's UI
+#: follows its own GenAI / model-training switch instead, so links add ``MLFLOW_TRAINING_VIEW``.
+EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
+#: sqlite tracking stores whose schema this process has created or checked.
+_READY_STORES: set[str] = set()
+
+
+class MLflowTracker(dg.ConfigurableResource):
+    """Logs one MLflow run per method and partition materialisation.
+
+    One experiment per data set (``<experiment_prefix>/<dataset>``); each run carries the
+    hyper-parameters as params, the scores as metrics, the Dagster run id and partition as
+    tags, and the parameter matrices and score table as artifacts.
+
+    Failures are bounded: a tracking server is probed first (``timeout_seconds``), and every
+    MLflow request then gets ``request_timeout`` seconds and ``request_retries`` retries
+    (MLflow's own defaults, 120 s and 7 retries, stall an asset for minutes on a broken
+    server). Credentials in the URI (``http://user:password@host``) are used for the probe and
+    never printed. A new sqlite store is created under a file lock, so runs that start at once
+    do not race in MLflow's schema migration.
+
+    Attributes
+    ----------
+    tracking_uri : str
+        Empty: ``$MLFLOW_TRACKING_URI`` or the embedded ``sqlite:///<project>/mlflow.db``.
+    experiment_prefix : str
+    ui_url : str
+        Where the MLflow UI of a local (sqlite) store is served; empty:
+        ``$PWA_MLFLOW_UI_URL`` or ``http://127.0.0.1:5000`` (``mlflow ui``'s default). Run
+        links point there, or at the tracking server itself, in the model-training view.
+    timeout_seconds : float
+        How long to wait for a tracking server's health probe before failing.
+    request_timeout : float
+        Seconds per MLflow HTTP request.
+    request_retries : int
+        Retries per MLflow HTTP request.
+    """
+
+    tracking_uri: str = ""
+    experiment_prefix: str = "pwa-pipeline"
+    ui_url: str = ""
+    timeout_seconds: float = 5.0
+    request_timeout: int = 10
+    request_retries: int = 2
+
+    def uri(self) -> str:
+        """The tracking URI in use."""
+        return self.tracking_uri or default_tracking_uri()
+
+    def check_reachable(self) -> None:
+        """Fail fast, with the URI (credentials masked) in the message, if the tracking store
+        cannot be used."""
+        uri = self.uri()
+        if uri.startswith(("http://", "https://")):
+            url, auth = split_credentials(uri)
+            request = urllib.request.Request(url.rstrip("/") + "/health")
+            if auth:
+                request.add_header("Authorization", "Basic " + auth)
+            try:
+                with urllib.request.urlopen(request, timeout=self.timeout_seconds) as resp:
+                    if resp.status != 200:
+                        raise OSError(f"HTTP {resp.status}")
+            except (OSError, urllib.error.URLError) as exc:
+                raise dg.Failure(
+                    description=(
+                        f"MLflow tracking server {mask_credentials(uri)} cannot be reached "
+                        f"({exc}). Start it, or unset MLFLOW_TRACKING_URI to use the embedded "
+                        f"store; assets already materialised are kept."
+                    )
+                ) from None
+        elif (db := self._sqlite_db()) is not None:
+            folder = db.parent
+            if not os.access(folder, os.W_OK):
+                raise dg.Failure(description=f"MLflow store folder {folder} is not writable")
+
+    def client(self):
+        """An MLflow client on the tracking URI, the store created if new (see the class doc)."""
+        import mlflow
+        from mlflow.tracking import MlflowClient
+
+        uri = self.uri()
+        if uri.startswith(("http://", "https://")):
+            # read by MLflow at each request; process-wide, as MLflow offers no other way.
+            # The credentials go to MLflow's own variables, so that no URI it puts in an
+            # error message holds the password
+            uri, user, password = user_and_password(uri)
+            os.environ.update({
+                "MLFLOW_HTTP_REQUEST_TIMEOUT": str(self.request_timeout),
+                "MLFLOW_HTTP_REQUEST_MAX_RETRIES": str(self.request_retries),
+                "MLFLOW_HTTP_REQUEST_BACKOFF_FACTOR": "1",
+                **({} if user is None else {"MLFLOW_TRACKING_USERNAME": user}),
+                **({} if password is None else {"MLFLOW_TRACKING_PASSWORD": password})})
+        # Artifact repositories of a tracking server resolve through the global URI.
+        mlflow.set_tracking_uri(uri)
+        if (db := self._sqlite_db()) is not None and uri not in _READY_STORES:
+            from filelock import FileLock
+
+            # the client's first use of a store creates and migrates its schema
+            with FileLock(f"{db}.lock"):
+                client = MlflowClient(tracking_uri=uri)
+                client.search_experiments(max_results=1)
+            _READY_STORES.add(uri)
+            return client
+        return MlflowClient(tracking_uri=uri)
+
+    def _sqlite_db(self) -> Path | None:
+        """The database file of an embedded sqlite store; None for a tracking server."""
+        uri = self.uri()
+        return Path(uri[len("sqlite:///"):]) if uri.startswith("sqlite:///") else None
+
+    def _experiment(self, client, dataset: str) -> str:
+        """Get or create the data set's experiment; another process creating it at the same
+        moment is fine."""
+        from mlflow.exceptions import MlflowException
+
+        name = f"{self.experiment_prefix}/{dataset}"
+        exp = client.get_experiment_by_name(name)
+        if exp is not None:
+            if exp.tags.get(EXPERIMENT_KIND[0]) is None:
+                client.set_experiment_tag(exp.experiment_id, *EXPERIMENT_KIND)
+            return exp.experiment_id
+        location = None
+        if (db := self._sqlite_db()) is not None:
+            # beside the database, never relative to whichever process's working directory
+            location = (db.parent / "mlartifacts" / dataset).as_uri()
+        try:
+            return client.create_experiment(name, artifact_location=location,
+                                            tags=dict([EXPERIMENT_KIND]))
+        except MlflowException:
+            exp = client.get_experiment_by_name(name)
+            if exp is None:
+                raise
+            return exp.experiment_id
+
+    @staticmethod
+    def _unmark_earlier(client, exp_id: str, run_id: str, hparams: str, method: str) -> None:
+        """Tag the earlier runs of the same set and method ``latest=false`` (``run_id`` gets
+        ``latest=true`` with its last tags), so that re-runs are told apart in the UI
+        (filter ``tags.latest = 'true'``)."""
+        earlier = client.search_runs(
+            [exp_id], filter_string=f"tags.hparams = '{hparams}' and tags.method = '{method}' "
+                                    f"and tags.latest = 'true'")
+        for run in earlier:
+            if run.info.run_id != run_id:
+                client.set_tag(run.info.run_id, "latest", "false")
+
+    @staticmethod
+    def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
+        """The model tags (``model_uri``, ``model_id``, ``model_run_id``) of the latest
+        finished run of ``method`` that logged or reused a model with this
+        :meth:`~.mlflow_models.ModelToLog.fingerprint`, if that model is still there and
+        ready (not deleted in the UI, say); else None."""
+        from mlflow.entities import LoggedModelStatus
+        from mlflow.exceptions import MlflowException
+
+        runs = client.search_runs(
+            [exp_id], max_results=1,
+            filter_string=f"tags.method = '{method}' and attributes.status = 'FINISHED' "
+                          f"and tags.model_fingerprint = '{fingerprint}'")
+        tags = runs[0].data.tags if runs else {}
+        if not set(MODEL_TAGS) <= tags.keys():
+            return None
+        try:
+            status = client.get_logged_model(tags["model_id"]).status
+        except MlflowException:  # deleted
+            return None
+        return {k: tags[k] for k in MODEL_TAGS} if status == LoggedModelStatus.READY else None
+
+    def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog",
+                   logged: dict | None) -> dict:
+        """Log the training table as the run's dataset, and ``model`` as its model, logged
+        and registered, unless ``logged`` (the tags of :meth:`_logged_model`) names it
+        already logged: then the run is linked to that model as its output. Returns the
+        run's tags for its model: :data:`MODEL_TAGS`, and for a linked model a description
+        (``mlflow.note.content``) that says which run logged it."""
+        import mlflow
+        from mlflow.entities import LoggedModelOutput
+
+        client = self.client()
+        # the fluent log_input and log_model need an active run; this one ends later, in
+        # log_run, with its status
+        with mlflow.start_run(run_id=run_id):
+            mlflow.log_input(model.training, context="training")
+            if logged is None:
+                info = _log_pyfunc(model, registered_name)
+                return {"model_uri": info.model_uri, "model_id": info.model_id,
+                        "model_run_id": run_id}
+        client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
+        return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
+
+    def run_url(self, run: "LoggedRun") -> str:
+        """The link to a run in the MLflow UI (credentials never included)."""
+        uri = self.uri()
+        base = split_credentials(uri)[0] if uri.startswith(("http://", "https://")) \
+            else self.ui_url or default_mlflow_ui_url()
+        return (f"{base.rstrip('/')}/#/experiments/{run.experiment_id}/runs/{run.run_id}"
+                f"{MLFLOW_TRAINING_VIEW}")
+
+    def log_run(
+        self,
+        *,
+        dataset: str,
+        hparams: str,
+        method: str,
+        params: dict,
+        metrics: dict[str, float],
+        tags: dict[str, str],
+        artifacts: dict[str, object],
+        model: "ModelToLog | None" = None,
+        run_name: str | None = None,
+    ) -> "LoggedRun":
+        """Create, fill and close one run; returns its id and its experiment's.
+
+        ``artifacts`` maps file names to dicts (written as JSON), DataFrames (as CSV), text
+        or bytes (e.g. a rendered PNG; as they are), stored in one call.
+        ``model`` is logged as the run's MLflow model (a pyfunc with signature and input
+        example, registered as ``<prefix>.<dataset>.<method>``) and its training table as the
+        run's dataset, unless a finished run of the method in the data set's experiment has
+        the same model (equal :meth:`~.mlflow_models.ModelToLog.fingerprint`, e.g. a baseline
+        shared by the sets of a sweep): then it is not logged or registered again, but linked
+        to this run as its output, and the run's description links the run that logged it
+        (runs of other processes that score the same model at the same moment may each log
+        it).
+        Either way the run is tagged ``model_uri`` (where the model is), ``model_id`` (its
+        MLflow logged model), ``model_run_id`` (the run that logged it) and
+        ``model_fingerprint``.
+        ``run_name`` defaults to ``<method>|<hparams>``.
+        """
+        from mlflow.entities import Metric, Param, RunTag
+
+        self.check_reachable()
+        client = self.client()
+        exp_id = self._experiment(client, dataset)
+        run = client.create_run(exp_id, run_name=run_name or f"{method}|{hparams}",
+                                tags={"dataset": dataset, "hparams": hparams,
+                                      "method": method, **tags})
+        run_id = run.info.run_id
+        batch, batched = None, False
+        try:
+            # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
+            # scores.csv artifact keeps the exact value).
+            values = {k: float(v) for k, v in metrics.items() if v is not None}
+            batch = {"metrics": [Metric(k, float(np.clip(v, -1e300, 1e300)), 0, 0)
+                                 for k, v in values.items()],
+                     "params": [Param(k, str(v))
+                                for k, v in {"method": method, **params}.items()]}
+            if artifacts:  # one call to the store for all of them
+                with tempfile.TemporaryDirectory() as tmp:
+                    for name, obj in artifacts.items():
+                        _write_artifact(Path(tmp) / name, obj)
+                    client.log_artifacts(run_id, tmp)
+            fingerprint = model.fingerprint() if model is not None else None
+            last = {} if model is None else {**self._log_model(
+                run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
+                self._logged_model(client, exp_id, method, fingerprint)),
+                "model_fingerprint": fingerprint}
+            self._unmark_earlier(client, exp_id, run_id, hparams, method)
+            # one batch: the metrics, parameters and the tags known last (``tags`` were set
+            # when the run was created)
+            batched = True
+            client.log_batch(run_id, **batch, tags=[
+                RunTag(k, v) for k, v in {**last, "latest": "true"}.items()])
+            client.set_terminated(run_id, "FINISHED")
+        except BaseException as exc:
+            # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
+            # as KILLED rather than leave it RUNNING forever, with the scores it has
+            status = "FAILED" if isinstance(exc, Exception) else "KILLED"
+            try:
+                if batch is not None and not batched:
+                    client.log_batch(run_id, **batch)
+                client.set_terminated(run_id, status)
+            except Exception as why:  # e.g. a sqlite store still locked by the write it broke
+                logging.getLogger(__name__).warning(
+                    f"MLflow run {run_id} could not be marked {status} ({why}); it stays "
+                    f"RUNNING until `python -m pwa_pipeline doctor --repair`")
+            raise  # the error or interrupt itself, never the failure to mark the run
+        return LoggedRun(run_id, exp_id)
+
+
+class LoggedRun(NamedTuple):
+    """A run :meth:`MLflowTracker.log_run` logged (what :meth:`MLflowTracker.run_url` links
+    to, without asking the store)."""
+
+    run_id: str
+    experiment_id: str
+
+
+def _log_pyfunc(model: "ModelToLog", registered_name: str):
+    """Log ``model`` as the active run's pyfunc model, registered as ``registered_name``;
+    returns MLflow's ``ModelInfo``."""
+    import mlflow
+    from mlflow.models import infer_signature
+
+    output = model.simulator.predict(None, model.input_example)
+    # MLflow warns that a python_model object is stored with cloudpickle, at every log;
+    # the module doc of mlflow_models says what loading needs instead
+    pyfunc_log = logging.getLogger("mlflow.pyfunc")
+    level = pyfunc_log.level
+    pyfunc_log.setLevel(logging.ERROR)
+    try:
+        return mlflow.pyfunc.log_model(
+            name="model", python_model=model.simulator,
+            signature=infer_signature(model.input_example, output),
+            input_example=model.input_example, registered_model_name=registered_name,
+            # given, not inferred: inference imports and inspects the environment
+            pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
+    finally:
+        pyfunc_log.setLevel(level)
+
+
+def _reuse_note(client, logged: dict) -> str:
+    """The description of a run that reuses the model another run logged (``logged``: the
+    tags of ``MLflowTracker._logged_model``): a link to that run and how to load the model."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        source = client.get_run(logged["model_run_id"]).info
+        by = (f"[{source.run_name}](#/experiments/{source.experiment_id}/runs/"
+              f"{source.run_id}{MLFLOW_TRAINING_VIEW})")
+    except MlflowException:  # that run purged from the store, its model kept
+        by = f"{logged['model_run_id']} (no longer in the store)"
+    return (f"The model of this run was logged by run {by}, which scored the same fitted "
+            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`.")
+
+
+def _write_artifact(path: Path, obj) -> None:
+    """Write an artifact of :meth:`MLflowTracker.log_run` to ``path``: bytes as they are, a
+    DataFrame as CSV, text as it is, anything else as JSON."""
+    if isinstance(obj, bytes):
+        path.write_bytes(obj)
+    elif isinstance(obj, pd.DataFrame):
+        path.write_text(obj.to_csv(index=False), encoding="utf-8")
+    elif isinstance(obj, str):
+        path.write_text(obj, encoding="utf-8")
+    else:
+        path.write_text(json.dumps(obj, indent=2, default=float), encoding="utf-8")

@@ -1,0 +1,116 @@
+"""``run``: partitions one after the other in this process, on shared stores; a failure or
+an interrupt keeps what was computed."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import dagster as dg
+import pandas as pd
+
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.paths import default_storage_dir
+
+
+def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
+        tmp_path, mlflow_template, monkeypatch, capsys):
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    d = make_hure_vasak(n_samples=1200, seed=7)
+    frame = pd.DataFrame({"u1": d.u[:, 0], "u2": d.u[:, 1], "y1": d.y[:, 0], "y2": d.y[:, 1]})
+    for name in ("plant", "mill", "gone"):
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+        assert main(["add-dataset", name, str(tmp_path / f"{name}.csv"), "--u", "u1", "u2",
+                     "--y", "y1", "y2"]) == 0
+    (tmp_path / "gone.csv").unlink()  # its run fails: the others' results must stay
+    capsys.readouterr()
+    keys = ["plant|default", "mill|default", "gone|default"]
+    args = ["run"] + [a for k in keys for a in ("--partition", k)]
+    assert main(args) == 1
+    out = capsys.readouterr().out
+    assert "gone|default: FAILED after" in out
+    for key in keys[:2]:
+        assert f"{key}: mean over the outputs" in out
+        assert f"  {key}: " in out.split("Summary")[1]  # its summary line
+    instance = dg.DagsterInstance.get()
+    runs = {r.tags["dagster/partition"]: r for r in instance.get_runs()
+            if "dagster/partition" in r.tags}
+    assert {k: runs[k].status for k in keys} == {
+        "plant|default": dg.DagsterRunStatus.SUCCESS,
+        "mill|default": dg.DagsterRunStatus.SUCCESS,
+        "gone|default": dg.DagsterRunStatus.FAILURE}
+    pids = {e.dagster_event.pid for k in keys for e in instance.all_logs(runs[k].run_id)
+            if e.is_dagster_event and e.dagster_event.pid is not None}
+    assert pids == {os.getpid()}  # every step of every run in this process
+    client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
+    for dataset in ("plant", "mill"):
+        exp = client.get_experiment_by_name(f"pwa-pipeline/{dataset}")
+        logged = client.search_runs([exp.experiment_id],
+                                    filter_string="tags.method != 'leaderboard'")
+        assert sorted(r.data.tags["method"] for r in logged) == [
+            "linear_arx", "pwa", "subspace"]
+    assert client.get_experiment_by_name("pwa-pipeline/gone") is None
+    store = PartitionedFileIOManager(base_dir=str(default_storage_dir()))
+    for key in keys[:2]:
+        model = store.load(dg.AssetKey("pwa_model"), key)
+        assert f"  {key}: {model.n_submodels_} PWA sub-model(s)" in out
+
+
+def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflow_template,
+                                                                  robot):
+    """Ctrl-C (SIGINT to the command's process group, as a terminal sends it) while a robot
+    partition with local sets of 250 rows runs: it ends as an interrupted run, the next
+    never starts, exit status 130, and no run is left STARTED. An interrupt can wait for
+    the step in flight to end, and one that a library dropped is sent again 5 s later, so the
+    command is given 150 s to end."""
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    (tmp_path / "hparams.toml").write_text(
+        '[longer.kuka_robot]\npreset = "default"\nna = 2\nnb = 2\n'
+        'local_models.n_rho = 250\n\n'
+        '[quick.hure_vasak]\npreset = "default"\nna = 1\nnb = 1\n')
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
+    env["PWA_PIPELINE_HOME"] = str(tmp_path)
+    env["PWA_HPARAMS"] = str(tmp_path / "hparams.toml")
+    keys = ["kuka_robot|longer", "hure_vasak|quick"]
+    out = tmp_path / "out.txt"
+    with open(out, "w") as sink:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "pwa_pipeline", "run",
+             *[a for k in keys for a in ("--partition", k)]], env=env, stdout=sink,
+            stderr=subprocess.STDOUT, start_new_session=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.time() + 120
+    while "local_models" not in out.read_text():  # the run is fitting
+        assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        status = proc.wait(timeout=150)
+    except subprocess.TimeoutExpired:  # what each process was doing goes into the failure
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("not ended 150 s after Ctrl-C:\n" + out.read_text()[-6000:])
+    assert status == 130
+    text = out.read_text()
+    summary = text.split("\nSummary\n")[1]
+    assert f"  {keys[0]}: INTERRUPTED after" in summary
+    assert f"  not run to the end: {keys[1]}" in summary
+    assert f"=== materialising {keys[1]} ===" not in text
+    os.environ["DAGSTER_HOME"] = str(tmp_path / ".dagster_home")
+    try:
+        with dg.DagsterInstance.get() as instance:
+            statuses = [r.status for r in instance.get_runs()]
+    finally:
+        del os.environ["DAGSTER_HOME"]
+    assert statuses == [dg.DagsterRunStatus.FAILURE]
