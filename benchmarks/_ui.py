@@ -274,10 +274,10 @@ def launch_from_sweep(page, stack: UIStack, dataset: str, hparams: str) -> str:
     page.goto(f"{stack.dagster_url}/locations/{LOCATION}/jobs/sweep")
     page.get_by_role("button", name="Materialize all…").click()
     dialog = page.get_by_role("dialog").first
-    for key in (dataset, hparams):  # the dimensions in order: dataset, then hparams
-        dialog.get_by_text("Select a partition or create one").first.click()
-        page.locator("[role=dialog]").nth(1).get_by_text(key, exact=True).first.click()
-        dialog.get_by_text("Launch runs to materialize").click()  # closes the list
+    dialog.get_by_text("Select a partition or create one").first.click()
+    page.locator("[role=dialog]").nth(1).get_by_text(f"{dataset}|{hparams}", exact=True) \
+        .first.click()
+    dialog.get_by_text("Launch runs to materialize").click()  # closes the list
     page.get_by_role("button", name="Launch 1 run").click()
     toast = page.get_by_text("Launched run")
     toast.wait_for(timeout=30_000)
@@ -303,6 +303,30 @@ def wait_for_run(page, stack: UIStack, run_id: str, timeout: float = 300.0) -> d
             return run
         time.sleep(1)
     raise TimeoutError(f"run {run_id} not finished after {timeout:.0f} s")
+
+
+def watch_live_run(page, stack: UIStack, run_id: str, timeout: float = 300.0
+                   ) -> tuple[dict, set[str]]:
+    """Watch the run's page, never reloading it, until the run has ended and the page says
+    so; returns the run as the API reports it and the steps the page listed under
+    *Executing* while the API said the run was going."""
+    page.goto(f"{stack.dagster_url}/runs/{run_id}")
+    executing: set[str] = set()
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < timeout:
+        run = stack.run(run_id)
+        lines = [line.strip() for line in page.inner_text("body").splitlines() if line.strip()]
+        if run["status"] == "STARTED":
+            start = next((i for i, line in enumerate(lines) if line.startswith("Executing (")),
+                         None)
+            if start is not None:
+                end = next(i for i in range(start, len(lines)) if lines[i].startswith("Errored"))
+                executing |= {line for line in lines[start + 1:end]
+                              if line.replace("_", "").isalnum()}
+        if run["status"] in _ENDED and _ENDED[run["status"]] in lines:
+            return run, executing
+        time.sleep(0.3)
+    raise TimeoutError(f"run {run_id}: its page did not show its end within {timeout:.0f} s")
 
 
 def open_figure(page, stack: UIStack, asset: str, key: str):

@@ -10,6 +10,27 @@ from pwa_pipeline import PWARX
 from pwa_pipeline.datasets import load_kuka, make_hure_vasak
 from pwa_pipeline.scoring.metrics import match_submodels
 
+#: Set (to anything non-empty) to turn the skips of tests that need a system package (Debian's
+#: chromium, PostgreSQL) into failures: ``.ci/run`` installs them and sets it.
+REQUIRE_SYSTEM = "PWA_REQUIRE_SYSTEM_TESTS"
+
+
+@pytest.fixture(scope="session")
+def system_package():
+    """``check(what, problem)``: nothing when ``problem`` is None; else skip the test saying
+    what is missing and how to get it, or fail where ``$PWA_REQUIRE_SYSTEM_TESTS`` is set."""
+
+    def check(what: str, problem: str | None) -> None:
+        if problem is None:
+            return
+        message = (f"{what}: {problem}. `bash .ci/run` installs it and runs the whole suite; "
+                   f"{REQUIRE_SYSTEM}=1 makes this a failure instead of a skip")
+        if os.environ.get(REQUIRE_SYSTEM):
+            pytest.fail(message, pytrace=False)
+        pytest.skip(message)
+
+    return check
+
 
 def pytest_configure(config):
     """Keep the developer's own registered data sets out of the tests (set before any test

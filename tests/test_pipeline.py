@@ -86,15 +86,16 @@ def test_schedule_requests_every_partition_once():
     requests = list(schedule(ctx))
     keys, skipped = runnable_keys(partitions_of(defs), defs.resources["settings"])
     assert sorted(r.partition_key for r in requests) == sorted(keys)
-    # the robot's structure has values for the robot only
-    assert list(skipped) == ["hure_vasak|robot"] and "kuka_robot|robot" in keys
+    # the robot's structure has values for the robot only: no other partition of it
+    assert skipped == {} and "kuka_robot|robot" in keys and "hure_vasak|robot" not in keys
     assert len({r.run_key for r in requests}) == len(requests) == len(keys)
     assert "hure_vasak|paper" in keys and "kuka_robot|default" in keys
 
 
 def test_partition_keys_parse_and_reject_typos():
     assert split_key("kuka_robot|paper") == ("kuka_robot", "paper")
-    with pytest.raises(ValueError, match="unknown partition 'kuka|paper'.*hparams in \\['paper'"):
+    with pytest.raises(ValueError, match=r"unknown partition 'kuka\|paper'; the partitions are "
+                                         r"\['hure_vasak\|paper', "):
         check_keys(partitions_of(defs), ["hure_vasak|paper", "kuka|paper"])
 
 

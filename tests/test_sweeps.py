@@ -62,16 +62,13 @@ def test_schedule_requests_are_sweep_runs_with_partition_keys():
     requests = list(schedule(ctx))
     assert requests and all(r.job_name in (None, "sweep") for r in requests)
     assert {r.partition_key for r in requests} <= set(all_keys(partitions_of(defs)))
-    # what the daemon launches: sweep runs tagged with the partition and its dimensions
+    # what the daemon launches: sweep runs tagged with the partition
     sweep = repo.get_job("sweep")
     for request in requests:
         tags = request.with_resolved_tags_and_config(
             target_definition=sweep, dynamic_partitions_requests=[],
             dynamic_partitions_store=None).tags
-        dataset, hparams = request.partition_key.split("|")
         assert tags["dagster/partition"] == request.partition_key
-        assert (tags["dagster/partition/dataset"], tags["dagster/partition/hparams"]) == (
-            dataset, hparams)
 
 
 def test_leaderboard_ranks_by_free_run_and_puts_diverged_runs_last():

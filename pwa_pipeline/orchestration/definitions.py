@@ -60,7 +60,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None,
     )
 
 
-def partitions_of(defs: dg.Definitions) -> dg.MultiPartitionsDefinition:
+def partitions_of(defs: dg.Definitions) -> dg.StaticPartitionsDefinition:
     """The partitions every partitioned asset of ``defs`` shares."""
     return next(a.partitions_def for a in defs.assets if a.partitions_def is not None)
 

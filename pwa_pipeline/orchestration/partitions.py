@@ -1,4 +1,11 @@
-"""The partitions: data set × hyper-parameter set, keys like ``"kuka_robot|paper"``."""
+"""The partitions: the pairs of a data set and a hyper-parameter set that has values for it,
+keys like ``"kuka_robot|paper"``.
+
+Only pairs that can run are offered: a set's own table for the data set, or, for a data set
+a user registered, its ``[<set>."*"]`` table (see :mod:`pwa_pipeline.config`). The paper's
+sets give values per data set and no rule, so ``hure_vasak|robot`` or ``<your data>|paper``
+are not partitions.
+"""
 
 from pathlib import Path
 
@@ -14,42 +21,34 @@ DEFAULT_SETS = ("paper", "default")
 
 
 def build_partitions(hparams: HParamsFile, registered: list[str]
-                     ) -> dg.MultiPartitionsDefinition:
-    """Every data set (built-in, then the ``registered`` ones) × every set of ``hparams``
-    (the same files the ``settings`` resource reads)."""
-    return dg.MultiPartitionsDefinition({
-        "dataset": dg.StaticPartitionsDefinition([*DATASETS, *registered]),
-        "hparams": dg.StaticPartitionsDefinition(hparams.sets),
-    })
+                     ) -> dg.StaticPartitionsDefinition:
+    """``dataset|set`` for every data set (built-in, then the ``registered`` ones) and every
+    set of ``hparams`` (the same file the ``settings`` resource reads) that has values for
+    it, in that order."""
+    return dg.StaticPartitionsDefinition([
+        f"{dataset}|{name}" for dataset, user in [*((d, False) for d in DATASETS),
+                                                   *((d, True) for d in registered)]
+        for name in hparams.sets if hparams.covers(name, dataset, registered=user)])
 
 
-def split_key(key: str | dg.MultiPartitionKey) -> tuple[str, str]:
-    """(dataset, hparams) of a partition key such as ``"kuka_robot|paper"``.
-
-    A key can arrive as a plain string (a run launched with only the ``dagster/partition``
-    tag), so it is parsed here rather than read from ``keys_by_dimension``; dimensions are in
-    alphabetical order.
-    """
+def split_key(key: str) -> tuple[str, str]:
+    """(dataset, hparams) of a partition key such as ``"kuka_robot|paper"``."""
     parts = str(key).split("|")
     if len(parts) != 2:
         raise ValueError(f"partition key {str(key)!r} is not of the form 'dataset|hparams'")
     return parts[0], parts[1]
 
 
-def check_keys(partitions_def: dg.MultiPartitionsDefinition, keys: list[str]) -> None:
+def check_keys(partitions_def: dg.StaticPartitionsDefinition, keys: list[str]) -> None:
     """Raise a ValueError naming the first key that is not a partition, and the valid ones."""
-    known = set(all_keys(partitions_def))
+    known = all_keys(partitions_def)
     for key in keys:
         if key not in known:
-            dims = {d.name: d.partitions_def.get_partition_keys()
-                    for d in partitions_def.partitions_defs}
-            raise ValueError(
-                f"unknown partition {key!r}; partitions are 'dataset|hparams' with dataset in "
-                f"{dims['dataset']} and hparams in {dims['hparams']}"
-            )
+            raise ValueError(f"unknown partition {key!r}; the partitions are {known} (a set "
+                             f"that has no values for a data set gives it no partition)")
 
 
-def all_keys(partitions_def: dg.MultiPartitionsDefinition) -> list[str]:
+def all_keys(partitions_def: dg.StaticPartitionsDefinition) -> list[str]:
     """Every partition key, as strings."""
     return [str(k) for k in partitions_def.get_partition_keys()]
 
@@ -68,13 +67,13 @@ def unavailable_datasets(settings: PipelineSettings) -> dict[str, str]:
     return missing
 
 
-def runnable_keys(partitions_def: dg.MultiPartitionsDefinition, settings: PipelineSettings,
+def runnable_keys(partitions_def: dg.StaticPartitionsDefinition, settings: PipelineSettings,
                   sets: tuple[str, ...] | None = None) -> tuple[list[str], dict[str, str]]:
     """The partition keys that can run, data set by data set, and why the others cannot.
 
     Parameters
     ----------
-    partitions_def : MultiPartitionsDefinition
+    partitions_def : StaticPartitionsDefinition
     settings : PipelineSettings
         The resource of the same definitions (files and registry).
     sets : tuple of str, optional
@@ -87,22 +86,19 @@ def runnable_keys(partitions_def: dg.MultiPartitionsDefinition, settings: Pipeli
         Reason by data set (its data are missing) or by key (the set has no values for a
         data set, e.g. the paper's set for a user's data set).
     """
-    dims = {d.name: d.partitions_def.get_partition_keys()
-            for d in partitions_def.partitions_defs}
+    offered = all_keys(partitions_def)
     hparams = settings.hparams()
-    registered = set(settings.registry().names())
     skipped = unavailable_datasets(settings)
     keys = []
-    for dataset in dims["dataset"]:
+    for dataset in dict.fromkeys(split_key(k)[0] for k in offered):
         if dataset in skipped:
             continue
-        for hp in sets or dims["hparams"]:
-            key = f"{dataset}|{hp}"
-            if hp not in dims["hparams"]:
-                continue
-            if hparams.covers(hp, dataset, dataset in registered):
+        for name in sets or [split_key(k)[1] for k in offered if split_key(k)[0] == dataset]:
+            key = f"{dataset}|{name}"
+            if key in offered:
                 keys.append(key)
-            else:
-                skipped[key] = (f"set {hp!r} has no values for {dataset!r} in {hparams.path}"
-                                + (f' (add [{hp}."*"])' if dataset in registered else ""))
+            elif name in hparams.sets:
+                skipped[key] = (f"set {name!r} has no values for {dataset!r} in {hparams.path}"
+                                + (f' (add [{name}."*"])' if dataset in settings.registry().names()
+                                   else ""))
     return keys, skipped

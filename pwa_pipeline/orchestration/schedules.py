@@ -7,7 +7,7 @@ from .partitions import runnable_keys
 from .settings import PipelineSettings
 
 
-def build_sweep(partitions_def: dg.MultiPartitionsDefinition, settings: PipelineSettings
+def build_sweep(partitions_def: dg.StaticPartitionsDefinition, settings: PipelineSettings
                 ) -> tuple:
     """The ``sweep`` job (every asset of one partition) and ``sweep_schedule`` over the
     partitions that ``settings`` can run."""
