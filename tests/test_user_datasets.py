@@ -171,14 +171,14 @@ def test_hparams_tables_for_unregistered_data_sets_fail_at_load(tmp_path):
         build_definitions(path, tmp_path / "datasets.json")
 
 
-def test_the_readme_example_registers_the_bundled_table(tmp_path, monkeypatch, capsys):
+def test_the_docs_example_registers_the_bundled_table(tmp_path, monkeypatch, capsys):
     import shlex
     from pathlib import Path
 
     from pwa_pipeline.orchestration.cli import main
 
     root = Path(__file__).resolve().parents[1]
-    readme = (root / "README.md").read_text()
+    readme = (root / "docs" / "your-data.md").read_text()
     start = readme.index("python -m pwa_pipeline add-dataset plant")
     command = readme[start:readme.index("\n", readme.index("\\\n", start) + 2)]
     args = shlex.split(command.replace("\\\n", " "))[3:]
