@@ -3,12 +3,9 @@ peak memory, and where the time goes (issue 12).
 
 Each repeat runs the command in a fresh process with ``PWA_PIPELINE_HOME`` set to a new
 temporary directory (so the Dagster home, the asset store, the local-model cache and the
-MLflow sqlite store are all created by the run) and ``MLFLOW_TRACKING_URI`` unset, once per
-``--jobs`` value (default ``2,1``: the default, two partitions at once, and one at a time
-as the reference in the same run), the values alternated within each repeat. Peak memory is
-the largest sum of the resident memory of the command's processes (it and its workers),
-sampled every 0.1 s. The time of the first repeat of each ``--jobs`` value is then split with
-the Dagster event log of its home:
+MLflow sqlite store are all created by the run) and ``MLFLOW_TRACKING_URI`` unset. Peak
+memory is the largest sum of the resident memory of the command's processes, sampled every
+0.1 s. The time of the first repeat is then split with the Dagster event log of its home:
 
 - ``start``: process start to the first run's start (imports, definitions, the Dagster
   instance's creation);
@@ -21,14 +18,11 @@ the Dagster event log of its home:
   steps is Dagster's own (events, storage, input loading between steps);
 - ``leaderboard`` and ``end`` (last run to process exit).
 
-Each repeat also counts the versions of each registered model in its MLflow store (each
-distinct model is registered once, also when two partitions score it at the same moment).
+Each repeat also counts the versions of each registered model in its MLflow store.
 
-Runs at once overlap: each partition's row says when it started after the first one.
-
-Writes results/first_command.json and results/first_command.md (``--suffix S``:
-results/first_command<S>.json and .md); the last line printed is a summary.
-Usage: python -m benchmarks.first_command [--repeats 1] [--jobs 2,1] [--suffix S]
+Writes results/first_command.json and results/first_command.md; the last line printed is a
+summary.
+Usage: python -m benchmarks.first_command [--repeats 3]
 """
 
 import argparse
@@ -51,7 +45,7 @@ FIT_STEPS = {"local_models", "clusters", "sub_models", "svm_regions", "output_er
              "pwa_model", "linear_arx_model", "subspace_model"}
 
 
-def one_run(home: Path, jobs: int) -> dict:
+def one_run(home: Path) -> dict:
     """Run the command with its stores in ``home``; wall seconds, peak memory, the split."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("MLFLOW_TRACKING_URI", "DAGSTER_HOME", "PWA_DATASETS")}
@@ -60,15 +54,14 @@ def one_run(home: Path, jobs: int) -> dict:
     start = time.time()
     peak = 0
     with open(home / "output.txt", "w") as out:
-        proc = subprocess.Popen([sys.executable, "-m", "pwa_pipeline", "run", "--jobs",
-                                 str(jobs)], cwd=home, env=env, stdout=out,
-                                stderr=subprocess.STDOUT)
+        proc = subprocess.Popen([sys.executable, "-m", "pwa_pipeline", "run"], cwd=home,
+                                env=env, stdout=out, stderr=subprocess.STDOUT)
         tree = psutil.Process(proc.pid)
         while proc.poll() is None:
             peak = max(peak, tree_rss(tree))
             time.sleep(0.1)
     wall = time.time() - start
-    return {"jobs": jobs, "wall_seconds": wall, "peak_gb": peak / 1024**3,
+    return {"wall_seconds": wall, "peak_gb": peak / 1024**3,
             "exit_code": proc.returncode, "model_versions": model_versions(home / "mlflow.db"),
             **split(home / ".dagster_home", start, start + wall)}
 
@@ -139,65 +132,44 @@ def split(dagster_home: Path, start: float, end: float) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=1)
-    parser.add_argument("--suffix", default="",
-                        help="written to first_command<suffix>.json and .md")
-    parser.add_argument("--jobs", default="2,1",
-                        help="comma-separated --jobs values of the command, alternated "
-                             "(default 2,1; the first is the one the summary quotes)")
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
-    variants = [int(j) for j in args.jobs.split(",")]
     load = MachineLoad()
-    runs: dict[int, list[dict]] = {j: [] for j in variants}
+    runs: list[dict] = []
     for i in range(args.repeats):
-        for jobs in variants:
-            with tempfile.TemporaryDirectory() as tmp:
-                runs[jobs].append(one_run(Path(tmp), jobs))
-            run = runs[jobs][-1]
-            print(f"repeat {i + 1}, --jobs {jobs}: {run['wall_seconds']:.1f} s, peak "
-                  f"{run['peak_gb']:.2f} GB, exit code {run['exit_code']}", flush=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            runs.append(one_run(Path(tmp)))
+        print(f"repeat {i + 1}: {runs[-1]['wall_seconds']:.1f} s, peak "
+              f"{runs[-1]['peak_gb']:.2f} GB, exit code {runs[-1]['exit_code']}", flush=True)
     machine = load.summary()
     cpus = len(os.sched_getaffinity(0))
-    write_json({"machine_load": machine, "cpus": cpus,
-                "repeats": args.repeats, "runs": {str(j): r for j, r in runs.items()}},
-               f"first_command{args.suffix}")
-    wall = {j: statistics.median(r["wall_seconds"] for r in runs[j]) for j in variants}
-    ref = variants[-1]
+    write_json({"machine_load": machine, "cpus": cpus, "repeats": args.repeats, "runs": runs},
+               "first_command")
+    wall = statistics.median(r["wall_seconds"] for r in runs)
     walls = pd.DataFrame([{
-        "--jobs": j, "median seconds": wall[j],
-        "runs": ", ".join(f"{r['wall_seconds']:.1f}" for r in runs[j]),
-        "peak GB": max(r["peak_gb"] for r in runs[j]),
-        f"over --jobs {ref}": wall[j] / wall[ref],
-        "exit codes": ", ".join(str(r["exit_code"]) for r in runs[j]),
-        "registered versions": ", ".join(str(sum(r["model_versions"].values()))
-                                         for r in runs[j])} for j in variants])
-    main_jobs = variants[0]
-    summary = (f"summary: python -m pwa_pipeline run (--jobs {main_jobs}) on fresh stores "
-               f"{wall[main_jobs]:.1f} s (median of {args.repeats}; runs "
-               f"{walls['runs'].iloc[0]}), peak {walls['peak GB'].iloc[0]:.2f} GB"
-               + (f", {wall[main_jobs] / wall[ref]:.2f}x the {wall[ref]:.1f} s of --jobs {ref} "
-                  f"in the same run" if len(variants) > 1 else "")
-               + f"; load {machine['start']:.2f} -> {machine['end']:.2f}, "
-                 f"{machine['steal_share']:.0%} stolen, on {cpus} CPUs")
-    md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} repeat(s) of each "
-          f"`--jobs` value, alternated; {describe_load(machine)}; {cpus} CPUs. Peak "
-          f"memory: the largest sum over the "
-          f"command's processes.\n", walls.to_markdown(index=False, floatfmt=".3g"), ""]
-    for j in variants:
-        first = runs[j][0]
-        table = pd.DataFrame(first["partitions"]).set_index("partition")
-        overview = pd.Series({"start (imports, definitions, instance)": first["start_seconds"],
-                              **{f"partition {k}": v for k, v in table["seconds"].items()},
-                              "leaderboard": first["leaderboard_seconds"],
-                              "end": first["end_seconds"]}, name="seconds")
-        md += [f"## --jobs {j}: where the first repeat's time went\n",
-               overview.to_markdown(floatfmt=".3g"), "",
-               "Per partition (seconds; scoring includes the MLflow logging with model "
-               "registration; partitions run at once overlap):\n",
-               table.to_markdown(floatfmt=".3g"), "",
-               "Registered model versions (first repeat): " + ", ".join(
-                   f"{name} {n}" for name, n in first["model_versions"].items()) + "\n"]
-    (RESULTS / f"first_command{args.suffix}.md").write_text("\n".join(md + [summary]) + "\n")
+        "median seconds": wall, "runs": ", ".join(f"{r['wall_seconds']:.1f}" for r in runs),
+        "peak GB": max(r["peak_gb"] for r in runs),
+        "exit codes": ", ".join(str(r["exit_code"]) for r in runs),
+        "registered versions": ", ".join(str(sum(r["model_versions"].values())) for r in runs)}])
+    summary = (f"summary: python -m pwa_pipeline run on fresh stores {wall:.1f} s (median of "
+               f"{args.repeats}; runs {walls['runs'].iloc[0]}), peak "
+               f"{walls['peak GB'].iloc[0]:.2f} GB; load {machine['start']:.2f} -> "
+               f"{machine['end']:.2f}, {machine['steal_share']:.0%} stolen, on {cpus} CPUs")
+    first = runs[0]
+    table = pd.DataFrame(first["partitions"]).set_index("partition")
+    overview = pd.Series({"start (imports, definitions, instance)": first["start_seconds"],
+                          **{f"partition {k}": v for k, v in table["seconds"].items()},
+                          "leaderboard": first["leaderboard_seconds"],
+                          "end": first["end_seconds"]}, name="seconds")
+    md = [f"`python -m pwa_pipeline run` on fresh stores, {args.repeats} repeat(s); "
+          f"{describe_load(machine)}; {cpus} CPUs. Peak memory: the largest sum over the "
+          f"command's processes.\n", walls.to_markdown(index=False, floatfmt=".3g"), "",
+          "## Where the first repeat's time went\n", overview.to_markdown(floatfmt=".3g"), "",
+          "Per partition (seconds; scoring includes the MLflow logging with model "
+          "registration):\n", table.to_markdown(floatfmt=".3g"), "",
+          "Registered model versions (first repeat): " + ", ".join(
+              f"{name} {n}" for name, n in first["model_versions"].items()) + "\n"]
+    (RESULTS / "first_command.md").write_text("\n".join(md + [summary]) + "\n")
     print(summary)
 
 
