@@ -56,8 +56,8 @@ def _quiet_sizeof() -> None:
 
 @dataclass
 class PartitionRun:
-    """One partition's run in another process (a ``sweep_dask`` run, or a worker's of
-    :mod:`.parallel_runs`): whether it succeeded or was interrupted, its run id, and its
+    """One partition's ``sweep_dask`` run, whose steps ran in other processes: whether it
+    succeeded or was interrupted, its run id, and its
     outputs read from the store (a ``JobExecutionResult`` reads them without the partition)."""
 
     key: str

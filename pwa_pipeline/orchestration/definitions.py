@@ -48,8 +48,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None,
         jobs=[job, *build_jobs()],
         schedules=[schedule],
         # One process per run: the steps take seconds, while the multiprocess executor
-        # started a process per step (each importing Dagster, MLflow and scikit-learn) and
-        # a UI-launched partition took 88 s for 3 s of compute.
+        # starts a process per step, each importing Dagster, MLflow and scikit-learn.
         executor=dg.in_process_executor,
         resources={
             "io_manager": PartitionedFileIOManager(),

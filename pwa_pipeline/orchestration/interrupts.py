@@ -2,10 +2,8 @@
 
 Dagster stops a run on SIGINT by raising ``DagsterExecutionInterruptedError`` from its signal
 handler, in whatever the main thread is running at that moment. A handler that raises inside
-code which catches and drops the error (a finaliser, a library's clean-up) leaves the run
-going: with two robot partitions at once under load (``run --jobs 2``), 1 of 26 Ctrl-Cs of a
-reproduction (and one in a CI run) left one run to finish on its own; the signal had come
-during its MLflow logging.
+code which catches and drops the error (a finaliser, a library's clean-up, MLflow's logging)
+leaves the run going to its end.
 :func:`interrupts_redelivered` notices every SIGINT at the C level, where no handler can
 lose it, and sends it again while the run goes on.
 """
