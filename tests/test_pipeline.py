@@ -17,7 +17,6 @@ from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration import assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.files import atomic_write
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.mlflow_models import example_table
 from pwa_pipeline.orchestration.partitions import (
@@ -418,20 +417,6 @@ def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, t
     assert {"regressors", "local_models", "clusters", "sub_models", "svm_regions",
             "pwa_model", "linear_arx_model", "subspace_model"} <= done
     assert (tmp_path / "storage" / "pwa_model" / "hure_vasak" / "paper.pkl").is_file()
-
-
-def test_atomic_write_keeps_the_old_file_when_a_write_fails(tmp_path):
-    path = tmp_path / "a.parquet"
-    atomic_write(path, lambda p: p.write_text("old"))
-
-    def broken(p):
-        p.write_text("half")
-        raise RuntimeError("disk full")
-
-    with pytest.raises(RuntimeError, match="disk full"):
-        atomic_write(path, broken)
-    assert path.read_text() == "old"
-    assert [f.name for f in tmp_path.iterdir()] == ["a.parquet"]
 
 
 def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template):

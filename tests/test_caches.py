@@ -1,0 +1,102 @@
+"""Caches in the store: keyed by inputs and the core's source; bad entries recomputed."""
+
+import pickle
+from pathlib import Path
+
+import dagster as dg
+import numpy as np
+import pytest
+
+from pwa_pipeline.definitions import defs
+from pwa_pipeline.orchestration import caches
+from pwa_pipeline.orchestration.caches import SignedMemory
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
+
+IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
+
+
+class _Planted:
+    """Unpickling this runs code: it writes ``marker``."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.write_text, (self.marker, "code ran"))
+
+
+def _assets(names):
+    return [a for a in defs.assets if a.key.to_user_string() in names]
+
+
+@pytest.fixture()
+def settings(tmp_path):
+    return PipelineSettings(cache_dir=str(tmp_path / "cache"))
+
+
+@pytest.mark.parametrize(("asset", "partition", "fitted"), [
+    ("local_models", "hure_vasak|paper", "theta_"),
+    ("sub_models", "hure_vasak|default", "thetas_")])
+def test_bad_cache_entries_are_recomputed_with_a_warning(tmp_path, settings, asset, partition,
+                                                         fitted):
+    """A planted or truncated entry of the local-model or step-5 cache is never unpickled:
+    the run recomputes it, says so, and gives the same result; the next run reads it."""
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "store")),
+                 "settings": settings}
+    instance = dg.DagsterInstance.ephemeral()
+    names = IDENTIFICATION + (["clusters", "sub_models"] if asset == "sub_models" else [])
+    first = dg.materialize(_assets(names), partition_key=partition, resources=resources,
+                           instance=instance)
+    [entry] = (tmp_path / "cache" / asset).glob("*.pkl")
+    reference = getattr(first.output_for_node(asset), fitted)
+    marker = tmp_path / "marker"
+    for damage in (lambda: entry.write_bytes(pickle.dumps(_Planted(marker))),
+                   lambda: entry.write_bytes(entry.read_bytes()[:100])):
+        damage()
+        result = dg.materialize(_assets(names), partition_key=partition, resources=resources,
+                                instance=instance)
+        meta = result.asset_materializations_for_node(asset)[0].metadata
+        assert result.success and not meta["from_cache"].value
+        logged = [e.user_message for e in instance.all_logs(result.run_id)]
+        assert any(f"cache entry {entry} unusable" in m for m in logged)
+        assert not marker.exists()
+        np.testing.assert_array_equal(getattr(result.output_for_node(asset), fitted), reference)
+    again = dg.materialize(_assets(names), partition_key=partition, resources=resources)
+    assert again.asset_materializations_for_node(asset)[0].metadata["from_cache"].value
+    np.testing.assert_array_equal(getattr(again.output_for_node(asset), fitted), reference)
+
+
+def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_path,
+                                                                          monkeypatch):
+    """SignedMemory computes a call once per function, arguments and numerical-core source,
+    and reads it back signed; a step holding it clones to the same handle."""
+    import copy
+
+    from sklearn.base import clone
+
+    from pwa_pipeline.pwa import RefinedSubModels
+
+    calls = []
+
+    def scaled(a, factor=1.0):
+        calls.append(factor)
+        return np.asarray(a) * factor
+
+    memory = SignedMemory(tmp_path, "m")
+    cached = memory.cache(scaled)
+    for factor, computed in ((1.0, 1), (1.0, 1), (2.0, 2), (1.0, 2)):
+        np.testing.assert_array_equal(cached(np.arange(3.0), factor=factor),
+                                      np.arange(3.0) * factor)
+        assert len(calls) == computed
+    assert (memory.hits, memory.misses) == (2, 2)
+    np.testing.assert_array_equal(cached(np.arange(4.0)), np.arange(4.0))  # other data
+    monkeypatch.setattr(caches, "core_fingerprint", lambda: "other code")
+    cached(np.arange(3.0), factor=1.0)
+    assert len(calls) == 4 and len(list((tmp_path / "m").glob("*.pkl"))) == 4
+    salted = SignedMemory(tmp_path, "m", salt="other figures").cache(scaled)
+    salted(np.arange(3.0), factor=1.0)  # the same call, another salt: computed again
+    assert len(calls) == 5 and len(list((tmp_path / "m").glob("*.pkl"))) == 5
+    assert copy.deepcopy(memory) is memory
+    assert clone(RefinedSubModels(memory=memory)).memory is memory
+
