@@ -45,11 +45,8 @@ MIN_PTS = (10, 15, 20)
 
 
 def _megabytes(folder: Path) -> float:
-    """What the files below ``folder`` take, in MB: a file under several names (the hard
-    links of :func:`~pwa_pipeline.orchestration.storage.save_object`) counted once."""
-    sizes = {(st.st_dev, st.st_ino): st.st_size
-             for st in (f.stat() for f in folder.rglob("*") if f.is_file())}
-    return sum(sizes.values()) / 1e6
+    """What the files below ``folder`` take, in MB."""
+    return sum(f.stat().st_size for f in folder.rglob("*") if f.is_file()) / 1e6
 
 
 QUIET = {"loggers": {"console": {"config": {"log_level": "ERROR"}}}}

@@ -34,9 +34,6 @@ class _Local:
         self.estimated_ = np.ones(len(theta), bool)
         self.original_ = np.arange(len(theta))
 
-    def at_estimated(self, name, rows):
-        return getattr(self, name)[rows]
-
 
 def test_automatic_eps_is_in_a_sane_range_and_never_mixes_clusters():
     theta = _blobs()

@@ -265,7 +265,7 @@ def _twenty_seven_clusters():
     rng = np.random.default_rng(1)
     labels = np.r_[np.full(60, -1), np.repeat(np.arange(27), np.arange(27)[::-1] + 22)]
     theta = rng.normal(size=(labels.size, 3, 2))
-    local = SimpleNamespace(at_estimated=lambda name, rows: theta[rows], phi_scale_=np.ones(3))
+    local = SimpleNamespace(theta_=theta, phi_scale_=np.ones(3))
     step = SimpleNamespace(unit_free=False, embedding="exact", labels_=labels, min_pts_=6,
                            clustered_=np.ones(labels.size, bool), eps_=1.0, eps_auto_=False)
     return local, step, labels

@@ -199,10 +199,11 @@ def test_a_tiled_record_draws_the_subset_of_the_record_once():
     np.testing.assert_array_equal(tiled.neighbours_[rows, 0], rows)
 
 
-def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
-    """Stored and cached steps (the pipeline's assets and caches, MLflow's model) hold only
-    the rows of the estimated samples; loading restores every array as fitted."""
-    import copy
+def test_samples_without_a_local_model_are_marked_and_a_pickle_loads_the_same_step():
+    """With ``max_sets`` the samples left out hold NaN (θ_k, residual variance) and −1 (local
+    set); the estimated ones hold the local models of a fit of every sample, copies of a
+    sample their original's; a pickled step loads with the same arrays, and a step fitted
+    again keeps nothing of its previous fit."""
     import pickle
 
     rng = np.random.default_rng(5)
@@ -210,106 +211,26 @@ def test_a_pickle_keeps_only_the_estimated_samples_and_loads_the_same_step():
     target = np.tanh(phi[:, :2])
     some = LocalLeastSquares(n_rho=12, max_sets=60).fit(phi, target)
     every = LocalLeastSquares(n_rho=12, max_sets=None).fit(phi, target)
-    sizes = {}
-    for name, step in (("some", some), ("every", every)):
-        data = pickle.dumps(step, protocol=5)
-        sizes[name] = len(data)
-        for back in (pickle.loads(data), copy.deepcopy(step)):
-            for name in ("theta_", "neighbours_", "residual_var_"):
-                getattr(back, name), getattr(step, name)  # (kept compact until read)
-            assert set(vars(back)) == set(vars(step))
-            np.testing.assert_equal(vars(back), vars(step))  # NaN, −1 and dtypes as fitted
-            assert all(getattr(back, a).dtype == getattr(step, a).dtype
-                       for a in ("theta_", "neighbours_", "residual_var_"))
-    # fitted or loaded, the per-sample arrays stay compact until read; pickled again unread
-    # or half read, the same bytes
-    fitted = LocalLeastSquares(n_rho=12, max_sets=60).fit(phi, target)
-    assert "_compact" in vars(fitted) and "theta_" not in vars(fitted)
-    assert pickle.dumps(fitted, protocol=5) == pickle.dumps(some, protocol=5)
-    # fitted again, nothing of the previous fit is left, read or unread
-    fitted.set_params(max_sets=None).fit(phi, target)
-    assert "_compact" not in vars(fitted)
-    np.testing.assert_array_equal(fitted.estimated_theta(), every.theta_)
-    fitted.neighbours_  # (spread before the next fit)
-    fitted.set_params(max_sets=60, random_state=1).fit(phi, target)
+    est = some.estimated_
+    assert est.sum() == some.n_estimated_ == 120  # 60 distinct samples, each twice
+    np.testing.assert_array_equal(est[:600], est[600:])
+    assert np.isnan(some.theta_[~est]).all() and np.isnan(some.residual_var_[~est]).all()
+    assert (some.neighbours_[~est] == -1).all()
+    assert not np.isnan(some.theta_[est]).any() and (some.neighbours_[est] >= 0).all()
+    np.testing.assert_allclose(some.theta_[est], every.theta_[est], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(some.residual_var_[est], every.residual_var_[est],
+                               rtol=1e-10, atol=1e-14)
+    np.testing.assert_array_equal(some.neighbours_[est], every.neighbours_[est])
+    assert some.neighbours_.dtype == every.neighbours_.dtype
+    for step in (some, every):
+        back = pickle.loads(pickle.dumps(step, protocol=5))
+        assert set(vars(back)) == set(vars(step))
+        np.testing.assert_equal(vars(back), vars(step))  # NaN, −1 and dtypes as fitted
+    refitted = pickle.loads(pickle.dumps(some)).set_params(max_sets=None).fit(phi, target)
+    np.testing.assert_equal(vars(refitted), {**vars(every)})
     other = LocalLeastSquares(n_rho=12, max_sets=60, random_state=1).fit(phi, target)
-    np.testing.assert_array_equal(fitted.neighbours_, other.neighbours_)
-    np.testing.assert_array_equal(fitted.estimated_theta(), other.estimated_theta())
-    back = pickle.loads(pickle.dumps(some, protocol=5))
-    assert not {"theta_", "neighbours_", "residual_var_"} & set(vars(back))
-    assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)
-    assert "_compact" in vars(back)  # pickling leaves the step as it was
-    np.testing.assert_array_equal(back.estimated_theta(), some.theta_[some.estimated_])
-    assert "theta_" not in vars(back) and every.estimated_theta() is every.theta_
-    np.testing.assert_array_equal(back.residual_var_, some.residual_var_)
-    assert "theta_" not in vars(back) and "residual_var_" in vars(back)
-    assert pickle.dumps(back, protocol=5) == pickle.dumps(some, protocol=5)
-    assert pickle.dumps(copy.deepcopy(back), protocol=5) == pickle.dumps(some, protocol=5)
-    with pytest.raises(AttributeError, match="'LocalLeastSquares' object has no attribute 'x_'"):
-        back.x_
-    # 120 of 1,200 samples estimated: under a fifth of the room of every local model (the
-    # per-sample flags and originals stay whole)
-    assert sizes["some"] < 0.2 * sizes["every"]
-
-
-def test_an_array_read_while_another_reader_spreads_it_is_found(monkeypatch):
-    """A compact array read again while a first read is spreading it (another thread, here
-    a read from inside the spreading) is found, compact or spread, and equal to the fit's;
-    every array read, the step holds no compact copy."""
-    from pwa_pipeline.pwa import local_models
-
-    rng = np.random.default_rng(9)
-    phi = rng.normal(size=(300, 3))
-    target = phi @ rng.normal(size=(3, 2))
-    step = LocalLeastSquares(n_rho=10, max_sets=50).fit(phi, target)
-    expected = LocalLeastSquares(n_rho=10, max_sets=None).fit(phi, target).theta_
-    spread, inner = local_models._spread, []
-
-    def interleaved(values, rows, n, fill):
-        if not inner:
-            inner.append(None)
-            inner[0] = step.theta_  # the other reader, while this one spreads
-        return spread(values, rows, n, fill)
-
-    monkeypatch.setattr(local_models, "_spread", interleaved)
-    outer = step.theta_
-    np.testing.assert_array_equal(outer[step.estimated_], expected[step.estimated_])
-    np.testing.assert_array_equal(inner[0], outer)
-    assert np.isnan(outer[~step.estimated_]).all()
-    step.neighbours_, step.residual_var_
-    assert "_compact" not in vars(step)
-
-
-def test_rows_of_estimated_samples_are_read_without_spreading_a_loaded_step():
-    """``at_estimated`` (what the clustering step, its figure and the cluster centres read)
-    gives the rows of the spread arrays, by mask or index, leaves a loaded step compact,
-    and refuses a row whose local model was not estimated; the clustering step fitted on a
-    loaded step labels as on the fitted one."""
-    import pickle
-
-    from pwa_pipeline.pwa import DBSCANClustering
-
-    rng = np.random.default_rng(8)
-    phi = np.tile(rng.normal(size=(500, 3)), (2, 1))  # a repeated record: copies too
-    target = np.where(phi[:, :1] > 0, phi @ [[1.0], [2.0], [0.5]], phi @ [[-1.0], [0.0], [3.0]])
-    some = LocalLeastSquares(n_rho=10, max_sets=200).fit(phi, target)
-    back = pickle.loads(pickle.dumps(some, protocol=5))
-    mask = some.estimated_ & (rng.random(some.estimated_.size) < 0.5)
-    index = rng.permutation(np.flatnonzero(some.estimated_))[:40]  # any order
-    for name in ("theta_", "neighbours_", "residual_var_"):
-        for rows in (mask, index):
-            np.testing.assert_array_equal(back.at_estimated(name, rows), getattr(some, name)[rows])
-            np.testing.assert_array_equal(some.at_estimated(name, rows), getattr(some, name)[rows])
-    assert "_compact" in vars(back) and not {"theta_", "residual_var_"} & set(vars(back))
-    unestimated = np.flatnonzero(~some.estimated_)
-    with pytest.raises(ValueError, match=rf"theta_: rows \[{unestimated[0]}\] are not estimated"):
-        back.at_estimated("theta_", np.r_[index[:3], unestimated[0]])
-    with pytest.raises(ValueError, match="are not estimated"):
-        back.at_estimated("theta_", [some.estimated_.size])  # past the last sample
-    clustering = DBSCANClustering(min_pts=6)
-    np.testing.assert_array_equal(clustering.fit(back, target).labels_,
-                                  clustering.fit(some, target).labels_)
-    assert not {"theta_", "residual_var_"} & set(vars(back))
+    again = refitted.set_params(max_sets=60, random_state=1).fit(phi, target)
+    np.testing.assert_equal(vars(again), vars(other))
 
 
 def test_the_paper_setting_estimates_every_local_model():
@@ -334,3 +255,20 @@ def test_a_long_record_fits_the_same_model_from_a_subset_of_local_models():
     assert match_submodels(some.thetas_, every.thetas_)[1].max() < 2e-3
     assert match_submodels(some.thetas_, data.thetas)[1].max() < 0.03
     assert np.mean(some.labels_ == every.labels_) > 0.995
+
+
+def test_a_step_stored_with_only_the_estimated_rows_is_refused():
+    import pickle
+
+    import numpy as np
+    import pytest
+
+    from pwa_pipeline.pwa import LocalLeastSquares
+
+    rng = np.random.default_rng(0)
+    phi, target = rng.normal(size=(300, 3)), rng.normal(size=(300, 1))
+    step = LocalLeastSquares(n_rho=10, max_sets=100, random_state=0).fit(phi, target)
+    assert pickle.loads(pickle.dumps(step)).theta_.shape == (300, 3, 1)
+    state = dict(vars(step), theta_=step.theta_[step.estimated_])  # the earlier compact form
+    with pytest.raises(ValueError, match="stored by an earlier version.*local_models again"):
+        LocalLeastSquares().__setstate__(state)

@@ -84,7 +84,7 @@ def test_the_missed_mode_search_sizes_its_local_sets_by_distinct_rows(sim_30db):
     """Step 5 re-runs steps 2–4 on rows no sub-model explains: a few distinct rows given ten
     times still get local sets (n_ρ from the distinct count, not the rows with copies)."""
     from pwa_pipeline.pwa.regressors import build_regressors
-    from pwa_pipeline.pwa.submodels import _missed_mode_clusters, _search_steps
+    from pwa_pipeline.pwa.submodels.refined import _missed_mode_clusters, _search_steps
 
     reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
     local = LocalLeastSquares().fit(reg.phi, reg.target)

@@ -7,7 +7,7 @@ import pytest
 from sklearn.utils._param_validation import InvalidParameterError
 
 from pwa_pipeline import PWARX, LinearARX, evaluate
-from pwa_pipeline.pwa.output_error import OutputErrorRefinement, _OutputRuns
+from pwa_pipeline.pwa.output_error import OutputErrorRefinement, OutputFreeRuns
 from pwa_pipeline.pwa.scheduling import SignScheduling
 from pwa_pipeline.pwa.structures import output_regressors
 
@@ -153,7 +153,7 @@ def test_the_structured_jacobian_matches_finite_differences():
     model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
                   scheduling=SignScheduling(switch="all")).fit(u, y)
     outputs = model.structure_.outputs
-    runs = _OutputRuns(u, y, 2, 1, True, 5, dict(enumerate(outputs)), [0, 1])
+    runs = OutputFreeRuns(u, y, 2, 1, True, 5, dict(enumerate(outputs)), [0, 1])
     # away from the least-squares fit (exact here), where the gradient is not zero
     p = np.concatenate([o.p for o in outputs]) + 0.01 * np.random.default_rng(0).normal(
         size=sum(o.n_params for o in outputs))

@@ -181,8 +181,7 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, title: str,
 def _clustering_embedding(local, step, target: np.ndarray) -> np.ndarray:
     """The clustered θ_k embedded as the clustering step embedded them (eq. 8–10), unit-free
     (θ_k·rms(φ)/rms(y)) when the step was."""
-    # (a few thousand of the robot's 40k rows, read without spreading a loaded step's arrays)
-    theta = local.at_estimated("theta_", step.clustered_)
+    theta = local.theta_[step.clustered_]
     if step.unit_free:
         theta = theta * local.phi_scale_[None, :, None] / column_rms(np.asarray(target))
     return EMBEDDINGS[step.embedding](theta)

@@ -323,7 +323,7 @@ class ResidualRegions(SVMRegions):
         self.denoise = denoise
 
     def fit(self, phi: Float2D, labels: np.ndarray, n_regions: int | None = None,
-            sample_weight: np.ndarray | None = None, target: Float2D | None = None,
+            sample_weight: np.ndarray | None = None, *, target: Float2D | None = None,
             thetas: np.ndarray | None = None, output_lags: np.ndarray | None = None,
             experiment: np.ndarray | None = None) -> "ResidualRegions":
         """Fit the SVM's hyperplanes on the labelled rows, then (with ``target`` and

@@ -3,7 +3,7 @@
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, _fit_context
+from sklearn.base import _fit_context
 from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import Interval, StrOptions
 
@@ -14,6 +14,7 @@ from ._cluster_kernels import (
     squared_distances,
     to_distances,
 )
+from .base import BaseClustering
 from .dbscan import dbscan
 from .embedding import EMBEDDINGS
 
@@ -162,7 +163,7 @@ def cluster_local_models(
     return labels, float(eps)
 
 
-class DBSCANClustering(BaseEstimator):
+class DBSCANClustering(BaseClustering):
     """Step 4 of the method: DBSCAN on the local parameter matrices θ_k (section 4, eq. 8–10).
 
     Parameters
@@ -238,14 +239,12 @@ class DBSCANClustering(BaseEstimator):
         Parameters
         ----------
         local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
-            Its ``theta_`` and ``residual_var_`` (on the estimated samples, read by
-            :meth:`~pwa_pipeline.pwa.local_models.LocalLeastSquares.at_estimated`),
-            ``phi_scale_``, ``degenerate_``, ``estimated_`` and ``original_`` are used;
-            only estimated local models are
-            clustered, degenerate ones never, and each
-            distinct sample is clustered once (MinPts, the confidence median and the subset
-            count it once): a repeated sample takes its first occurrence's label, so a
-            record repeated r times is clustered as the record once.
+            Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_``,
+            ``estimated_`` and ``original_`` are used; only estimated local models are
+            clustered, degenerate ones never, and each distinct sample is clustered once
+            (MinPts, the confidence median and the subset count it once): a repeated sample
+            takes its first occurrence's label, so a record repeated r times is clustered
+            as the record once.
         target : ndarray of shape (n, m)
             The outputs y(k) (their RMS makes θ unit-free).
         """
@@ -264,7 +263,7 @@ class DBSCANClustering(BaseEstimator):
                 f"excite the system with an input that changes more often"
             )
         if self.confidence is not None:
-            keep[keep] = confident_models(local.at_estimated("residual_var_", keep),
+            keep[keep] = confident_models(local.residual_var_[keep],
                                           self.confidence)
         if self.max_clustered is not None and keep.sum() > self.max_clustered:
             rows = np.random.default_rng(self.random_state).choice(
@@ -272,7 +271,7 @@ class DBSCANClustering(BaseEstimator):
             keep = np.zeros(n, bool)
             keep[rows] = True
         rows = np.flatnonzero(keep)
-        theta = local.at_estimated("theta_", rows)
+        theta = local.theta_[rows]
         if self.unit_free:
             theta = theta * local.phi_scale_[None, :, None] / column_rms(target[distinct])
         labels = np.full(n, -1)

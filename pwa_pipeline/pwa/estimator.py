@@ -1,6 +1,5 @@
 """The PWARX estimator: MIMO piecewise-affine ARX identification by extended DBSCAN."""
 
-import inspect
 import time
 from numbers import Integral
 
@@ -64,9 +63,12 @@ class PWARX(ARXModelBase):
         Step 5. None: ``RefinedSubModels()``; the paper's is ``ClusterCentres()``.
     regions : estimator, optional
         Step 6. None: ``ResidualRegions()`` (the SVM's regions with boundaries moved to
-        where the sub-models' residuals switch); the paper's is ``SVMRegions()``. A region
-        step whose ``fit`` takes ``target`` and ``thetas`` is given the outputs and step 5's
-        sub-models.
+        where the sub-models' residuals switch); the paper's is ``SVMRegions()``.
+
+    Each step object implements the interface of its kind (:mod:`~.base`:
+    :class:`~.base.BaseLocalModels`, :class:`~.base.BaseClustering`,
+    :class:`~.base.BaseSubModels`, :class:`~.base.BaseRegions`), and :meth:`fit_step` calls
+    every step of a kind alike.
     refinement : estimator, optional
         After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
         minimise the free-run error on the training experiments, the regions kept. None (the
@@ -328,18 +330,14 @@ class PWARX(ARXModelBase):
                             regions=steps["regions"])
         if name == "regions":
             subs = fitted["submodels"]
-            # a region step that places boundaries by the residuals gets the sub-models
-            params = inspect.signature(step.fit).parameters
-            residuals = ({"target": reg.target, "thetas": subs.thetas_}
-                         if "thetas" in params else {})
-            if "output_lags" in params and not self.structured:
-                # φ of eq. (3): the columns that carry the outputs' measurement noise
-                residuals["output_lags"] = output_lag_columns(reg.n_outputs, self.na,
-                                                              reg.phi.shape[1])
-            if "experiment" in params and not self.structured:
-                residuals["experiment"] = reg.experiment
+            # the output-lag columns of φ (eq. 3) and each row's experiment; the structured
+            # route's regressors are not eq. (3)'s φ and pass neither
+            output_lags = None if self.structured else output_lag_columns(
+                reg.n_outputs, self.na, reg.phi.shape[1])
             return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
-                            sample_weight=subs.weights_, **residuals)
+                            sample_weight=subs.weights_, target=reg.target,
+                            thetas=subs.thetas_, output_lags=output_lags,
+                            experiment=None if self.structured else reg.experiment)
         raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
 
     def assemble(self, reg: Regressors, local_models: BaseEstimator,

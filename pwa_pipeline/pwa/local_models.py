@@ -6,7 +6,7 @@ from numbers import Integral, Real
 
 import numpy as np
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator, _fit_context
+from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
 
 from .._arrays import column_rms
@@ -14,6 +14,7 @@ from .._typing import Float2D
 from ._blas import single_threaded_blas
 from ._qr_kernels import local_solve
 from ._threads import map_in_threads
+from .base import BaseLocalModels
 from .neighbours import distinct_rows, nearest_neighbours
 
 _RANK_TOL = 1e-10
@@ -21,9 +22,6 @@ _CHUNK = 256
 """Local sets per task of the solve (its θ_k and, where singular, R blocks: 256 × d × (d + m)
 floats each); the results do not depend on it, bit for bit."""
 _CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
-_UNESTIMATED = {"neighbours_": -1, "theta_": np.nan, "residual_var_": np.nan}
-"""The per-sample arrays of :class:`LocalLeastSquares`, and their value on the samples whose
-local model was not estimated; a pickle keeps only the estimated samples' rows."""
 
 
 def check_n_rho(n_rho: int, d: int) -> None:
@@ -168,7 +166,7 @@ def local_least_squares(
     return theta, resvar, scale, degenerate
 
 
-class LocalLeastSquares(BaseEstimator):
+class LocalLeastSquares(BaseLocalModels):
     """Steps 2–3 of the method: a local set of n_ρ neighbours around every φ(k) and its
     least-squares parameter matrix θ_k (eq. 6–7).
 
@@ -191,8 +189,8 @@ class LocalLeastSquares(BaseEstimator):
         subset (each local set still holds its n_ρ nearest among every sample); the others
         get none (``estimated_``). The clustering step uses at most 3,000 local models
         (``DBSCANClustering.max_clustered``), so on a long record most local models would
-        be estimated only to be left out: estimating all of the robot's 39,856 took 2.6 s
-        of a 3.9 s fit (``benchmarks/results/speed.md``). None (the paper): every sample.
+        be estimated only to be left out, and on long records estimating them all takes
+        most of the fit's time. None (the paper): every sample.
     random_state : int, default 0
         Seed of that subset.
 
@@ -200,9 +198,7 @@ class LocalLeastSquares(BaseEstimator):
     ----------
     theta_ : ndarray of shape (n, d, m)
         θ_k of every local set, in the regressors' own units; NaN for the samples whose local
-        model was not estimated. Where some were not, this and the next two arrays are kept
-        on the estimated samples and spread to every sample when first read; steps that
-        read a few rows use :meth:`at_estimated` or :meth:`local_thetas` instead.
+        model was not estimated.
     residual_var_ : ndarray of shape (n, m)
         Residual variance of each local fit, SSR / (n_ρ − d), per output (NaN where not
         estimated).
@@ -306,13 +302,12 @@ class LocalLeastSquares(BaseEstimator):
             idx[:, 0] = np.flatnonzero(estimated)
         self.degenerate_, self.original_ = degenerate, first[inverse]
         self.estimated_ = estimated
-        fitted = {"neighbours_": idx, "theta_": theta, "residual_var_": resvar}
-        for name in (*fitted, "_compact"):  # (a previous fit's)
-            vars(self).pop(name, None)
-        if estimated.all():
-            vars(self).update(fitted)
-        else:  # kept on the estimated samples, as a loaded step's (:meth:`__setstate__`)
-            self._compact = fitted
+        if not estimated.all():  # the samples without a local model: −1 and NaN
+            at = np.flatnonzero(estimated)
+            idx = _spread(idx, at, n, -1)
+            theta = _spread(theta, at, n, np.nan)
+            resvar = _spread(resvar, at, n, np.nan)
+        self.neighbours_, self.theta_, self.residual_var_ = idx, theta, resvar
         self.n_degenerate_ = int(degenerate.sum())
         self.n_estimated_ = int(estimated.sum())
         return self
@@ -321,112 +316,20 @@ class LocalLeastSquares(BaseEstimator):
         """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
         return {**self.get_params(), "n_rho": self.n_rho_}
 
-    def estimated_theta(self) -> np.ndarray:
-        """``theta_`` on the estimated samples (``estimated_``), without spreading the
-        compact arrays of an unpickled step (:meth:`__setstate__`)."""
-        compact = self.__dict__.get("_compact", {})
-        if "theta_" in compact:
-            return compact["theta_"]
-        return self.theta_ if self.estimated_.all() else self.theta_[self.estimated_]
-
-    def at_estimated(self, name: str, rows: np.ndarray) -> np.ndarray:
-        """``getattr(self, name)[rows]`` for ``name`` one of ``theta_``, ``neighbours_``,
-        ``residual_var_`` and ``rows`` (indices or a boolean mask over the samples) of
-        estimated samples only, read without spreading the compact arrays of an unpickled
-        step (:meth:`__setstate__`): the clustering step and its figure read a few thousand
-        of the robot's 40k rows.
+    def __setstate__(self, state: dict) -> None:
+        """Refuse a step pickled by an earlier version that kept only the estimated samples'
+        rows: its arrays would no longer line up with the samples.
 
         Raises
         ------
         ValueError
-            If a row is not an estimated sample (its value is the fill, not a fit).
+            If ``theta_`` has fewer rows than there are samples.
         """
-        rows = np.asarray(rows)
-        if rows.dtype == bool:
-            rows = np.flatnonzero(rows)
-        estimated = np.flatnonzero(self.estimated_)
-        at = np.searchsorted(estimated, rows)
-        found = np.append(estimated, -1)[at] == rows  # (-1: past the last estimated row)
-        if not found.all():
-            raise ValueError(f"{name}: rows {rows[~found][:5].tolist()} are not estimated "
-                             f"samples")
-        compact = self.__dict__.get("_compact", {})
-        return compact[name][at] if name in compact else getattr(self, name)[rows]
-
-    def local_thetas(self) -> "LocalThetas":
-        """The θ_k of every sample as a :class:`LocalThetas`: rows selected and read without
-        spreading ``theta_`` (what step 5's split search reads)."""
-        return LocalThetas(self, np.arange(self.estimated_.size))
-
-    def __getstate__(self) -> dict:
-        """The state to pickle: ``theta_``, ``neighbours_`` and ``residual_var_`` only on the
-        estimated samples when some were not (their other rows hold no information), so a
-        stored or cached step takes about ``max_sets``/n of the room (a robot partition with
-        the default adds about 10 MB to the caches, ``benchmarks/results/pipeline.md``);
-        :meth:`__setstate__` restores the same arrays (spread to every sample when first
-        read); the keys sorted, so that a step loaded and stored again gives the same bytes."""
-        state = dict(super().__getstate__())  # (object's is the instance's own dict)
-        compact = state.pop("_compact", {})
-        estimated = state.get("estimated_")
-        if estimated is not None and not estimated.all():
-            state.update({name: compact[name] if name in compact else state[name][estimated]
-                          for name in _UNESTIMATED})
-        return dict(sorted(state.items()))  # the same bytes, however much was read
-
-    def __setstate__(self, state: dict) -> None:
-        if "theta_" in state and len(state["theta_"]) < len(state["estimated_"]):
-            # kept compact until read (:meth:`__getattr__`): the pipeline's steps that only
-            # pass a loaded step on (or pickle it again) never spread its 60 MB on the robot
-            state = dict(state)
-            state["_compact"] = {name: state.pop(name) for name in _UNESTIMATED}
+        if "theta_" in state and len(state["theta_"]) != len(state["estimated_"]):
+            raise ValueError("these local models were stored by an earlier version of "
+                             "pwa-pipeline with only the estimated samples' rows; materialise "
+                             "local_models again")
         super().__setstate__(state)
-
-    def __getattr__(self, name: str):
-        """``theta_``, ``neighbours_`` or ``residual_var_`` of a step fitted on a subset or
-        unpickled, spread to every sample when first read (:meth:`fit` and
-        :meth:`__setstate__` keep them compact). The spread array is set before its compact
-        copy is dropped, so that a reader in another thread finds one or the other."""
-        compact = self.__dict__.get("_compact")
-        if compact is None or name not in compact:
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        value = _spread(compact[name], np.flatnonzero(self.estimated_),
-                        len(self.estimated_), _UNESTIMATED[name])
-        setattr(self, name, value)
-        compact.pop(name, None)
-        if not compact:
-            vars(self).pop("_compact", None)
-        return value
-
-
-class LocalThetas:
-    """The θ_k of some samples of a fitted :class:`LocalLeastSquares`, read without spreading
-    its arrays: ``thetas[rows]`` selects among these samples (indices or a boolean mask), and
-    :meth:`estimated` reads which of them have a local model, and their θ_k.
-
-    Step 5's split search (:func:`~pwa_pipeline.pwa.submodels.split_gain`) takes it in place
-    of ``theta_``: on the robot it reads the θ_k of a 2,000-row subsample of the 40k samples,
-    where ``theta_`` spread is 46 MB (NaN on the 35k samples without a local model), its
-    rows copied again for every sub-model searched (the peak and time this saves are in the
-    README's *Speed*).
-
-    Parameters
-    ----------
-    local : fitted LocalLeastSquares
-    rows : ndarray of shape (n,), int
-        The samples, in the order read.
-    """
-
-    def __init__(self, local: LocalLeastSquares, rows: np.ndarray):
-        self._local, self._rows = local, rows
-
-    def __getitem__(self, rows: np.ndarray) -> "LocalThetas":
-        return LocalThetas(self._local, self._rows[rows])
-
-    def estimated(self) -> tuple[np.ndarray, np.ndarray]:
-        """Which of the samples have a local model (bool, shape (n,)), and their θ_k (shape
-        (that many, d, m))."""
-        have = self._local.estimated_[self._rows]
-        return have, self._local.at_estimated("theta_", self._rows[have])
 
 
 def _spread(values: np.ndarray, rows: np.ndarray, n: int, fill) -> np.ndarray:

@@ -4,16 +4,17 @@ import warnings
 from numbers import Integral, Real
 
 import numpy as np
-from sklearn.base import BaseEstimator, _fit_context
+from sklearn.base import _fit_context
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.svm import LinearSVC
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D
+from .base import BaseRegions
 
 
-class SVMRegions(BaseEstimator):
+class SVMRegions(BaseRegions):
     """Step 6 of the method: the regions H_i of a linear partition of the regressor space,
     φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j), from a multi-class linear SVM on labelled φ(k).
 
@@ -21,8 +22,7 @@ class SVMRegions(BaseEstimator):
     ``LinearSVC(multi_class="crammer_singer")``), trained on z-scored regressors (constant
     columns such as the affine 1 are dropped; the SVM has its own intercept); its hyperplanes
     are mapped back to φ's units. Two classes are solved as the binary hinge-loss SVM with
-    2C, the same problem (tested), in about half the time (``LinearSVC(loss="hinge")``: the
-    two-class SVMs of two 20 dB fits 0.58 s against 1.19 s, ``benchmarks.region_svm``).
+    2C, the same problem (tested), in about half the time (``LinearSVC(loss="hinge")``).
     Rows labelled −1 (DBSCAN noise) or weighted 0 are left out.
 
     Parameters
@@ -34,22 +34,18 @@ class SVMRegions(BaseEstimator):
         (``max_rows`` // classes, a seeded random choice), so a rare class keeps all its rows
         up to that share, and kept rows are weighted so that the classes keep the proportions
         they have among all rows (``C`` then weighs the loss as on a fit of the kept rows).
-        The dual solver's cost grows faster than the rows where classes overlap (0.9 s a fit
-        on 50k single-output rows), and a linear boundary is fixed by far fewer. None: every
-        row.
+        The dual solver's cost grows faster than the rows where classes overlap, and a
+        linear boundary is fixed by far fewer. None: every row.
     random_state : int, default 0
         Seed of that choice.
     tol : float, default 1e-4
         Stopping tolerance of the SVM's dual solver (scikit-learn's ``LinearSVC(tol=...)``;
         liblinear's own default for this formulation is 0.1). The paper's preset uses 1e-2:
-        on its 24,732 clustered robot rows in 27 classes, 1e-4 does not converge (it stops
-        at ``max_iter`` with a ConvergenceWarning, 8 s), while 1e-2 converges in a seventh
-        of the time; the regions of 1e-2 equal those of a 1e-5 solve on every training and
-        held-out row, those of 1e-4 differ on one training row (``benchmarks.speed``); on
-        six heavily overlapping classes rows near the boundaries move between solves at
-        any tolerance (1e-2 gives the region of a 1e-6 solve on 99.8 % of 4,000 rows,
-        tested). On the simulated system 1e-2 has moved up to 10 of 4,000 rows against
-        1e-4, so the default keeps 1e-4.
+        on the robot's tens of thousands of clustered rows in 27 classes, 1e-4 does not
+        converge (it stops at ``max_iter`` with a ConvergenceWarning), while 1e-2 converges
+        and gives the regions of a much tighter solve; on heavily overlapping classes rows
+        near the boundaries move between solves at any tolerance. On the simulated system
+        1e-2 moves a few rows in thousands against 1e-4, so the default keeps 1e-4.
 
     Attributes
     ----------
@@ -92,6 +88,11 @@ class SVMRegions(BaseEstimator):
         labels: np.ndarray,
         n_regions: int | None = None,
         sample_weight: np.ndarray | None = None,
+        *,
+        target: Float2D | None = None,
+        thetas: np.ndarray | None = None,
+        output_lags: np.ndarray | None = None,
+        experiment: np.ndarray | None = None,
     ) -> "SVMRegions":
         """Fit the hyperplanes on the labelled rows.
 
@@ -105,6 +106,9 @@ class SVMRegions(BaseEstimator):
             is never chosen.
         sample_weight : ndarray of shape (n,), optional
             Weight of each row in the SVM loss; rows weighted 0 are left out.
+        target, thetas, output_lags, experiment : optional
+            Not used: the SVM separates the labels alone. Accepted so that every region
+            step is fitted alike (:class:`~.base.BaseRegions`).
         """
         labels = np.asarray(labels)
         d = phi.shape[1]

@@ -26,7 +26,7 @@ from sklearn.base import BaseEstimator
 
 from .._typing import Float2D
 from ..scoring.evaluation import WARMUP
-from .output_error import VALIDATION_FRACTION, _OutputRuns, held_out, refine_outputs
+from .output_error import VALIDATION_FRACTION, OutputFreeRuns, held_out, refine_outputs
 from .regressors import Regressors, build_regressors
 from .scheduling import SignRegions
 from .structures import OutputModel, StructuredModel, output_lags, output_regressors, phi_names
@@ -185,7 +185,7 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                         "cost": res.cost, "one_step_start": res.one_step_start,
                         "one_step": res.one_step_cost}
             elif held_uy is not None:
-                runs = _OutputRuns(*held_uy, lags, nb, affine, warmup, models, group)
+                runs = OutputFreeRuns(*held_uy, lags, nb, affine, warmup, models, group)
                 cost = runs.simulate(np.concatenate([models[j].p for j in group]), False)[0]
             else:
                 cost = np.nan

@@ -1,0 +1,155 @@
+"""The free run of an ARX-structured model and its sensitivities dŷ(k)/dθ, for the
+output-error refinement (:mod:`~pwa_pipeline.pwa.output_error`).
+
+The Jacobian of the free run is propagated forward in time (sensitivities through the output
+lags of φ̂, the region treated as locally constant), for all experiments at once, and only
+JᵀJ (P × P) and Jᵀr are kept, never J itself (N·m × P rows).
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..._typing import Float2D
+
+
+class _NormalEquations:
+    """JᵀJ and Jᵀr of the free run, from Jacobian rows gathered over 32 time steps for one
+    larger product."""
+
+    def __init__(self, p: int):
+        self.jtj, self.jtr = np.zeros((p, p)), np.zeros(p)
+        self._rows: list[np.ndarray] = []
+        self._res: list[np.ndarray] = []
+
+    def add(self, rows: np.ndarray, residuals: np.ndarray, last: bool) -> None:
+        """Add the rows dŷ/dθ (n, p) and residuals (n,) of one time step."""
+        self._rows.append(rows)
+        self._res.append(residuals)
+        if len(self._rows) == 32 or last:
+            rows_j, res = np.vstack(self._rows), np.concatenate(self._res)
+            self.jtj += rows_j.T @ rows_j
+            self.jtr += rows_j.T @ res
+            self._rows, self._res = [], []
+
+
+class FreeRuns:
+    """The training experiments padded to one length, simulated in lockstep.
+
+    ``simulated`` (default: every output) are the outputs that run free; the others keep
+    their measured values (with decoupled per-output models they do not enter the
+    simulated ones).
+    """
+
+    def __init__(self, u: list[Float2D], y: list[Float2D], na: int, nb: int, affine: bool,
+                 warmup: int, simulated: list[int] | None = None):
+        self.na, self.nb, self.affine, self.warmup = na, nb, affine, warmup
+        self.lengths = np.array([len(e) for e in y])
+        n, e = self.lengths.max(), len(y)
+        self.u = np.zeros((e, n, u[0].shape[1]))
+        self.y = np.zeros((e, n, y[0].shape[1]))
+        for i, (ue, ye) in enumerate(zip(u, y, strict=True)):
+            self.u[i, :len(ue)], self.y[i, :len(ye)] = ue, ye
+        self.simulated = list(range(self.y.shape[2]) if simulated is None else simulated)
+        self.n_scored = int(np.maximum(self.lengths - warmup, 0).sum()) * len(self.simulated)
+
+    def phi(self, ysim: np.ndarray, k: int) -> Float2D:
+        """φ̂(k) of every experiment, in eq. (3)'s order, from the simulated outputs."""
+        e = ysim.shape[0]
+        ylags = ysim[:, k - self.na:k][:, ::-1].transpose(0, 2, 1).reshape(e, -1)
+        ulags = self.u[:, k - self.nb:k][:, ::-1].transpose(0, 2, 1).reshape(e, -1)
+        parts = [ylags, ulags] + ([np.ones((e, 1))] if self.affine else [])
+        return np.concatenate(parts, axis=1)
+
+    def simulate(self, thetas: np.ndarray, region_of: Callable | None,
+                 sensitivities: bool) -> tuple[float, np.ndarray | None, np.ndarray | None]:
+        """Cost J / (scored samples · outputs), and JᵀJ and Jᵀr when ``sensitivities``, of
+        parameter matrices θ (s, d, m) flattened as (region, regressor, output).
+
+        Returns inf (and no normal equations) when the run leaves the finite numbers.
+        """
+        s, d, m = thetas.shape
+        rows, outs = np.arange(self.y.shape[0])[:, None, None], np.arange(m)[None, :, None]
+
+        def step(phi):
+            region = np.zeros(len(phi), dtype=int) if region_of is None else region_of(phi)
+
+            def direct(sk):  # dŷ_j(k)/dθ_{λ(k), a, j} = φ_a(k)
+                cols = region[:, None, None] * d * m + np.arange(d)[None, None, :] * m + outs
+                sk[rows, outs, cols] = phi[:, None, :]
+
+            return thetas[region], direct
+
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._run(step, s * d * m, sensitivities)
+
+    def _run(self, step: Callable, n_params: int, sensitivities: bool):
+        """The free run and its sensitivities dŷ(k)/dθ, propagated through the output lags
+        of φ̂. ``step(φ̂)`` gives every experiment's parameter matrix at k, (e, d, outputs
+        simulated), and a function adding the direct term dŷ(k)/dθ at fixed φ̂ to an
+        (e, outputs simulated, n_params) array."""
+        e, n = self.y.shape[:2]
+        sim, w, na = self.simulated, self.warmup, self.na
+        ysim = self.y.copy()
+        lag_rows = [[q * na + lag - 1 for q in sim] for lag in range(1, na + 1)]
+        sens = np.zeros((na + 1, e, len(sim), n_params))  # ring buffer of dŷ(k)/dθ
+        normal, cost = _NormalEquations(n_params), 0.0
+        for k in range(w, n):
+            active = self.lengths > k
+            phi = self.phi(ysim, k)
+            theta_k, direct = step(phi)
+            yk = np.einsum("ed,edj->ej", phi, theta_k)
+            target = self.y[:, k][:, sim]
+            ysim[:, k, sim] = np.where(active[:, None], yk, target)
+            r = np.where(active[:, None], yk - target, 0.0)
+            cost += float(np.sum(r * r))
+            if not np.isfinite(cost):
+                return np.inf, None, None
+            if not sensitivities:
+                continue
+            sk = np.zeros((e, len(sim), n_params))
+            direct(sk)
+            # through the output lags of φ̂: φ_{q, lag}(k) = ŷ_q(k − lag)
+            for lag in range(1, min(na, k - w) + 1):
+                a = theta_k[:, lag_rows[lag - 1], :]                   # (e, q, j)
+                sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
+            sk[~active] = 0.0
+            sens[k % (na + 1)] = sk
+            normal.add(sk.reshape(-1, n_params), r.ravel(), last=k == n - 1)
+        if not sensitivities:
+            return cost / self.n_scored, None, None
+        return cost / self.n_scored, normal.jtj, normal.jtr
+
+
+class OutputFreeRuns(FreeRuns):
+    """The experiments simulated with per-output models
+    (:class:`~pwa_pipeline.pwa.structures.OutputModel`): the outputs ``simulated`` run free, the others
+    keep their measured values.
+
+    The parameters are the concatenated p_j of the simulated outputs.
+    """
+
+    def __init__(self, u, y, lags: int, nb: int, affine: bool, warmup: int,
+                 models: list, simulated: list[int]):
+        super().__init__(u, y, lags, nb, affine, warmup, simulated)
+        self.models = models
+        self.g = [models[j].G() for j in self.simulated]
+        self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
+
+    def simulate(self, p: np.ndarray, sensitivities: bool):
+        """As :meth:`FreeRuns.simulate`, with the concatenated p_j."""
+        sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
+        thetas = [self.models[j].c + g @ p[a:b]
+                  for j, g, (a, b) in zip(sim, self.g, bounds, strict=True)]
+
+        def step(phi):
+            regions = [self.models[j].regions(phi) for j in sim]
+
+            def direct(sk):
+                for jj, (g, reg, (a, b)) in enumerate(zip(self.g, regions, bounds)):
+                    sk[:, jj, a:b] = np.einsum("ed,edp->ep", phi, g[reg])
+
+            return np.stack([t[r] for t, r in zip(thetas, regions, strict=True)], axis=2), direct
+
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._run(step, int(self.offsets[-1]), sensitivities)
