@@ -15,7 +15,6 @@
 
 import importlib
 import inspect
-import logging
 import pkgutil
 import re
 import tomllib
@@ -24,28 +23,6 @@ from pathlib import Path
 ESTIMATORS_MARKER = "<!-- generated: estimators -->"
 HPARAMS_MARKER = "<!-- generated: hparams -->"
 PAGE = "configuration.md"
-
-# Docstring warnings known and reported upstream, silenced so that `mkdocs build --strict`
-# passes until the docstring is fixed: (path suffix, line, message start). A warning that no
-# longer occurs is harmless here; a new one still fails the strict build.
-KNOWN_DOCSTRING_WARNINGS = [
-    # PWARX: a paragraph ("With form=...") inside the Parameters section, read as parameters.
-    ("pwa_pipeline/pwa/estimator.py", 89, ""),
-]
-
-
-class _KnownWarnings(logging.Filter):
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = record.getMessage()
-        for path, line, start in KNOWN_DOCSTRING_WARNINGS:
-            if f"{path}:{line}:" in message and message.split(f"{path}:{line}: ", 1)[-1].startswith(start):
-                return False
-        return True
-
-
-for _name in ("griffe", "mkdocs.plugins.griffe"):
-    logging.getLogger(_name).addFilter(_KnownWarnings())
-
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
     if page.file.src_uri != PAGE:

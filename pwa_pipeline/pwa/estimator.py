@@ -49,6 +49,16 @@ class PWARX(ARXModelBase):
     residuals (:class:`~.boundaries.ResidualRegions`). :meth:`PWARX.paper` is the paper's
     setting.
 
+    Each step object implements the interface of its kind (:mod:`~.base`:
+    :class:`~.base.BaseLocalModels`, :class:`~.base.BaseClustering`,
+    :class:`~.base.BaseSubModels`, :class:`~.base.BaseRegions`), and :meth:`fit_step` calls
+    every step of a kind alike.
+
+    With ``form="velocity"``, ``outputs="decoupled"`` or ``scheduling``, the fit takes the
+    structured route of :mod:`~.structure_fit` (the paper's steps run per output group on ψ
+    when ``scheduling`` is None); the model is then ``structure_`` and ``thetas_``,
+    ``regions_``, ``labels_`` and the fitted steps are not set.
+
     Parameters
     ----------
     na, nb : int
@@ -64,11 +74,6 @@ class PWARX(ARXModelBase):
     regions : estimator, optional
         Step 6. None: ``ResidualRegions()`` (the SVM's regions with boundaries moved to
         where the sub-models' residuals switch); the paper's is ``SVMRegions()``.
-
-    Each step object implements the interface of its kind (:mod:`~.base`:
-    :class:`~.base.BaseLocalModels`, :class:`~.base.BaseClustering`,
-    :class:`~.base.BaseSubModels`, :class:`~.base.BaseRegions`), and :meth:`fit_step` calls
-    every step of a kind alike.
     refinement : estimator, optional
         After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
         minimise the free-run error on the training experiments, the regions kept. None (the
@@ -83,11 +88,6 @@ class PWARX(ARXModelBase):
         Regions given by the user (:class:`~.scheduling.SignScheduling`, e.g. the sign of
         each output's increment), in place of steps 2–6; sub-models by least squares per
         region, optionally a structure chosen per output on held-out training experiments.
-
-    With ``form="velocity"``, ``outputs="decoupled"`` or ``scheduling``, the fit takes the
-    structured route of :mod:`~.structure_fit` (the paper's steps run per output group on ψ
-    when ``scheduling`` is None); the model is then ``structure_`` and ``thetas_``,
-    ``regions_``, ``labels_`` and the fitted steps are not set.
 
     Attributes
     ----------
