@@ -1,7 +1,6 @@
 """Caches in the store: keyed by inputs and the core's source; bad entries recomputed."""
 
 import pickle
-from pathlib import Path
 
 import dagster as dg
 import numpy as np
@@ -13,17 +12,9 @@ from pwa_pipeline.orchestration.caches import SignedMemory
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 
+from ._planted import Planted
+
 IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
-
-
-class _Planted:
-    """Unpickling this runs code: it writes ``marker``."""
-
-    def __init__(self, marker: Path):
-        self.marker = marker
-
-    def __reduce__(self):
-        return (Path.write_text, (self.marker, "code ran"))
 
 
 def _assets(names):
@@ -51,7 +42,7 @@ def test_bad_cache_entries_are_recomputed_with_a_warning(tmp_path, settings, ass
     [entry] = (tmp_path / "cache" / asset).glob("*.pkl")
     reference = getattr(first.output_for_node(asset), fitted)
     marker = tmp_path / "marker"
-    for damage in (lambda: entry.write_bytes(pickle.dumps(_Planted(marker))),
+    for damage in (lambda: entry.write_bytes(pickle.dumps(Planted(marker))),
                    lambda: entry.write_bytes(entry.read_bytes()[:100])):
         damage()
         result = dg.materialize(_assets(names), partition_key=partition, resources=resources,

@@ -1,21 +1,8 @@
 """The command line's Dagster instance."""
 
-import contextlib
-import multiprocessing
 import os
 
-
-@contextlib.contextmanager
-def _fork_pool(processes: int):
-    """A fork pool ended by close + join: ``Pool.__exit__`` terminates its workers by SIGTERM,
-    which pytest-xdist's workers ignore, and a worker blocked on the task queue's lock (held by
-    the terminating pool) then never ends."""
-    pool = multiprocessing.get_context("fork").Pool(processes)
-    try:
-        yield pool
-    finally:
-        pool.close()
-        pool.join()
+from ._fork_pool import fork_pool
 
 
 def _prepare(home):
@@ -31,7 +18,7 @@ def test_instances_created_at_once_share_one_schema(tmp_path):
 
     for trial in range(2):  # without the lock 2 of 3 such trials broke the home
         home = tmp_path / f"home{trial}"
-        with _fork_pool(4) as pool:
+        with fork_pool(4) as pool:
             assert pool.map(_prepare, [str(home)] * 4) == ["ok"] * 4
         db = sqlite3.connect(home / "history" / "runs.db")
         assert db.execute("select count(*) from alembic_version").fetchone() == (1,)

@@ -1,7 +1,6 @@
 """The trust boundary: only pickles this store signed are loaded."""
 
 import pickle
-from pathlib import Path
 
 import dagster as dg
 import pytest
@@ -14,15 +13,7 @@ from pwa_pipeline.orchestration.signed_pickles import (
     signing_key,
 )
 
-
-class _Planted:
-    """Unpickling this runs code: it writes ``marker``."""
-
-    def __init__(self, marker: Path):
-        self.marker = marker
-
-    def __reduce__(self):
-        return (Path.write_text, (self.marker, "code ran"))
+from ._planted import Planted
 
 
 def test_signed_files_round_trip_and_damage_is_detected(tmp_path):
@@ -41,7 +32,7 @@ def test_a_planted_pickle_is_never_loaded(tmp_path):
     marker = tmp_path / "marker"
     planted = tmp_path / "store" / "x" / "d" / "s.pkl"
     planted.parent.mkdir(parents=True)
-    planted.write_bytes(pickle.dumps(_Planted(marker)))
+    planted.write_bytes(pickle.dumps(Planted(marker)))
     io = PartitionedFileIOManager(base_dir=str(tmp_path / "store"))
     ctx = dg.build_input_context(asset_key=dg.AssetKey("x"), partition_key="d|s")
     with pytest.raises(UnsignedFileError, match=f"{planted} is not a file this store wrote"):

@@ -1,9 +1,7 @@
 """The MLflow resource: runs logged whole, ended on failure, credentials never shown."""
 
 import base64
-import contextlib
 import json
-import multiprocessing
 import shutil
 import threading
 import time
@@ -17,25 +15,14 @@ import pytest
 from pwa_pipeline.orchestration.credentials import mask_credentials, split_credentials
 from pwa_pipeline.orchestration.tracking import LoggedRun, MLflowTracker
 
+from ._fork_pool import fork_pool
+
 
 def _log_one(args):
     uri, i = args
     tracker = MLflowTracker(tracking_uri=uri)
     return tracker.log_run(dataset="d", hparams=f"s{i}", method="pwa", params={}, metrics={"m": i},
                            tags={}, artifacts={}).run_id
-
-
-@contextlib.contextmanager
-def _fork_pool(processes: int):
-    """A fork pool ended by close + join: ``Pool.__exit__`` terminates its workers by SIGTERM,
-    which pytest-xdist's workers ignore, and a worker blocked on the task queue's lock (held by
-    the terminating pool) then never ends."""
-    pool = multiprocessing.get_context("fork").Pool(processes)
-    try:
-        yield pool
-    finally:
-        pool.close()
-        pool.join()
 
 
 @pytest.mark.parametrize("fresh", [True, False])
@@ -46,7 +33,7 @@ def test_runs_started_at_once_all_log(tmp_path, fresh, mlflow_template):
     if not fresh:
         shutil.copy(mlflow_template, db)
     uri = f"sqlite:///{db}"
-    with _fork_pool(3) as pool:  # separate processes, no re-import
+    with fork_pool(3) as pool:  # separate processes, no re-import
         ids = pool.map(_log_one, [(uri, i) for i in range(3)])
     client = MlflowClient(tracking_uri=uri)
     exps = [e for e in client.search_experiments() if e.name == "pwa-pipeline/d"]
