@@ -257,18 +257,22 @@ def test_a_long_record_fits_the_same_model_from_a_subset_of_local_models():
     assert np.mean(some.labels_ == every.labels_) > 0.995
 
 
-def test_a_step_stored_with_only_the_estimated_rows_is_refused():
+def test_a_pickle_keeps_the_estimated_rows_and_loads_the_same_arrays():
     import pickle
 
     import numpy as np
-    import pytest
 
     from pwa_pipeline.pwa import LocalLeastSquares
 
     rng = np.random.default_rng(0)
-    phi, target = rng.normal(size=(300, 3)), rng.normal(size=(300, 1))
-    step = LocalLeastSquares(n_rho=10, max_sets=100, random_state=0).fit(phi, target)
-    assert pickle.loads(pickle.dumps(step)).theta_.shape == (300, 3, 1)
-    state = dict(vars(step), theta_=step.theta_[step.estimated_])  # the earlier compact form
-    with pytest.raises(ValueError, match="stored by an earlier version.*local_models again"):
-        LocalLeastSquares().__setstate__(state)
+    phi, target = rng.normal(size=(3000, 3)), rng.normal(size=(3000, 1))
+    step = LocalLeastSquares(n_rho=10, max_sets=300, random_state=0).fit(phi, target)
+    whole = LocalLeastSquares(n_rho=10, random_state=0).fit(phi, target)
+    data = pickle.dumps(step)
+    assert len(data) < len(pickle.dumps(whole)) / 5  # 300 of 3000 rows
+    loaded = pickle.loads(data)
+    for name in ("theta_", "neighbours_", "residual_var_", "estimated_"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(step, name))
+    assert loaded.theta_.shape == (3000, 3, 1) and np.isnan(loaded.theta_[~step.estimated_]).all()
+    assert (loaded.neighbours_[~step.estimated_] == -1).all()
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(whole)).theta_, whole.theta_)

@@ -21,6 +21,9 @@ _RANK_TOL = 1e-10
 _CHUNK = 256
 """Local sets per task of the solve (its θ_k and, where singular, R blocks: 256 × d × (d + m)
 floats each); the results do not depend on it, bit for bit."""
+_PER_SAMPLE = {"neighbours_": -1, "theta_": np.nan, "residual_var_": np.nan}
+"""The per-sample arrays of :class:`LocalLeastSquares` and their value on the samples whose
+local model was not estimated."""
 _CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
 
 
@@ -316,19 +319,24 @@ class LocalLeastSquares(BaseLocalModels):
         """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
         return {**self.get_params(), "n_rho": self.n_rho_}
 
-    def __setstate__(self, state: dict) -> None:
-        """Refuse a step pickled by an earlier version that kept only the estimated samples'
-        rows: its arrays would no longer line up with the samples.
+    def __getstate__(self) -> dict:
+        """The state to pickle, the per-sample arrays (:data:`_PER_SAMPLE`) on the estimated
+        samples only: their other rows hold no information, so a stored or cached step fitted
+        with ``max_sets`` takes about ``max_sets`` / n of the room."""
+        state = dict(super().__getstate__())
+        estimated = state.get("estimated_")
+        if estimated is not None and not estimated.all():
+            state.update({name: state[name][estimated] for name in _PER_SAMPLE})
+        return state
 
-        Raises
-        ------
-        ValueError
-            If ``theta_`` has fewer rows than there are samples.
-        """
-        if "theta_" in state and len(state["theta_"]) != len(state["estimated_"]):
-            raise ValueError("these local models were stored by an earlier version of "
-                             "pwa-pipeline with only the estimated samples' rows; materialise "
-                             "local_models again")
+    def __setstate__(self, state: dict) -> None:
+        """The pickled state (:meth:`__getstate__`), its per-sample arrays spread back to
+        every sample."""
+        estimated = state.get("estimated_")
+        if estimated is not None and len(state.get("theta_", estimated)) < len(estimated):
+            rows = np.flatnonzero(estimated)
+            state = {**state, **{name: _spread(state[name], rows, len(estimated), fill)
+                                 for name, fill in _PER_SAMPLE.items()}}
         super().__setstate__(state)
 
 
