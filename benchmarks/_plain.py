@@ -1,4 +1,4 @@
-"""A plain numpy/scikit-learn version of steps 1–4 of the default, the reference of issue 12.
+"""A plain numpy/scikit-learn version of steps 1–4 of the default: the speed benchmark's reference.
 
 Written as one would first write it: regressors, scikit-learn's brute-force neighbours on
 z-scored regressors, one ``np.linalg.lstsq`` per local set, the default's unit-free θ,

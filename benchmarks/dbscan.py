@@ -1,4 +1,4 @@
-"""DBSCAN on the robot's local models: pwa_pipeline.pwa.dbscan against scikit-learn (issue 12).
+"""DBSCAN on the robot's local models: pwa_pipeline.pwa.dbscan against scikit-learn.
 
 The embedding is the paper setting's (KUKA training record, na = nb = 2, n_rho = 61, exact
 embedding of the local parameter matrices: 39,856 points in 144 dimensions, eps = 8,

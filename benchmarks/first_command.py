@@ -1,5 +1,5 @@
 """The README's first command, ``python -m pwa_pipeline run``, on fresh stores: wall time,
-peak memory, and where the time goes (issue 12).
+peak memory, and where the time goes.
 
 Each repeat runs the command in a fresh process with ``PWA_PIPELINE_HOME`` set to a new
 temporary directory (so the Dagster home, the asset store, the local-model cache and the

@@ -1,4 +1,4 @@
-"""Held (piecewise-constant) inputs on the paper's section 5 system (issue 10).
+"""Held (piecewise-constant) inputs on the paper's section 5 system.
 
 Each input value is held for 5–40 samples (uniform), as from a PLC, a PRBS or a step test;
 N = 4000, 30 dB. For seeds 1000–1019 (never used while tuning the default), fits the default

@@ -1,4 +1,4 @@
-"""What bounds step 6's region accuracy: the gate with the true sub-models and modes (issue 10).
+"""What bounds step 6's region accuracy: the gate with the true sub-models and modes.
 
 On the records of :mod:`benchmarks.robustness` (tuning seeds 100…), the gate of
 :func:`~pwa_pipeline.pwa.boundaries.refine_boundaries` is started from the SVM on the true

@@ -1,4 +1,4 @@
-"""Robustness of the default PWARX on the cases real excitation brings (issue 10).
+"""Robustness of the default PWARX on the cases real excitation brings.
 
 Cases (N = 4000 and 30 dB unless named otherwise):
 
@@ -44,7 +44,7 @@ Writes results/robustness{suffix}.md, .json and .csv. Usage::
 
 On long records (``--n 40000``) the default estimates the local models of 5,000 samples
 (``LocalLeastSquares.max_sets``); the same run with ``--params local_models__max_sets=None``
-estimates every one, and the two tables compare the subset with the full step (issue 12).
+estimates every one, and the two tables compare the subset with the full step.
 
 ``--seeds 3 --cases ...`` is the quick form; the full run (10 cases × 20 seeds) takes about
 15 minutes with ``--jobs 2``. The reference (the landed code on the same seeds) runs this

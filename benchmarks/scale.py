@@ -1,4 +1,4 @@
-"""Scale curve of the default fit (issue 12): time and peak memory per step against N.
+"""Scale curve of the default fit: time and peak memory per step against N.
 
 Cases: the simulated system of the paper's section 5 (``make_hure_vasak``, 30 dB, seed 0,
 na = nb = 1, d = 4, m = 2) at N = 4,000, 40,000 and 400,000 samples, and the KUKA training

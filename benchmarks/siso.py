@@ -1,4 +1,4 @@
-"""Single-output fit time (issue 13): a 2-mode SISO PWARX record at N = 5k, 20k and 50k.
+"""Single-output fit time: a 2-mode SISO PWARX record at N = 5k, 20k and 50k.
 
 y(k) = 0.5·y(k−1) + u(k−1) where y(k−1) > 0, else −0.3·y(k−1) + 2·u(k−1) + 0.5, u white
 uniform in [−1, 1], output noise σ = 0.01, affine regressors. On such records DBSCAN returns

@@ -1,4 +1,4 @@
-"""Speed and memory on the robot (issue 12): the default and the paper setting, against the
+"""Speed and memory on the robot: the default and the paper setting, against the
 plain reference and the previous implementation, in one run.
 
 On the full KUKA training record (39,988 samples, na = nb = 2, d = 24, m = 6), each fit in a

@@ -1,5 +1,5 @@
 """A 12-set sweep over ε and MinPts on the robot: local models and step 5 reused vs every set
-recomputed (issue 12).
+recomputed.
 
 The 12 sets are the library default on the KUKA training record (na = nb = 2, n_rho = 72)
 with ε × MinPts from EPS × MIN_PTS (ε in the unit-free θ units of the default; the default's
