@@ -6,7 +6,7 @@ with ε × MinPts from EPS × MIN_PTS (ε in the unit-free θ units of the defau
 own choice is about 25). ``recompute``: each set is a full ``PWARX.fit``. ``reuse``: the
 regressors and the local-model step are fitted once (``PWARX.fit_step``), and each set fits
 only its clustering, sub-models and regions on them and joins the steps with
-``PWARX.assemble``: what the pipeline's local-model cache does (orchestration/assets.py).
+``PWARX.assemble``: what the pipeline's local-model cache does (orchestration/assets/identification.py).
 ``reuse + step 5``: the same with the pipeline's step-5 cache too (``RefinedSubModels``'s
 ``memory``, a ``SignedMemory`` in a new temporary folder each run, so that the sweep fills
 it): each set whose clustering consolidates to a state an earlier set reached takes steps

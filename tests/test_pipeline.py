@@ -15,7 +15,8 @@ from pwa_pipeline import PWARX, LinearARX, SubspaceSS
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
-from pwa_pipeline.orchestration import assets
+from pwa_pipeline.orchestration.assets import model_facts
+from pwa_pipeline.orchestration.assets import scores as score_assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.mlflow_models import example_table
@@ -264,10 +265,10 @@ def test_cached_scores_are_those_of_the_same_model_on_the_same_held_out_data(tmp
     edited = dataclasses.replace(data, y_test=[y])
     model = LinearARX(na=1, nb=1).fit(data.u_train, data.y_train)
     memory = SignedMemory(tmp_path, "scores")
-    score = memory.cache(assets._scored, ignore=["model", "data"])
-    first = score(model, data, 10, "t", assets._prediction_key(model, data))[0]
-    again = score(model, data, 10, "t", assets._prediction_key(model, data))[0]
-    other = score(model, edited, 10, "t", assets._prediction_key(model, edited))[0]
+    score = memory.cache(score_assets.scored, ignore=["model", "data"])
+    first = score(model, data, 10, "t", model_facts.prediction_key(model, data))[0]
+    again = score(model, data, 10, "t", model_facts.prediction_key(model, data))[0]
+    other = score(model, edited, 10, "t", model_facts.prediction_key(model, edited))[0]
     assert (memory.hits, memory.misses) == (1, 2)
     pd.testing.assert_frame_equal(first.table, again.table)
     assert not np.allclose(first.table["nrmse"], other.table["nrmse"])
@@ -384,7 +385,7 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
                                                            data.y_test[0][:5])[5:])
 
     # changed figure code draws the baselines' figures again, their fits still cached
-    monkeypatch.setattr(assets, "figures_fingerprint", lambda: "other figure code")
+    monkeypatch.setattr(score_assets, "figures_fingerprint", lambda: "other figure code")
     run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
     assert all(metadata(run, n, "from_cache") for n in names)
     assert not any(metadata(run, n, "scores_from_cache") for n in scores)
