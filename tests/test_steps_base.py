@@ -61,3 +61,27 @@ def test_the_svm_regions_ignore_what_only_residual_regions_use():
                              experiment=np.zeros(300, int))
     np.testing.assert_array_equal(given.coef_, plain.coef_)
     np.testing.assert_array_equal(given.intercept_, plain.intercept_)
+
+
+class _KMeansClustering(BaseClustering):
+    """A step 4 of one's own: k-means on the local parameter vectors."""
+
+    def __init__(self, n_clusters: int = 4):
+        self.n_clusters = n_clusters
+
+    def fit(self, local, target):
+        from sklearn.cluster import KMeans
+
+        theta = local.theta_.reshape(len(local.theta_), -1)
+        labels = KMeans(self.n_clusters, n_init=4, random_state=0).fit_predict(theta)
+        self.labels_, self.min_pts_ = labels, 10
+        return self
+
+
+def test_a_step_of_ones_own_that_implements_the_interface_is_used_by_pwarx():
+    data = make_hure_vasak(n_samples=2000, snr_db=None, seed=1)
+    model = PWARX(na=1, nb=1, clustering=_KMeansClustering(), submodels=ClusterCentres(),
+                  regions=SVMRegions()).fit(data.u, data.y)
+    assert isinstance(model.clustering_, _KMeansClustering)
+    assert model.get_params()["clustering__n_clusters"] == 4
+    assert model.n_submodels_ == 4 and np.isfinite(model.thetas_).all()
