@@ -88,6 +88,7 @@ def runnable_keys(partitions_def: dg.StaticPartitionsDefinition, settings: Pipel
     """
     offered = all_keys(partitions_def)
     hparams = settings.hparams()
+    registered = set(settings.registry().names())
     skipped = unavailable_datasets(settings)
     keys = []
     for dataset in dict.fromkeys(split_key(k)[0] for k in offered):
@@ -99,6 +100,5 @@ def runnable_keys(partitions_def: dg.StaticPartitionsDefinition, settings: Pipel
                 keys.append(key)
             elif name in hparams.sets:
                 skipped[key] = (f"set {name!r} has no values for {dataset!r} in {hparams.path}"
-                                + (f' (add [{name}."*"])' if dataset in settings.registry().names()
-                                   else ""))
+                                + (f' (add [{name}."*"])' if dataset in registered else ""))
     return keys, skipped
