@@ -273,3 +273,21 @@ def test_runs_launched_from_the_sweep_page_of_the_ui_are_sweep_runs(tmp_path):
         assert sorted(r.tags["dagster/partition"] for r in runs) == sorted([KEYS[0], *KEYS])
         assert {r.run_id for r in runs} >= set(backfill["launchedRunIds"])
         assert not instance.get_runs(dg.RunsFilter(job_name="__ASSET_JOB"))
+
+
+def test_a_leaderboard_with_nothing_scored_yet_lists_every_partition_as_missing(
+        tmp_path, mlflow_template):
+    from pwa_pipeline.orchestration.settings import PipelineSettings
+    from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
+                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                              hparams_path=str(BUNDLED_HPARAMS)),
+                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")}
+    board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources)
+    assert board.success and board.output_for_node(LEADERBOARD).empty
+    meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
+    assert meta["partitions_scored"].value == 0
+    assert meta["partitions_missing"].value == len(all_keys(partitions_of(defs)))
+    assert "No partition has been materialised yet." in meta["leaderboard"].value

@@ -187,3 +187,18 @@ def test_the_docs_example_registers_the_bundled_table(tmp_path, monkeypatch, cap
     assert main(args) == 0
     assert "training : 3 experiment(s), 1,800 samples" in capsys.readouterr().out
     assert DatasetRegistry(tmp_path / "datasets.json").get("plant").test_experiments == ("r4",)
+
+
+def test_a_broken_hyper_parameter_file_registers_nothing(tmp_path, csv, capsys, monkeypatch):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    broken = tmp_path / "hp.toml"
+    broken.write_text("[default.\n")
+    monkeypatch.setenv("PWA_HPARAMS", str(broken))
+    args = ["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2"]
+    assert main(args) == 2
+    assert f"error: {broken} is not valid TOML" in capsys.readouterr().err
+    assert DatasetRegistry(tmp_path / "datasets.json").names() == []
+    monkeypatch.setenv("PWA_HPARAMS", str(BUNDLED_HPARAMS))
+    assert main(args) == 0  # the retry registers it: nothing was left half-done

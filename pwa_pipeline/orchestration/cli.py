@@ -169,8 +169,8 @@ def add_dataset(args: argparse.Namespace) -> int:
         experiment=args.experiment, time=args.time,
         test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
         na=args.na, nb=args.nb, affine=args.affine)
+    hparams = HParamsFile()  # read and checked first: a broken file registers nothing
     data = registry.add(spec, replace=args.replace)
-    hparams = HParamsFile()
     sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
     others = [s for s in hparams.sets if s not in sets]
     print(f"registered {spec.name!r} in {registry.path}\n"

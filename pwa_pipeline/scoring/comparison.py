@@ -66,11 +66,13 @@ def leaderboard(scores: pd.DataFrame) -> pd.DataFrame:
     output-averaged NRMSE and R² of one-step prediction and free run and whether the free run
     diverged; ``rank`` orders the rows of a data set by free-run NRMSE (1 is best, ties share
     a rank, a diverged or non-finite free run ranks last). Rows are sorted by data set (as
-    they come), rank, then method (registry order) and set.
+    they come), rank, then method (registry order) and set. No score: no row.
     """
     from ..methods import METHODS
 
     means = scores[scores["output"] == "mean"]
+    if means.empty:  # nothing scored yet: the table's columns, no row
+        return pd.DataFrame(columns=LEADERBOARD_COLUMNS)
     keys = ["dataset", "hparams", "method"]
     # unstack, not pivot_table: a NaN score keeps its row, and no absent combination appears
     wide = means.set_index([*keys, "mode"])[["nrmse", "r2"]].unstack("mode")
