@@ -41,6 +41,9 @@ BASELINES = "baselines"
 #: The table key of a set's values for every user data set.
 ANY_DATASET = "*"
 ORDERS = ("na", "nb", "affine")
+#: The keys of a ``[baselines.<dataset>]`` table: the evaluation's warm-up and the subspace
+#: baseline's parameters (a sub-table).
+BASELINE_KEYS = {"warmup", "subspace"}
 #: Sub-tables that add an optional step object, and an example key of each.
 _STEP_TABLES = {"refinement": OutputErrorRefinement, "scheduling": SignScheduling}
 _EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"'}
@@ -172,6 +175,13 @@ class HParamsFile:
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"{self.path} is not valid TOML: {exc}") from None
         self._baselines = tables.pop(BASELINES, {})
+        for dataset, table in self._baselines.items():
+            unknown = sorted(set(table) - BASELINE_KEYS) if isinstance(table, dict) else None
+            if unknown is None or unknown:
+                raise ValueError(
+                    f"{self.path}, [{BASELINES}.{dataset}]: "
+                    + ("must be a table" if unknown is None else f"unknown key(s) {unknown}")
+                    + f"; its keys are {sorted(BASELINE_KEYS)} (e.g. subspace.order = 4)")
         self.sets = [check_name(name, "hyper-parameter set") for name in tables]
         self._templates: dict[str, dict] = {}
         self._configs: dict[tuple[str, str], Configuration] = {}
@@ -204,8 +214,9 @@ class HParamsFile:
 
     @property
     def datasets(self) -> set[str]:
-        """The data sets the file has tables for (in any set)."""
-        return {dataset for _, dataset in self._configs}
+        """The data sets the file has tables for (in any set, or among the baselines)."""
+        return {dataset for _, dataset in self._configs} | (set(self._baselines)
+                                                             - {ANY_DATASET})
 
     def covers(self, hparams: str, dataset: str, registered: bool = False) -> bool:
         """Whether set ``hparams`` has values for ``dataset`` (a user's ``registered`` one

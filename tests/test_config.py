@@ -142,3 +142,26 @@ def test_table1_layout_follows_the_method_registry():
     assert table1(with_sets, "d", "free_run").columns[0] == "pwa (paper) NRMSE"
     with pytest.raises(ValueError, match=r"unknown method\(s\) \['lstm'\]"):
         table1(pd.DataFrame(rows).replace("subspace", "lstm"), "d", "free_run")
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('[baselines.hure_vasak]\nwarmpu = 3\nbogus = "x"\n',
+     r"\[baselines.hure_vasak\]: unknown key\(s\) \['bogus', 'warmpu'\]; its keys are "
+     r"\['subspace', 'warmup'\]"),
+    ("[baselines]\nhure_vasak = 3\n", r"\[baselines.hure_vasak\]: must be a table"),
+])
+def test_a_baselines_table_with_unknown_keys_is_refused_naming_them(tmp_path, text, message):
+    path = tmp_path / "hp.toml"
+    path.write_text("[a.hure_vasak]\n\n" + text)
+    with pytest.raises(ValueError, match=message) as info:
+        HParamsFile(path)
+    assert str(path) in str(info.value)
+
+
+def test_a_baselines_table_for_an_unknown_data_set_is_refused(tmp_path):
+    from pwa_pipeline.orchestration.definitions import build_definitions
+
+    path = tmp_path / "hp.toml"
+    path.write_text("[a.hure_vasak]\n\n[baselines.kuka_robto]\nwarmup = 3\n")
+    with pytest.raises(ValueError, match=r"unknown data set\(s\) \['kuka_robto'\]"):
+        build_definitions(path)
