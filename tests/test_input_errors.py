@@ -153,3 +153,63 @@ def test_all_zero_channel_and_moderate_scales_are_accepted():
     u, y = _arx_data()
     for scale in (1e-140, 1e140):
         as_experiments(u * scale, np.column_stack([y * scale, np.zeros(len(y))]))
+
+
+# users' tables: what used to be read silently wrong or fail late, refused naming the file
+
+
+def _write(tmp_path, name: str, frame: pd.DataFrame):
+    path = tmp_path / name
+    frame.to_parquet(path) if name.endswith(".parquet") else frame.to_csv(path, index=False)
+    return path
+
+
+def test_a_column_named_twice_in_the_header_is_refused(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("u1,u1,y1\n1,2,3\n4,5,6\n")
+    with pytest.raises(ValueError, match=r"d\.csv names column\(s\) \['u1'\] more than once"):
+        load_table(path, ["u1"], ["y1"])
+
+
+def test_a_date_time_column_given_as_an_input_is_refused(tmp_path):
+    frame = pd.DataFrame({"t": pd.date_range("2026-01-01", periods=30, freq="s"),
+                          "y1": np.arange(30.0)})
+    path = _write(tmp_path, "d.parquet", frame)
+    with pytest.raises(ValueError, match=r"d\.parquet: column 't' holds datetime64\[.s\] "
+                                         r"values, not numbers.*--time"):
+        load_table(path, ["t"], ["y1"])
+
+
+def test_a_constant_output_column_is_refused(tmp_path):
+    path = _write(tmp_path, "d.csv", pd.DataFrame({"u1": np.arange(30.0), "y1": 3.0,
+                                                   "y2": np.arange(30.0)}))
+    with pytest.raises(ValueError, match=r"d\.csv: output column\(s\) \['y1'\] hold one value "
+                                         r"in every row \(e\.g\. 3\)"):
+        load_table(path, ["u1"], ["y1", "y2"])
+
+
+def test_values_whose_squares_overflow_are_refused_at_once(tmp_path):
+    y = np.arange(30.0)
+    y[7] = 1e200
+    path = _write(tmp_path, "d.csv", pd.DataFrame({"u1": np.arange(30.0), "y1": y}))
+    with pytest.raises(ValueError, match=r"d\.csv: column 'y1' has 1 value\(s\) beyond "
+                                         r"±1e\+150 \(first: 1e\+200 at row 7\)"):
+        load_table(path, ["u1"], ["y1"])
+
+
+@pytest.mark.parametrize("name", ["d.csv", "d.parquet"])
+def test_a_table_without_rows_is_refused(tmp_path, name):
+    path = _write(tmp_path, name, pd.DataFrame({"u1": pd.Series(dtype=float),
+                                                "y1": pd.Series(dtype=float)}))
+    with pytest.raises(ValueError, match=r"has a header but no data rows"):
+        load_table(path, ["u1"], ["y1"])
+
+
+@pytest.mark.parametrize(("name", "content"), [("d.csv", b""), ("d.csv", b"\xff\xfe\x00\x81"),
+                                               ("d.parquet", b"not parquet")])
+def test_an_empty_or_binary_file_is_refused_naming_it(tmp_path, name, content):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=rf"{path} cannot be read as a "
+                                         rf"{name.split('.')[1]} table"):
+        load_table(path, ["u1"], ["y1"])

@@ -8,6 +8,10 @@ import numpy as np
 
 from .._typing import Float2D
 
+#: The largest magnitude accepted in an input or output column: least squares square the
+#: values, and float64 overflows beyond about 1e308.
+MAX_ABS = 1e150
+
 
 def _shown(cell: object) -> str:
     """A table cell as error messages show it: quoted if text, 'NaN or empty' if missing."""
@@ -62,9 +66,12 @@ def read_table(
     Raises
     ------
     FileNotFoundError, ValueError
-        Missing file, unknown format, missing columns, an empty experiment id, a
-        non-numeric, missing or infinite value in the u/y columns, or a missing, repeated or
-        decreasing time. Rows are numbered from 0 in file order, not counting the header.
+        Missing file, unknown format, a file that cannot be read as its format (empty,
+        binary), a column named twice in a CSV header, missing columns, no data rows, an
+        empty experiment id, a u/y column of date-times or booleans, a non-numeric, missing,
+        infinite or huge (beyond ``MAX_ABS``) value in the u/y columns, an output that holds
+        one value in every row, or a missing, repeated or decreasing time. Each message names
+        the file; rows are numbered from 0 in file order, not counting the header.
     """
     import pandas as pd
 
@@ -74,13 +81,27 @@ def read_table(
     readers = {".csv": pd.read_csv, ".parquet": pd.read_parquet}
     if p.suffix.lower() not in readers:
         raise ValueError(f"unsupported file type {p.suffix!r} for {p}: use .csv or .parquet")
-    df = readers[p.suffix.lower()](p).reset_index(drop=True)
+    try:
+        df = readers[p.suffix.lower()](p).reset_index(drop=True)
+    except (ValueError, UnicodeDecodeError, OSError) as exc:  # (pandas' and pyarrow's errors)
+        raise ValueError(f"{p} cannot be read as a {p.suffix.lower()[1:]} table: "
+                         f"{type(exc).__name__}: {exc}") from None
     extra = [c for c in (experiment_column, time_column) if c]
     wanted = list(u_columns) + list(y_columns) + extra
+    twice = _repeated_header(p, wanted) if p.suffix.lower() == ".csv" else []
+    if twice:
+        raise ValueError(f"{p.name} names column(s) {twice} more than once in its header; "
+                         f"rename them so that each column has its own name")
     missing = [c for c in wanted if c not in df.columns]
     if missing:
         raise ValueError(f"{p.name} has no column(s) {missing}; it has {list(df.columns)}")
+    if df.empty:
+        raise ValueError(f"{p.name} has a header but no data rows")
     for c in list(u_columns) + list(y_columns):
+        if not (pd.api.types.is_numeric_dtype(df[c]) or pd.api.types.is_object_dtype(df[c])
+                or pd.api.types.is_string_dtype(df[c])) or pd.api.types.is_bool_dtype(df[c]):
+            raise ValueError(f"{p.name}: column {c!r} holds {df[c].dtype} values, not numbers; "
+                             f"an input or output must be numeric (a date-time goes to --time)")
         values = pd.to_numeric(df[c], errors="coerce").astype(float)
         bad = np.flatnonzero(~np.isfinite(values.to_numpy()))
         if bad.size:
@@ -88,7 +109,18 @@ def read_table(
                 f"{p.name}: column {c!r} has {bad.size} non-numeric, missing or infinite value(s) "
                 f"(first: {_shown(df[c].iloc[bad[0]])} at row {bad[0]})"
             )
+        huge = np.flatnonzero(np.abs(values.to_numpy()) > MAX_ABS)
+        if huge.size:
+            raise ValueError(
+                f"{p.name}: column {c!r} has {huge.size} value(s) beyond ±{MAX_ABS:g} (first: "
+                f"{values.iloc[huge[0]]:g} at row {huge[0]}), whose squares overflow the least "
+                f"squares; rescale the column")
         df[c] = values
+    constant = [c for c in y_columns if len(df) > 1 and df[c].nunique() == 1]
+    if constant:
+        raise ValueError(f"{p.name}: output column(s) {constant} hold one value in every row "
+                         f"(e.g. {df[constant[0]].iloc[0]:g}): there is nothing to identify; "
+                         f"leave them out of the outputs")
     if experiment_column is None:
         groups = [("0", df)]
     else:
@@ -107,6 +139,16 @@ def read_table(
     return Table(u=[g[list(u_columns)].to_numpy(dtype=float) for _, g in groups],
                  y=[g[list(y_columns)].to_numpy(dtype=float) for _, g in groups],
                  ids=[k for k, _ in groups])
+
+
+def _repeated_header(path: Path, names: list[str]) -> list[str]:
+    """The ``names`` that the CSV file's header line holds more than once (pandas would
+    rename the later ones and read the first without a word)."""
+    import csv
+
+    with path.open(newline="", encoding="utf-8", errors="replace") as fh:
+        header = next(csv.reader(fh), [])
+    return [n for n in dict.fromkeys(names) if header.count(n) > 1]
 
 
 def _time_values(column, file: str, name: str) -> np.ndarray:
