@@ -14,6 +14,8 @@ from ._typing import Float2D, Signals
 # neither underflow to zero nor lose precision as subnormals.
 MAX_MAGNITUDE = 1e150
 MIN_MAGNITUDE = 1e-150
+#: More channels than this, and than samples, is taken for a transposed signal.
+MAX_CHANNELS = 256
 #: Names of data sets, hyper-parameter sets and assets: they become paths and partition keys.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
 
@@ -64,6 +66,9 @@ def as_signal(x: object, name: str) -> Float2D:
             f"{name} is complex (dtype {raw.dtype}); a real signal is needed: pass its real "
             f"part, magnitude or phase explicitly"
         )
+    if raw.dtype.kind in "USO" and any(isinstance(v, (str, bytes)) for v in raw.flat):
+        raise ValueError(f"{name} must be numeric: it holds text (dtype {raw.dtype}); convert "
+                         f"it where it is read, so that a bad cell is seen there")
     try:
         arr = raw.astype(float, copy=False)
     except (TypeError, ValueError) as exc:
@@ -76,6 +81,10 @@ def as_signal(x: object, name: str) -> Float2D:
         )
     if arr.shape[1] == 0:
         raise ValueError(f"{name} has no channels (shape {arr.shape})")
+    if arr.shape[1] > max(arr.shape[0], MAX_CHANNELS):
+        raise ValueError(
+            f"{name} has shape {arr.shape}: {arr.shape[1]} channels of {arr.shape[0]} "
+            f"sample(s). Signals are (n_samples, n_channels); is it transposed?")
     if np.ma.isMaskedArray(x):
         masked = np.ma.getmaskarray(x).reshape(arr.shape)
         if masked.any():
@@ -107,6 +116,19 @@ def as_signal(x: object, name: str) -> Float2D:
                 f"(e.g. to engineering units)"
             )
     return arr
+
+
+def check_n_init(n_init: object, n_samples: int) -> None:
+    """Refuse a warm-up ``n_init`` that is not a whole number from 0 to below ``n_samples``
+    (a longer one would return the measured outputs as the prediction)."""
+    if n_init is None:
+        return
+    if isinstance(n_init, bool) or not isinstance(n_init, (int, np.integer)):
+        raise ValueError(f"n_init must be a whole number of samples, got {n_init!r}")
+    if not 0 <= n_init < n_samples:
+        raise ValueError(f"n_init = {n_init} must be at least 0 and below the {n_samples} "
+                         f"samples given: those rows are returned as measured, so nothing "
+                         f"would be predicted")
 
 
 def _is_experiment_list(x: object) -> bool:

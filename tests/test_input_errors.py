@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 from scipy.io import savemat
 
-from pwa_pipeline import LinearARX, evaluate, load_kuka, load_table
+from pwa_pipeline import LinearARX, SubspaceSS, evaluate, load_kuka, load_table
 from pwa_pipeline._validation import as_experiments, as_signal
 
 
@@ -213,3 +213,33 @@ def test_an_empty_or_binary_file_is_refused_naming_it(tmp_path, name, content):
     with pytest.raises(ValueError, match=rf"{path} cannot be read as a "
                                          rf"{name.split('.')[1]} table"):
         load_table(path, ["u1"], ["y1"])
+
+
+# signals and warm-ups that used to give a silently wrong result or a late memory error
+
+
+@pytest.mark.parametrize("n_init", [5000, 200, -1, 2.5, True])
+@pytest.mark.parametrize("model", [LinearARX(na=1, nb=1), SubspaceSS(order=1, horizon=3)])
+def test_a_warm_up_outside_the_samples_is_refused(n_init, model):
+    u, y = _arx_data(200)
+    model.fit(u, y)
+    with pytest.raises(ValueError, match=r"n_init (= .* must be at least 0 and below the 200 "
+                                         r"samples given|must be a whole number)"):
+        model.predict(u, y, n_init=n_init)
+    assert model.predict(u, y, n_init=199).shape == (200, 1)  # the last one is predicted
+
+
+def test_text_is_refused_rather_than_converted():
+    u, y = _arx_data(50)
+    with pytest.raises(ValueError, match=r"u must be numeric: it holds text \(dtype <U"):
+        as_signal(u.astype(str), "u")
+    with pytest.raises(ValueError, match=r"y must be numeric: it holds text \(dtype object\)"):
+        as_signal(np.array([["1.0"], [2.0]], dtype=object), "y")
+
+
+def test_transposed_signals_are_refused_with_a_shape_error():
+    rng = np.random.default_rng(0)
+    u, y = rng.normal(size=(2, 4000)), rng.normal(size=(2, 4000))  # (channels, samples)
+    with pytest.raises(ValueError, match=r"u has shape \(2, 4000\): 4000 channels of 2 "
+                                         r"sample\(s\).*transposed"):
+        LinearARX(na=1, nb=1).fit(u, y)

@@ -19,7 +19,13 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._arrays import column_rms
 from .._typing import Float2D, Signals
-from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from .._validation import (
+    _is_experiment_list,
+    as_experiments,
+    as_signal,
+    check_n_init,
+    check_width,
+)
 from ..pwa._blas import single_threaded_blas
 
 
@@ -215,6 +221,7 @@ class SubspaceSS(BaseEstimator):
             return [self.predict(a, b, n_init) for a, b in zip(u, y, strict=True)]
         ue, ye = self._check(u, y, "y")
         as_experiments(ue, ye)
+        check_n_init(n_init, ye.shape[0])
         w = self.warmup if n_init is None else n_init
         x = self.initial_state(ue[:w], ye[:w])
         out = ye.copy()

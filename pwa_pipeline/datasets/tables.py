@@ -7,10 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._typing import Float2D
-
-#: The largest magnitude accepted in an input or output column: least squares square the
-#: values, and float64 overflows beyond about 1e308.
-MAX_ABS = 1e150
+from .._validation import MAX_MAGNITUDE
 
 
 def _shown(cell: object) -> str:
@@ -69,7 +66,7 @@ def read_table(
         Missing file, unknown format, a file that cannot be read as its format (empty,
         binary), a column named twice in a CSV header, missing columns, no data rows, an
         empty experiment id, a u/y column of date-times or booleans, a non-numeric, missing,
-        infinite or huge (beyond ``MAX_ABS``) value in the u/y columns, an output that holds
+        infinite or huge (beyond ``MAX_MAGNITUDE``) value in the u/y columns, an output that holds
         one value in every row, or a missing, repeated or decreasing time. Each message names
         the file; rows are numbered from 0 in file order, not counting the header.
     """
@@ -109,10 +106,10 @@ def read_table(
                 f"{p.name}: column {c!r} has {bad.size} non-numeric, missing or infinite value(s) "
                 f"(first: {_shown(df[c].iloc[bad[0]])} at row {bad[0]})"
             )
-        huge = np.flatnonzero(np.abs(values.to_numpy()) > MAX_ABS)
+        huge = np.flatnonzero(np.abs(values.to_numpy()) > MAX_MAGNITUDE)
         if huge.size:
             raise ValueError(
-                f"{p.name}: column {c!r} has {huge.size} value(s) beyond ±{MAX_ABS:g} (first: "
+                f"{p.name}: column {c!r} has {huge.size} value(s) beyond ±{MAX_MAGNITUDE:g} (first: "
                 f"{values.iloc[huge[0]]:g} at row {huge[0]}), whose squares overflow the least "
                 f"squares; rescale the column")
         df[c] = values

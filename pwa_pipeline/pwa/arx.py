@@ -5,7 +5,13 @@ from sklearn.base import BaseEstimator
 from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
-from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from .._validation import (
+    _is_experiment_list,
+    as_experiments,
+    as_signal,
+    check_n_init,
+    check_width,
+)
 from ..scoring.metrics import r2_score
 from .regressors import lagged_matrix, n_initial
 from .structures import output_lags
@@ -60,7 +66,7 @@ class ARXModelBase(BaseEstimator):
             Measured outputs; only their past values enter φ(k).
         n_init : int, optional
             Rows returned as given (a warm-up window); at least and by default
-            max(output lags, nb).
+            max(output lags, nb). From 0 to below each experiment's length.
 
         Returns
         -------
@@ -72,6 +78,7 @@ class ARXModelBase(BaseEstimator):
         keep = n0 if n_init is None else max(n_init, n0)
         out = []
         for ue, ye in pairs:
+            check_n_init(n_init, ye.shape[0])
             yhat = ye.copy()
             if ye.shape[0] > n0:
                 phi = lagged_matrix(ue, ye, self.output_lags_, self.nb, self.affine)
