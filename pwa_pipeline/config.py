@@ -172,9 +172,20 @@ class HParamsFile:
         try:
             with self.path.open("rb") as fh:
                 tables = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
             raise ValueError(f"{self.path} is not valid TOML: {exc}") from None
         self._baselines = tables.pop(BASELINES, {})
+        if not tables:
+            raise ValueError(f"{self.path} has no hyper-parameter set: add a table "
+                             f"[<set>.<dataset>], e.g. [default.hure_vasak]")
+        for name, per_dataset in tables.items():
+            loose = None if isinstance(per_dataset, dict) else name
+            loose = loose or next((f"{name}.{d}" for d, t in per_dataset.items()
+                                   if not isinstance(t, dict)), None)
+            if loose is not None:
+                raise ValueError(f"{self.path}: {loose} must be a table [<set>.<dataset>] of "
+                                 f"parameters (e.g. [{name}.hure_vasak] with na = 1), not a "
+                                 f"value")
         for dataset, table in self._baselines.items():
             unknown = sorted(set(table) - BASELINE_KEYS) if isinstance(table, dict) else None
             if unknown is None or unknown:
@@ -182,7 +193,13 @@ class HParamsFile:
                     f"{self.path}, [{BASELINES}.{dataset}]: "
                     + ("must be a table" if unknown is None else f"unknown key(s) {unknown}")
                     + f"; its keys are {sorted(BASELINE_KEYS)} (e.g. subspace.order = 4)")
-        self.sets = [check_name(name, "hyper-parameter set") for name in tables]
+        try:
+            self.sets = [check_name(name, "hyper-parameter set") for name in tables]
+            for per_dataset in tables.values():
+                for dataset in set(per_dataset) - {ANY_DATASET}:
+                    check_name(dataset, "data set")
+        except ValueError as exc:
+            raise ValueError(f"{self.path}: {exc}") from None
         self._templates: dict[str, dict] = {}
         self._configs: dict[tuple[str, str], Configuration] = {}
         for name, per_dataset in tables.items():
@@ -196,8 +213,7 @@ class HParamsFile:
                     self._templates[name] = table
                     self._build(name, ANY_DATASET, {**table, "na": 1, "nb": 1})  # check it
                     continue
-                self._configs[name, dataset] = self._build(name, check_name(dataset, "data set"),
-                                                           table)
+                self._configs[name, dataset] = self._build(name, dataset, table)
 
     def _build(self, name: str, dataset: str, table: dict) -> Configuration:
         base = {"warmup": WARMUP, **self._baselines.get(

@@ -165,3 +165,32 @@ def test_a_baselines_table_for_an_unknown_data_set_is_refused(tmp_path):
     path.write_text("[a.hure_vasak]\n\n[baselines.kuka_robto]\nwarmup = 3\n")
     with pytest.raises(ValueError, match=r"unknown data set\(s\) \['kuka_robto'\]"):
         build_definitions(path)
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"s1 = 3\n", r"s1 must be a table \[<set>.<dataset>\] of parameters"),
+    (b"[s1]\nhure_vasak = 3\n", r"s1.hure_vasak must be a table"),
+    (b"", r"has no hyper-parameter set"),
+    (b"[baselines.hure_vasak]\nwarmup = 5\n", r"has no hyper-parameter set"),
+    (b"\xff\xfe\x00", r"is not valid TOML: 'utf-8' codec can't decode"),
+    (b'["../x".hure_vasak]\n', r"invalid hyper-parameter set name '../x'"),
+    (b'[s1."../y"]\n', r"invalid data set name '../y'"),
+])
+def test_a_malformed_hyper_parameter_file_is_refused_naming_it(tmp_path, content, message):
+    path = tmp_path / "hp.toml"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=message) as info:
+        HParamsFile(path)
+    assert str(path) in str(info.value)
+
+
+def test_the_partitions_command_says_what_is_wrong_in_one_line(tmp_path, monkeypatch, capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    path = tmp_path / "hp.toml"
+    path.write_text("s1 = 3\n")
+    monkeypatch.setenv("PWA_HPARAMS", str(path))
+    assert main(["partitions"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pwa-pipeline partitions: error: {path}: s1 must be a table")
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -221,6 +221,15 @@ def remove_dataset(args: argparse.Namespace) -> int:
     return 0
 
 
+def partitions(args: argparse.Namespace) -> int:
+    """Print every partition key, one per line."""
+    from .definitions import build_definitions, partitions_of
+    from .partitions import all_keys
+
+    print("\n".join(all_keys(partitions_of(build_definitions()))))
+    return 0
+
+
 def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
@@ -319,14 +328,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "run" and args.scheduler:
         args.executor = "dask"
-    if args.command == "partitions":
-        from .definitions import build_definitions, partitions_of
-        from .partitions import all_keys
-
-        print("\n".join(all_keys(partitions_of(build_definitions()))))
-        return 0
     commands = {"doctor": doctor, "add-dataset": add_dataset, "list-datasets": list_datasets,
-                "remove-dataset": remove_dataset, "run": run}
+                "remove-dataset": remove_dataset, "run": run, "partitions": partitions}
     try:
         return commands[args.command](args)
     except (ValueError, FileNotFoundError, KeyError) as exc:
