@@ -240,8 +240,9 @@ def doctor(args: argparse.Namespace) -> int:
     client = MLflowTracker(tracking_uri=args.tracking_uri).client()
     older = args.older_than * 60
     orphans = find_orphans(instance, client, [default_storage_dir()], older)
-    print(f"Runs and files older than {args.older_than:g} minutes that interrupted runs left:")
-    print(f"  Dagster runs still STARTED : {orphans.dagster_runs or 'none'}")
+    print("What interrupted or killed runs left (runs whose processes are gone; runs of other "
+          f"machines and temporary files older than {args.older_than:g} minutes):")
+    print(f"  Dagster runs not ended     : {orphans.dagster_runs or 'none'}")
     print(f"  MLflow runs still RUNNING  : {orphans.mlflow_runs or 'none'}")
     print(f"  temporary files            : {[str(p) for p in orphans.temporary_files] or 'none'}")
     if orphans and args.repair:
@@ -316,13 +317,14 @@ def main(argv: list[str] | None = None) -> int:
                           help="unregister a data set (its file and results are kept)")
     p_rm.add_argument("name")
     p_doc = sub.add_parser(
-        "doctor", help="list Dagster runs left STARTED, MLflow runs left RUNNING and temporary "
-                       "files left by interrupted runs; --repair marks the runs failed/killed "
-                       "and deletes the files")
+        "doctor", help="list the Dagster runs (not ended) and MLflow runs (RUNNING) whose "
+                       "processes are gone, and the temporary files that interrupted runs "
+                       "left; --repair marks the runs failed/killed and deletes the files")
     p_doc.add_argument("--repair", action="store_true", help="fix what is found")
     p_doc.add_argument("--older-than", type=float, default=60.0, metavar="MINUTES",
-                       help="only what is older than this (a younger run may be live; "
-                            "default 60)")
+                       help="temporary files, and runs of other machines (whose processes "
+                            "cannot be seen from here), only when older than this (default "
+                            "60)")
     p_doc.add_argument("--tracking-uri", default="", help="MLflow tracking URI (default as "
                                                           "for run)")
     args = parser.parse_args(argv)

@@ -1,18 +1,36 @@
 """Finding and repairing what interrupted runs leave behind.
 
 A run killed with SIGKILL (or a machine that stops) cannot clean up: its Dagster run stays
-STARTED, its MLflow run RUNNING, and a temporary file may stay beside the file it was writing.
-:func:`find_orphans` lists them; :func:`repair` marks the runs failed / killed and deletes the
-temporary files. Anything younger than ``older_than`` seconds is taken for a live run.
+NOT_STARTED, STARTING or STARTED, its MLflow runs RUNNING, and a temporary file may stay beside
+the file it was writing. :func:`find_orphans` lists them; :func:`repair` marks the runs failed
+/ killed and deletes the temporary files.
+
+A Dagster run is left behind when none of the processes that logged its events is alive on
+this machine (a run on one machine's sqlite storage, or one that the command line tagged with
+this host); a run that logged no process yet is given :data:`START_GRACE` seconds. A run of
+another machine, whose processes cannot be seen from here, is taken for left behind only once
+older than ``older_than``. An MLflow run RUNNING is left behind when the Dagster run that
+opened it (its ``dagster_run_id`` tag) is no longer going; one without that tag, or opened by a
+run of another Dagster instance, once older than ``older_than``.
 """
 
+import socket
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import dagster as dg
+import psutil
 
 from .files import STALE_SECONDS, sweep_stale_tmp
+
+#: Seconds a run may go without logging its process before it is taken for left behind.
+START_GRACE = 60.0
+#: Run tag naming the machine whose process runs it (set by the command line).
+HOST_TAG = "pwa/host"
+#: The statuses of a run that has not ended.
+GOING = (dg.DagsterRunStatus.NOT_STARTED, dg.DagsterRunStatus.STARTING,
+         dg.DagsterRunStatus.STARTED)
 
 
 @dataclass
@@ -33,22 +51,49 @@ def _stale_tmp(roots: list[Path], older_than: float) -> list[Path]:
                   if p.is_file() and p.stat().st_mtime < cutoff)
 
 
+def _alive(pid: int, since: float) -> bool:
+    """Whether process ``pid`` runs and was started by ``since`` (a later one reuses the
+    number)."""
+    try:
+        return psutil.Process(pid).create_time() <= since + 1.0
+    except (psutil.NoSuchProcess, psutil.AccessDenied, ValueError):
+        return False
+
+
+def _left_behind(instance: dg.DagsterInstance, record, local: bool, now: float,
+                 older_than: float) -> bool:
+    """Whether the going run of ``record`` has no live process (see the module doc)."""
+    run = record.dagster_run
+    created = record.create_timestamp.timestamp()
+    if not (local or run.tags.get(HOST_TAG) == socket.gethostname()):
+        return created < now - older_than
+    events = [e for e in instance.all_logs(run.run_id)
+              if e.is_dagster_event and e.dagster_event.pid is not None]
+    if not events:
+        return created < now - START_GRACE
+    return not any(_alive(e.dagster_event.pid, e.timestamp) for e in events)
+
+
 def find_orphans(instance: dg.DagsterInstance, mlflow_client, roots: list[Path],
                  older_than: float = STALE_SECONDS) -> Orphans:
-    """Dagster runs STARTED/STARTING, MLflow runs RUNNING, and temporary files under
-    ``roots``, all older than ``older_than`` seconds."""
-    cutoff = time.time() - older_than
-    records = instance.get_run_records(dg.RunsFilter(
-        statuses=[dg.DagsterRunStatus.STARTED, dg.DagsterRunStatus.STARTING]))
+    """Dagster runs not ended whose processes are gone, MLflow runs RUNNING whose Dagster run
+    is no longer going, and temporary files under ``roots`` older than ``older_than``
+    seconds."""
+    now = time.time()
+    local = type(instance.run_storage).__name__.startswith("Sqlite")
+    records = instance.get_run_records(dg.RunsFilter(statuses=list(GOING)))
     dagster_runs = [r.dagster_run.run_id for r in records
-                    if (r.start_time or r.create_timestamp.timestamp()) < cutoff]
+                    if _left_behind(instance, r, local, now, older_than)]
+    going = {r.dagster_run.run_id for r in records} - set(dagster_runs)
     mlflow_runs = []
     if mlflow_client is not None:
         experiments = [e.experiment_id for e in mlflow_client.search_experiments()]
         if experiments:
             mlflow_runs = [r.info.run_id for r in mlflow_client.search_runs(
                 experiments, filter_string="attributes.status = 'RUNNING'")
-                if r.info.start_time / 1000 < cutoff]
+                if (r.data.tags["dagster_run_id"] not in going
+                    if instance.has_run(r.data.tags.get("dagster_run_id", ""))
+                    else r.info.start_time / 1000 < now - older_than)]
     return Orphans(dagster_runs, mlflow_runs, _stale_tmp(roots, older_than))
 
 

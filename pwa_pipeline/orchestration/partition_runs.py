@@ -7,8 +7,11 @@ it saves. Runs at once go through Dagster's own machinery: a backfill launched i
 which the daemon's run queue runs side by side, or ``--executor dask`` (:mod:`.dask_sweep`).
 """
 
+import socket
+
 import dagster as dg
 
+from .doctor import HOST_TAG
 from .interrupts import interrupts_redelivered
 
 
@@ -36,9 +39,10 @@ def run_resources(defs: dg.Definitions, tracking_uri: str = "") -> dict:
 def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
                           instance: dg.DagsterInstance, run_config: dict, selection
                           ) -> dg.ExecuteInProcessResult:
-    """One partition's run in this process (errors are the run's, not raised); a Ctrl-C
-    that leaves it running is sent again (:func:`~.interrupts.interrupts_redelivered`)."""
+    """One partition's run in this process (errors are the run's, not raised), tagged with
+    this host for ``doctor``; a Ctrl-C that leaves it running is sent again
+    (:func:`~.interrupts.interrupts_redelivered`)."""
     with interrupts_redelivered():
         return dg.materialize(list(defs.assets), partition_key=key, selection=selection,
                               resources=resources, instance=instance, run_config=run_config,
-                              raise_on_error=False)
+                              tags={HOST_TAG: socket.gethostname()}, raise_on_error=False)
