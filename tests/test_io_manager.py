@@ -1,12 +1,14 @@
-"""The asset store's layout: one file per asset partition, inside the store."""
-
+"""The asset store's layout: one file per asset partition, inside the store; a failed write
+keeps what was stored."""
 
 import dagster as dg
 import pandas as pd
 import pytest
 
+from pwa_pipeline.definitions import defs
 from pwa_pipeline.orchestration.files import inside
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
 
 
 def test_paths_cannot_leave_the_store(tmp_path):
@@ -36,3 +38,45 @@ def test_similar_names_never_share_a_file(tmp_path):
     assert sorted(p.name for p in (tmp_path / "x" / "d").iterdir()) == [
         "eps0.parquet", "eps0_1.pkl", "eps0_3.pkl"]
 
+
+
+def test_a_full_disk_fails_the_step_naming_the_file_and_keeps_what_was_stored(tmp_path,
+                                                                              monkeypatch):
+    import errno
+
+    from pwa_pipeline.orchestration import io_manager as module
+
+    store = PartitionedFileIOManager(base_dir=str(tmp_path))
+    names = ("configuration", "raw_benchmark", "regressors")
+    assets = [a for a in defs.assets if a.key.to_user_string() in names]
+    resources = {"io_manager": store,
+                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"))}
+    first = dg.materialize(assets, partition_key="hure_vasak|paper", resources=resources)
+    before = (tmp_path / "regressors" / "hure_vasak" / "paper.pkl").read_bytes()
+
+    def full(*_):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(module, "save_object", full)
+    again = dg.materialize(assets, partition_key="hure_vasak|paper", resources=resources,
+                           raise_on_error=False)
+    assert first.success and not again.success
+    errors = " ".join(str(e.event_specific_data.error) for e in again.all_events
+                      if e.event_type_value == "STEP_FAILURE")
+    path = tmp_path / "configuration" / "hure_vasak" / "paper.pkl"
+    assert f"cannot write {path}: No space left on device; the file it would replace, and " \
+           f"everything stored before, are kept" in errors
+    assert (tmp_path / "regressors" / "hure_vasak" / "paper.pkl").read_bytes() == before
+
+
+def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_path,
+                                                                          monkeypatch, capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    (tmp_path / "storage").write_text("not a folder")
+    assert main(["run", "--partition", "hure_vasak|paper"]) == 2
+    err = capsys.readouterr().err
+    assert f"error: the asset store {tmp_path / 'storage'} cannot be a folder: " in err
+    assert not (tmp_path / ".dagster_home").exists()  # nothing started

@@ -10,13 +10,16 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 import argparse
 import sys
 import time
+from pathlib import Path
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials, split_credentials
+from .files import check_writable
 from .instance import prepare_instance
 from .partition_runs import run_resources, was_interrupted
 from .paths import (
     MLFLOW_TRAINING_VIEW,
+    dagster_home,
     default_datasets_path,
     default_mlflow_ui_url,
     default_storage_dir,
@@ -44,9 +47,14 @@ def run(args: argparse.Namespace) -> int:
                                       None if args.all else DEFAULT_SETS)
         for what, reason in skipped.items():
             print(f"note: {what} left out: {reason}", file=sys.stderr)
+    resources = run_resources(defs, args.tracking_uri)
+    for folder, what in ((dagster_home(), "Dagster home"),
+                         (Path(resources["io_manager"].base_dir or default_storage_dir()),
+                          "asset store"),
+                         (defs.resources["settings"].cache_root(), "cache folder")):
+        check_writable(folder, what)  # before any run: a refused store leaves nothing half-done
     instance = prepare_instance()
     home = instance.root_directory
-    resources = run_resources(defs, args.tracking_uri)
     uri = mask_credentials(resources["mlflow"].uri())
     # INFO shows each step's one-line summary; Dagster's own events are DEBUG
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}

@@ -53,6 +53,18 @@ def create_new(path: Path, data: bytes, mode: int) -> bool:
         os.unlink(tmp)
 
 
+def check_writable(folder: Path, what: str) -> None:
+    """Raise a ValueError naming ``folder`` unless it is, or can be created as, a folder this
+    process may write (checked before a run, so that nothing half-done is left)."""
+    folder = Path(folder)
+    existing = next(p for p in (folder, *folder.parents) if p.exists())
+    if not existing.is_dir():
+        raise ValueError(f"the {what} {folder} cannot be a folder: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"the {what} {folder} is not writable ({existing} is read-only); "
+                         f"nothing stored there was changed")
+
+
 def inside(root: Path, *parts: str) -> Path:
     """``root / parts``, resolved, refused unless it stays inside ``root``."""
     base = root.resolve()

@@ -53,12 +53,16 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         key = context.asset_partition_key if context.has_asset_partitions else None
         paths = self._paths(context.asset_key, key)
         sweep_stale_tmp(paths["pkl"].parent)
-        if isinstance(obj, pd.DataFrame):
-            path = paths["parquet"]
-            atomic_write(path, lambda p: obj.to_parquet(p, index=False))
-        else:
-            path = paths["pkl"]
-            save_object(path, obj, signing_key(self._root()))
+        path = paths["parquet" if isinstance(obj, pd.DataFrame) else "pkl"]
+        try:
+            if isinstance(obj, pd.DataFrame):
+                atomic_write(path, lambda p: obj.to_parquet(p, index=False))
+            else:
+                save_object(path, obj, signing_key(self._root()))
+        except OSError as exc:  # a full disk, a store made read-only
+            raise dg.Failure(description=(
+                f"cannot write {path}: {exc.strerror or exc}; the file it would replace, and "
+                f"everything stored before, are kept")) from None
         for other in paths.values():
             if other != path:
                 other.unlink(missing_ok=True)
