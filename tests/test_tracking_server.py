@@ -74,8 +74,10 @@ def _resources(folder: Path, url: str) -> dict:
                                     request_retries=1)}
 
 
-def test_a_partition_is_tracked_on_a_real_server(tmp_path):
+def test_a_partition_is_tracked_on_a_real_server(tmp_path, monkeypatch, capsys):
     from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.cli import main
 
     with mlflow_server(tmp_path, free_port()) as url:
         result = dg.materialize(ASSETS, partition_key=PARTITION,
@@ -93,6 +95,10 @@ def test_a_partition_is_tracked_on_a_real_server(tmp_path):
             assert {"scores.csv", "prediction.png"} <= names, names
         models = {m.name for m in client.search_registered_models()}
         assert models == {f"pwa-pipeline.hure_vasak.{m}" for m in METHODS}
+        # doctor reads the same server: nothing left behind
+        monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+        assert main(["doctor", "--tracking-uri", url]) == 0
+        assert "MLflow runs still RUNNING  : none" in capsys.readouterr().out
     # the artifacts are on the server's side only
     assert list((tmp_path / "artifacts").rglob("prediction.png"))
 
