@@ -114,3 +114,31 @@ def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflo
     finally:
         del os.environ["DAGSTER_HOME"]
     assert statuses == [dg.DagsterRunStatus.FAILURE]
+
+
+def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_path,
+                                                                          monkeypatch, capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    (tmp_path / "storage").write_text("not a folder")
+    assert main(["run", "--partition", "hure_vasak|paper"]) == 2
+    err = capsys.readouterr().err
+    assert f"error: the asset store {tmp_path / 'storage'} cannot be a folder: " in err
+    assert not (tmp_path / ".dagster_home").exists()  # nothing started
+
+
+def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
+        tmp_path, monkeypatch, capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    assert main(["run", "--partition", "hure_vasak|paper", "--tracking-uri",
+                 "http://ana:s3cret@127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline run: error: MLflow tracking server "
+                          "http://ana:***@127.0.0.1:9 cannot be reached")
+    assert "s3cret" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "storage").exists()  # no run started

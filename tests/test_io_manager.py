@@ -67,16 +67,3 @@ def test_a_full_disk_fails_the_step_naming_the_file_and_keeps_what_was_stored(tm
     assert f"cannot write {path}: No space left on device; the file it would replace, and " \
            f"everything stored before, are kept" in errors
     assert (tmp_path / "regressors" / "hure_vasak" / "paper.pkl").read_bytes() == before
-
-
-def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_path,
-                                                                          monkeypatch, capsys):
-    from pwa_pipeline.orchestration.cli import main
-
-    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
-    monkeypatch.delenv("DAGSTER_HOME", raising=False)
-    (tmp_path / "storage").write_text("not a folder")
-    assert main(["run", "--partition", "hure_vasak|paper"]) == 2
-    err = capsys.readouterr().err
-    assert f"error: the asset store {tmp_path / 'storage'} cannot be a folder: " in err
-    assert not (tmp_path / ".dagster_home").exists()  # nothing started

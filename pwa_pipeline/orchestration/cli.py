@@ -53,6 +53,10 @@ def run(args: argparse.Namespace) -> int:
                           "asset store"),
                          (defs.resources["settings"].cache_root(), "cache folder")):
         check_writable(folder, what)  # before any run: a refused store leaves nothing half-done
+    try:
+        resources["mlflow"].check_reachable()
+    except dg.Failure as exc:  # said in one line, before any run
+        raise ValueError(exc.description) from None
     instance = prepare_instance()
     home = instance.root_directory
     uri = mask_credentials(resources["mlflow"].uri())
