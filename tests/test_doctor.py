@@ -23,6 +23,8 @@ def test_doctor_finds_and_repairs_what_a_killed_run_left(tmp_path, mlflow_templa
 
     instance = prepare_instance()
     run = instance.add_run(dg.DagsterRun(job_name="sweep", status=dg.DagsterRunStatus.STARTED))
+    never = instance.add_run(dg.DagsterRun(job_name="sweep",
+                                           status=dg.DagsterRunStatus.NOT_STARTED))
     client = MlflowClient(tracking_uri=uri)
     mlflow_run = client.create_run(client.create_experiment("pwa-pipeline/d"),
                                    tags={"dagster_run_id": run.run_id})
@@ -37,8 +39,10 @@ def test_doctor_finds_and_repairs_what_a_killed_run_left(tmp_path, mlflow_templa
     assert main(args) == 1
     report = capsys.readouterr().out
     assert run.run_id in report and mlflow_run.info.run_id in report and str(tmp) in report
+    assert never.run_id in report
     assert main(args + ["--repair"]) == 0
     assert instance.get_run_by_id(run.run_id).status == dg.DagsterRunStatus.FAILURE
+    assert instance.get_run_by_id(never.run_id).status == dg.DagsterRunStatus.FAILURE
     assert client.get_run(mlflow_run.info.run_id).info.status == "KILLED"
     assert not tmp.exists()
     assert main(args) == 0  # nothing left
