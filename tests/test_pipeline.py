@@ -567,3 +567,26 @@ def test_diverged_scores_are_capped_and_flagged_for_mlflow():
     assert m["free_run_nrmse_mean"] == 10 and m["free_run_r2_mean"] == -99
     assert m["free_run_nrmse_q1"] == 10 and "free_run_rmse_mean" not in m
     assert m["one_step_rmse_mean"] == 0.1 and m["free_run_diverged"] == 1.0
+
+
+def test_registered_model_versions_say_where_they_come_from(paper_run):
+    from mlflow.tracking import MlflowClient
+
+    result, resources, _ = paper_run
+    client, runs = _runs(resources, "hure_vasak")
+    by_method = {r.data.tags["method"]: r for r in runs}
+    registry = MlflowClient(tracking_uri=resources["mlflow"].tracking_uri)
+    for method in METHODS:
+        [version] = registry.search_model_versions(f"name = 'pwa-pipeline.hure_vasak.{method}'")
+        run = by_method[method]
+        assert {k: version.tags[k] for k in ("dataset", "hparams", "method", "mlflow_run_id",
+                                             "dagster_run_id", "partition")} == {
+            "dataset": "hure_vasak", "hparams": "paper", "method": method,
+            "mlflow_run_id": run.info.run_id, "dagster_run_id": result.run_id,
+            "partition": "hure_vasak|paper"}
+        free = run.data.metrics["free_run_nrmse_mean"]
+        assert version.description.startswith(
+            f"The {method} model of data set hure_vasak, hyper-parameter set paper.")
+        assert f"free-run NRMSE {free:.4g}" in version.description
+    assert "2 sub-model(s)." in registry.search_model_versions(
+        "name = 'pwa-pipeline.hure_vasak.pwa'")[0].description

@@ -193,9 +193,11 @@ class MLflowTracker(dg.ConfigurableResource):
         return {k: tags[k] for k in MODEL_TAGS} if status == LoggedModelStatus.READY else None
 
     def _log_model(self, run_id: str, registered_name: str, model: "ModelToLog",
-                   logged: dict | None) -> dict:
+                   logged: dict | None, version_tags: dict[str, str], description: str
+                   ) -> dict:
         """Log the training table as the run's dataset, and ``model`` as its model, logged
-        and registered, unless ``logged`` (the tags of :meth:`_logged_model`) names it
+        and registered (the new version tagged with ``version_tags`` and described by
+        ``description``), unless ``logged`` (the tags of :meth:`_logged_model`) names it
         already logged: then the run is linked to that model as its output. Returns the
         run's tags for its model: :data:`MODEL_TAGS`, and for a linked model a description
         (``mlflow.note.content``) that says which run logged it."""
@@ -209,6 +211,10 @@ class MLflowTracker(dg.ConfigurableResource):
             mlflow.log_input(model.training, context="training")
             if logged is None:
                 info = _log_pyfunc(model, registered_name)
+                version = info.registered_model_version
+                for key, value in version_tags.items():
+                    client.set_model_version_tag(registered_name, version, key, value)
+                client.update_model_version(registered_name, version, description=description)
                 return {"model_uri": info.model_uri, "model_id": info.model_id,
                         "model_run_id": run_id}
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
@@ -276,9 +282,12 @@ class MLflowTracker(dg.ConfigurableResource):
                         _write_artifact(Path(tmp) / name, obj)
                     client.log_artifacts(run_id, tmp)
             fingerprint = model.fingerprint() if model is not None else None
+            version_tags = {"dataset": dataset, "hparams": hparams, "method": method,
+                            "mlflow_run_id": run_id, **tags}
             last = {} if model is None else {**self._log_model(
                 run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
-                self._logged_model(client, exp_id, method, fingerprint)),
+                self._logged_model(client, exp_id, method, fingerprint), version_tags,
+                model_description(dataset, hparams, method, values)),
                 "model_fingerprint": fingerprint}
             self._unmark_earlier(client, exp_id, run_id, hparams, method)
             # one batch: the metrics, parameters and the tags known last (``tags`` were set
@@ -309,6 +318,24 @@ class LoggedRun(NamedTuple):
 
     run_id: str
     experiment_id: str
+
+
+def model_description(dataset: str, hparams: str, method: str, metrics: dict[str, float]
+                      ) -> str:
+    """The description of a registered model version: what it was fitted on and its
+    headline scores (the mean over the outputs, on the held-out experiments)."""
+    parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
+    scores = {label: metrics.get(f"{mode}_nrmse_mean") for label, mode in (
+        ("one-step", "one_step"), ("free-run", "free_run"))}
+    shown = [f"{label} NRMSE {value:.4g}" for label, value in scores.items()
+             if value is not None]
+    if shown:
+        parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs)"
+                     + (", the free run diverged" if metrics.get("free_run_diverged") else "")
+                     + ".")
+    if "n_submodels" in metrics:
+        parts.append(f"{int(metrics['n_submodels'])} sub-model(s).")
+    return " ".join(parts)
 
 
 def _log_pyfunc(model: "ModelToLog", registered_name: str):
