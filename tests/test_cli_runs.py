@@ -46,6 +46,9 @@ def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
     instance = dg.DagsterInstance.get()
     runs = {r.tags["dagster/partition"]: r for r in instance.get_runs()
             if "dagster/partition" in r.tags}
+    assert {runs[k].job_name for k in keys} == {"sweep"}  # listed among the sweep job's runs
+    assert [r.job_name for r in instance.get_runs() if "dagster/partition" not in r.tags] == [
+        "refresh_leaderboard"]
     assert {k: runs[k].status for k in keys} == {
         "plant|default": dg.DagsterRunStatus.SUCCESS,
         "mill|default": dg.DagsterRunStatus.SUCCESS,

@@ -16,7 +16,7 @@ from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials, split_credentials
 from .files import check_writable
 from .instance import prepare_instance
-from .partition_runs import run_resources, was_interrupted
+from .partition_runs import cli_definitions, was_interrupted
 from .paths import (
     MLFLOW_TRAINING_VIEW,
     dagster_home,
@@ -32,12 +32,12 @@ def run(args: argparse.Namespace) -> int:
     import dagster as dg
 
     from ..scoring.comparison import mean_scores
-    from .definitions import build_definitions, partitions_of
-    from .jobs import LEADERBOARD, SWEEP_SELECTION
+    from .definitions import partitions_of
+    from .jobs import LEADERBOARD, LEADERBOARD_JOB
     from .partitions import DEFAULT_SETS, check_keys, runnable_keys
     from .reporting import leaderboard_markdown
 
-    defs = build_definitions()  # read now: a data set may have been registered since import
+    defs = cli_definitions(args.tracking_uri)
     partitions_def = partitions_of(defs)
     if args.partition:
         keys = args.partition
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
                                       None if args.all else DEFAULT_SETS)
         for what, reason in skipped.items():
             print(f"note: {what} left out: {reason}", file=sys.stderr)
-    resources = run_resources(defs, args.tracking_uri)
+    resources = defs.resources
     for folder, what in ((dagster_home(), "Dagster home"),
                          (Path(resources["io_manager"].base_dir or default_storage_dir()),
                           "asset store"),
@@ -64,8 +64,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
     failed, ended, interrupted, summaries = [], [], [], []
     try:
-        for key, result, seconds in _partition_runs(args, defs, keys, instance, resources,
-                                                    quiet, SWEEP_SELECTION):
+        for key, result, seconds in _partition_runs(args, defs, keys, instance, quiet):
             ended.append(key)
             if not result.success:
                 failed.append(key)
@@ -92,8 +91,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"  not run to the end: {', '.join(left)}")
         return 130  # as a shell reports SIGINT; the leaderboard is left as it was
     # the leaderboard ranks every partition stored so far, not only the ones just run
-    board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
-                           instance=instance, run_config=quiet, raise_on_error=False)
+    board = defs.resolve_job_def(LEADERBOARD_JOB).execute_in_process(
+        instance=instance, run_config=quiet, raise_on_error=False)
     if board.success:
         meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
         print(f"\nLeaderboard (every partition stored so far; "
@@ -120,10 +119,10 @@ Open the UIs on the same stores:
     return 1 if failed else 0
 
 
-def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, resources: dict,
-                    run_config: dict, selection):
-    """``(key, result, seconds)`` of each partition's run, one after the other: in this
-    process (``dg.materialize``), or, with ``--executor dask``, as ``sweep_dask`` runs whose
+def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
+                    run_config: dict):
+    """``(key, result, seconds)`` of each partition's run, one after the other: a ``sweep``
+    run in this process, or, with ``--executor dask``, a ``sweep_dask`` run whose
     steps are tasks on a dask cluster (a LocalCluster unless ``--scheduler``). No partition
     starts after a run was interrupted (Ctrl-C)."""
     from .partition_runs import materialize_partition
@@ -135,8 +134,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
         for key in keys:
             announce(key)
             t0 = time.perf_counter()
-            result = materialize_partition(defs, key, resources, instance, run_config,
-                                           selection)
+            result = materialize_partition(defs, key, instance, run_config)
             yield key, result, time.perf_counter() - t0
             if was_interrupted(result):
                 return
@@ -152,7 +150,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance, r
               f"8787 if it was free)"), flush=True)
         t0 = time.perf_counter()
         for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
-                                         io_manager=resources["io_manager"]):
+                                         io_manager=defs.resources["io_manager"]):
             yield key, result, time.perf_counter() - t0
             if was_interrupted(result):
                 return

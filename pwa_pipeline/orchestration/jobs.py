@@ -21,6 +21,8 @@ import dagster as dg
 
 #: The one asset that is not partitioned: it reads every partition of the scores.
 LEADERBOARD = "leaderboard"
+#: The job of every asset of one partition (built in :mod:`.schedules`), and the leaderboard's.
+SWEEP_JOB, LEADERBOARD_JOB = "sweep", "refresh_leaderboard"
 #: What a sweep run materialises: every asset of one partition.
 SWEEP_SELECTION = dg.AssetSelection.all() - dg.AssetSelection.assets(LEADERBOARD)
 #: Environment variable naming the dask scheduler of ``sweep_dask`` (unset: a LocalCluster).
@@ -74,7 +76,7 @@ def build_jobs() -> list:
         description="Every asset of one partition, each step a task on a dask cluster "
                     f"(${SCHEDULER_ENV}, else a LocalCluster started by the run).")
     leaderboard = dg.define_asset_job(
-        "refresh_leaderboard", selection=dg.AssetSelection.assets(LEADERBOARD),
+        LEADERBOARD_JOB, selection=dg.AssetSelection.assets(LEADERBOARD),
         executor_def=dg.in_process_executor,
         description="Ranks every data set × hyper-parameter set × method from the stored "
                     "scores of every partition materialised so far.")

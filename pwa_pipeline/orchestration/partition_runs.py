@@ -1,6 +1,6 @@
 """One partition's run in this process, as ``python -m pwa_pipeline run`` makes it.
 
-Partitions run one after the other, each one ``dg.materialize`` run with every step in this
+Partitions run one after the other, each one run of the ``sweep`` job with every step in this
 process: a partition's steps take seconds, while Dagster's multiprocess executor starts a
 process per step (each importing Dagster, MLflow and scikit-learn), which costs more than
 it saves. Runs at once go through Dagster's own machinery: a backfill launched in the UI,
@@ -13,6 +13,7 @@ import dagster as dg
 
 from .doctor import HOST_TAG
 from .interrupts import interrupts_redelivered
+from .jobs import SWEEP_JOB
 
 
 def was_interrupted(result) -> bool:
@@ -25,24 +26,25 @@ def was_interrupted(result) -> bool:
                for e in result.all_events)
 
 
-def run_resources(defs: dg.Definitions, tracking_uri: str = "") -> dict:
-    """The resources of a partition's run: the code location's, with the MLflow store at
-    ``tracking_uri`` when given (the command line's ``--tracking-uri``)."""
+def cli_definitions(tracking_uri: str = "") -> dg.Definitions:
+    """The code location's definitions as the command line runs them: read now (a data set
+    may have been registered since import), with the MLflow store at ``tracking_uri`` when
+    given (``--tracking-uri``)."""
+    from .definitions import build_definitions
     from .tracking import MLflowTracker
 
-    resources = dict(defs.resources)
     if tracking_uri:
-        resources["mlflow"] = MLflowTracker(tracking_uri=tracking_uri)
-    return resources
+        return build_definitions(mlflow=MLflowTracker(tracking_uri=tracking_uri))
+    return build_definitions()
 
 
-def materialize_partition(defs: dg.Definitions, key: str, resources: dict,
-                          instance: dg.DagsterInstance, run_config: dict, selection
-                          ) -> dg.ExecuteInProcessResult:
-    """One partition's run in this process (errors are the run's, not raised), tagged with
-    this host for ``doctor``; a Ctrl-C that leaves it running is sent again
+def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterInstance,
+                          run_config: dict) -> dg.ExecuteInProcessResult:
+    """One partition's run of the ``sweep`` job in this process, so that it is listed among
+    the job's runs as a run launched in the UI is (errors are the run's, not raised); tagged
+    with this host for ``doctor``. A Ctrl-C that leaves it running is sent again
     (:func:`~.interrupts.interrupts_redelivered`)."""
     with interrupts_redelivered():
-        return dg.materialize(list(defs.assets), partition_key=key, selection=selection,
-                              resources=resources, instance=instance, run_config=run_config,
-                              tags={HOST_TAG: socket.gethostname()}, raise_on_error=False)
+        return defs.resolve_job_def(SWEEP_JOB).execute_in_process(
+            partition_key=key, instance=instance, run_config=run_config,
+            tags={HOST_TAG: socket.gethostname()}, raise_on_error=False)

@@ -2,7 +2,7 @@
 
 import dagster as dg
 
-from .jobs import SWEEP_SELECTION
+from .jobs import SWEEP_JOB, SWEEP_SELECTION
 from .partitions import runnable_keys
 from .settings import PipelineSettings
 
@@ -11,7 +11,7 @@ def build_sweep(partitions_def: dg.StaticPartitionsDefinition, settings: Pipelin
                 ) -> tuple:
     """The ``sweep`` job (every asset of one partition) and ``sweep_schedule`` over the
     partitions that ``settings`` can run."""
-    job = dg.define_asset_job("sweep", selection=SWEEP_SELECTION,
+    job = dg.define_asset_job(SWEEP_JOB, selection=SWEEP_SELECTION,
                               executor_def=dg.in_process_executor,
                               description="Every asset of one partition, in one process "
                                           "(all but the unpartitioned leaderboard).")
