@@ -291,3 +291,32 @@ def test_a_leaderboard_with_nothing_scored_yet_lists_every_partition_as_missing(
     assert meta["partitions_scored"].value == 0
     assert meta["partitions_missing"].value == len(all_keys(partitions_of(defs)))
     assert "No partition has been materialised yet." in meta["leaderboard"].value
+
+
+def test_the_leaderboard_is_requested_after_a_partitions_scores_change(tmp_path, mlflow_template):
+    """The automation condition: nothing to refresh on an empty instance; a materialised
+    partition's scores request one leaderboard run; then nothing more until they change."""
+    from pwa_pipeline.orchestration.jobs import LEADERBOARD_SENSOR
+    from pwa_pipeline.orchestration.settings import PipelineSettings
+    from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+    [sensor] = [s for s in defs.sensors if s.name == LEADERBOARD_SENSOR]
+    assert sensor.default_status == dg.DefaultSensorStatus.STOPPED  # turned on in the UI
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
+                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                              hparams_path=str(BUNDLED_HPARAMS)),
+                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")}
+    board = dg.AssetKey(LEADERBOARD)
+    with dg.instance_for_test() as instance:
+        first = dg.evaluate_automation_conditions(defs=defs, instance=instance)
+        assert first.get_num_requested(board) == 0
+        swept = [a for a in defs.assets if a.key != board]
+        assert dg.materialize(swept, partition_key="hure_vasak|paper", resources=resources,
+                              instance=instance).success
+        after = dg.evaluate_automation_conditions(defs=defs, instance=instance,
+                                                  cursor=first.cursor)
+        assert after.get_num_requested(board) == 1
+        again = dg.evaluate_automation_conditions(defs=defs, instance=instance,
+                                                  cursor=after.cursor)
+        assert again.get_num_requested(board) == 0

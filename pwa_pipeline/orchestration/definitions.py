@@ -9,7 +9,7 @@ from ..datasets import DATASETS
 from ..datasets.user import DatasetRegistry
 from .assets import build_assets
 from .io_manager import PartitionedFileIOManager
-from .jobs import build_jobs
+from .jobs import build_jobs, build_sensors
 from .partitions import build_partitions
 from .paths import default_datasets_path
 from .schedules import build_sweep
@@ -47,6 +47,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None,
         assets=build_assets(partitions_def),
         jobs=[job, *build_jobs()],
         schedules=[schedule],
+        sensors=build_sensors(),
         # One process per run: the steps take seconds, while the multiprocess executor
         # starts a process per step, each importing Dagster, MLflow and scikit-learn.
         executor=dg.in_process_executor,

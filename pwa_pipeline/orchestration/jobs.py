@@ -67,6 +67,20 @@ def dask_executor(init_context):
     return executor.executor_creation_fn(init_context)
 
 
+#: The automation sensor that refreshes the leaderboard after sweep runs; off until turned on
+#: in the UI (*Automation*), like the schedule. The command line refreshes it at its end.
+LEADERBOARD_SENSOR = "leaderboard_refresh"
+
+
+def build_sensors() -> list:
+    """The automation sensor of the leaderboard's condition (evaluated every 30 s by the
+    daemon)."""
+    return [dg.AutomationConditionSensorDefinition(
+        LEADERBOARD_SENSOR, target=dg.AssetSelection.assets(LEADERBOARD),
+        default_status=dg.DefaultSensorStatus.STOPPED, minimum_interval_seconds=30,
+        description="Refreshes the leaderboard after any partition's scores change.")]
+
+
 def build_jobs() -> list:
     """``sweep_dask`` and ``refresh_leaderboard`` (``sweep`` and its schedule are built in
     :mod:`.schedules`)."""

@@ -14,11 +14,18 @@ from ..reporting import (
 )
 from ..tracking import MLflowTracker
 
+#: Refresh when any partition's scores were updated since the last tick, unless a refresh or a
+#: run upstream is in progress: after every sweep run, from the command line or the UI, once
+#: the automation sensor :data:`.jobs.LEADERBOARD_SENSOR` is turned on.
+REFRESH = (dg.AutomationCondition.any_deps_updated() & ~dg.AutomationCondition.in_progress()
+           & ~dg.AutomationCondition.any_deps_in_progress())
+
 
 def leaderboard_asset(partitions_def):
     @dg.asset(name=LEADERBOARD, group_name="comparison", kinds={"pandas", "mlflow"},
               ins={f"{name}_scores": dg.AssetIn(metadata={ALL_PARTITIONS: True})
-                   for name in METHODS})
+                   for name in METHODS},
+              automation_condition=REFRESH)
     def leaderboard(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                     **scores: dict) -> pd.DataFrame:
         """Every data set × hyper-parameter set × method, one-step and free run, ranked by
