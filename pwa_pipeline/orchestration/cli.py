@@ -10,7 +10,6 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 import argparse
 import sys
 import time
-from pathlib import Path
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials, split_credentials
@@ -49,9 +48,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: {what} left out: {reason}", file=sys.stderr)
     resources = defs.resources
     for folder, what in ((dagster_home(), "Dagster home"),
-                         (Path(resources["io_manager"].base_dir or default_storage_dir()),
-                          "asset store"),
-                         (defs.resources["settings"].cache_root(), "cache folder")):
+                         (resources["io_manager"].root(), "asset store"),
+                         (resources["settings"].cache_root(), "cache folder")):
         check_writable(folder, what)  # before any run: a refused store leaves nothing half-done
     try:
         resources["mlflow"].check_reachable()

@@ -33,7 +33,8 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
 
     base_dir: str = ""
 
-    def _root(self) -> Path:
+    def root(self) -> Path:
+        """The store's folder."""
         return Path(self.base_dir).resolve() if self.base_dir else default_storage_dir()
 
     def _paths(self, asset_key: dg.AssetKey, partition_key: str | None) -> dict[str, Path]:
@@ -41,12 +42,12 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         format."""
         asset = [check_name(part, "asset") for part in asset_key.path]
         if partition_key is None:
-            return {fmt: inside(self._root(), *asset[:-1], f"{asset[-1]}.{fmt}")
+            return {fmt: inside(self.root(), *asset[:-1], f"{asset[-1]}.{fmt}")
                     for fmt in ("parquet", "pkl")}
         dataset, hparams = split_key(partition_key)
         check_name(dataset, "data set")
         check_name(hparams, "hyper-parameter set")
-        return {fmt: inside(self._root(), *asset, dataset, f"{hparams}.{fmt}")
+        return {fmt: inside(self.root(), *asset, dataset, f"{hparams}.{fmt}")
                 for fmt in ("parquet", "pkl")}
 
     def handle_output(self, context: dg.OutputContext, obj) -> None:
@@ -58,7 +59,7 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
             if isinstance(obj, pd.DataFrame):
                 atomic_write(path, lambda p: obj.to_parquet(p, index=False))
             else:
-                save_object(path, obj, signing_key(self._root()))
+                save_object(path, obj, signing_key(self.root()))
         except OSError as exc:  # a full disk, a store made read-only
             raise dg.Failure(description=(
                 f"cannot write {path}: {exc.strerror or exc}; the file it would replace, and "
@@ -80,7 +81,7 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
                 f"{'' if partition_key is None else f' for partition {partition_key}'} has not "
                 f"been materialised (no {paths['pkl']})"
             )
-        return load_object(paths["pkl"], signing_key(self._root()))
+        return load_object(paths["pkl"], signing_key(self.root()))
 
     def load_input(self, context: dg.InputContext):
         """One stored value; for an input declared with ``metadata={ALL_PARTITIONS: True}``
