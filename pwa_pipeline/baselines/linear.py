@@ -8,7 +8,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
-from ..pwa.arx import ARXModelBase
+from ..pwa.arx import ARXModelBase, training_range
 from ..pwa.regressors import build_regressors
 from ..pwa.structure_fit import fit_structure
 from ..pwa.structures import COUPLINGS, FORMS
@@ -42,6 +42,9 @@ class LinearARX(ARXModelBase):
         The validation experiments and the refinement of each output group
         (:class:`~pwa_pipeline.pwa.structure_fit.StructureFit`).
     n_inputs_, n_outputs_ : int
+    signal_range_ : ndarray of shape (2, m + r)
+        Smallest and largest training value of each output, then each input: the data
+        envelope of :meth:`to_state_space`.
 
     Examples
     --------
@@ -77,6 +80,7 @@ class LinearARX(ARXModelBase):
     def fit(self, u: Signals, y: Signals) -> "LinearARX":
         """Least-squares fit on one or several experiments (regressors never span two)."""
         pairs = as_experiments(u, y)
+        self.signal_range_ = training_range(pairs)
         self.n_inputs_ = pairs[0][0].shape[1]
         self.n_outputs_ = pairs[0][1].shape[1]
         self.n_features_in_ = self.n_inputs_
@@ -106,6 +110,22 @@ class LinearARX(ARXModelBase):
         if self.refinement is not None:
             params["refinement"] = type(self.refinement).__name__
         return params
+
+    def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
+                       padding: float = 0.05, input_names: list[str] | None = None,
+                       output_names: list[str] | None = None):
+        """The model as a PWA state-space model with one mode, x⁺ = A x + B u + f,
+        y = C x + g, valid in the data envelope (:func:`pwa_pipeline.control.to_state_space`,
+        whose parameters these are).
+
+        Returns
+        -------
+        pwa_pipeline.control.PWAStateSpace
+        """
+        from ..control.conversion import to_state_space
+
+        return to_state_space(self, u, y, padding=padding, input_names=input_names,
+                              output_names=output_names)
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         return phi @ self.theta_

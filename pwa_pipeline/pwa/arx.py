@@ -17,6 +17,24 @@ from .regressors import lagged_matrix, n_initial
 from .structures import output_lags
 
 
+def training_range(experiments: list[tuple[Float2D, Float2D]]) -> Float2D:
+    """Smallest and largest value of each output, then each input, over the experiments.
+
+    Parameters
+    ----------
+    experiments : list of (u, y)
+        As :func:`~pwa_pipeline._validation.as_experiments` returns them.
+
+    Returns
+    -------
+    ndarray of shape (2, m + r)
+        Row 0 the minima, row 1 the maxima: the estimators keep it as ``signal_range_``,
+        the data envelope of their state-space form (:mod:`pwa_pipeline.control`).
+    """
+    joined = np.vstack([np.hstack([y, u]) for u, y in experiments])
+    return np.vstack([joined.min(axis=0), joined.max(axis=0)])
+
+
 class ARXModelBase(BaseEstimator):
     """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
 

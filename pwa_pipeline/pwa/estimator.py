@@ -10,7 +10,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
-from .arx import ARXModelBase
+from .arx import ARXModelBase, training_range
 from .boundaries import ResidualRegions
 from .clustering import DBSCANClustering
 from .local_models import LocalLeastSquares
@@ -109,6 +109,10 @@ class PWARX(ARXModelBase):
         Per output its regressor, regions and sub-models (:mod:`~.structures`).
     structure_fit_ : StructureFit (structured route only)
         The held-out experiments, each candidate's validation error, the refinements.
+    signal_range_ : ndarray of shape (2, m + r)
+        Smallest and largest training value of each output, then each input (set by
+        :meth:`fit`; a model joined by :meth:`assemble` alone has none): the data envelope
+        of :meth:`to_state_space`.
 
     Examples
     --------
@@ -233,6 +237,7 @@ class PWARX(ARXModelBase):
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
         experiments = as_experiments(u, y)
+        self.signal_range_ = training_range(experiments)
         if self.structured:
             return self._fit_structured(experiments)
         reg = build_regressors(experiments, self.na, self.nb, self.affine)
@@ -398,6 +403,30 @@ class PWARX(ARXModelBase):
         check_is_fitted(self)
         return {k: v for k, v in vars(self).items()
                 if k not in self.FIT_RECORD and k not in self.FIT_PARAMS}
+
+    def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
+                       padding: float = 0.05, input_names: list[str] | None = None,
+                       output_names: list[str] | None = None):
+        """The model as a PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i on
+        polyhedral regions of z = [x; u] (:func:`pwa_pipeline.control.to_state_space`, whose
+        parameters these are): every route, the regions made explicit inside the data
+        envelope (``signal_range_``, or the range of ``u`` and ``y`` when given, widened by
+        ``padding``).
+
+        Returns
+        -------
+        pwa_pipeline.control.PWAStateSpace
+
+        Raises
+        ------
+        NotImplementedError
+            For a region step of one's own whose regions are not an argmax of affine
+            functions (named in the message).
+        """
+        from ..control.conversion import to_state_space
+
+        return to_state_space(self, u, y, padding=padding, input_names=input_names,
+                              output_names=output_names)
 
     def _predict_phi(self, phi: Float2D) -> Float2D:
         if self.structured:

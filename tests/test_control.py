@@ -1,0 +1,419 @@
+"""The PWA state-space form of fitted models (pwa_pipeline.control): it simulates as the model,
+its explicit regions are the model's regions inside the envelope, ties go as the model's, and
+its JSON, MPT3 script and stability report hold what they say."""
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
+from pwa_pipeline.control import SCHEMA_VERSION, PWAStateSpace, to_state_space
+from pwa_pipeline.control.polyhedra import Box, chebyshev_ball, irredundant_rows
+from pwa_pipeline.control.stability import stability_report
+from pwa_pipeline.pwa.output_error import OutputErrorRefinement
+from pwa_pipeline.pwa.regions import SVMRegions
+from pwa_pipeline.pwa.scheduling import SignScheduling
+
+
+@pytest.fixture(scope="module")
+def default_ss(default_30db):
+    return default_30db.to_state_space()
+
+
+def _friction(n_exp: int = 3, n: int = 300, seed: int = 0):
+    """A Coulomb-friction axis: Δy(k) = 0.8Δy(k−1) − 0.02y(k−1) + 0.5u(k−1) ∓ 0.3 by the
+    sign of Δy(k−1) (the structured route's test system)."""
+    rng = np.random.default_rng(seed)
+    us, ys = [], []
+    for _ in range(n_exp):
+        u = rng.normal(size=(n, 1))
+        y = np.zeros((n, 1))
+        for k in range(2, n):
+            dy = y[k - 1, 0] - y[k - 2, 0]
+            y[k] = y[k - 1] + 0.8 * dy - 0.02 * y[k - 1] + 0.5 * u[k - 1] \
+                + (-0.3 if dy > 0 else 0.3)
+        us.append(u)
+        ys.append(y)
+    return us, ys
+
+
+def _two_axes(n_exp: int = 3, n: int = 300, seed: int = 0):
+    """Output 1 linear in u; output 2 the friction axis of :func:`_friction` driven by u2."""
+    rng = np.random.default_rng(seed)
+    us, ys = [], []
+    for _ in range(n_exp):
+        u = rng.normal(size=(n, 2))
+        y = np.zeros((n, 2))
+        for k in range(2, n):
+            dy = y[k - 1, 1] - y[k - 2, 1]
+            y[k, 0] = 0.7 * y[k - 1, 0] + 0.4 * u[k - 1, 0] - 0.2 * u[k - 1, 1]
+            y[k, 1] = y[k - 1, 1] + 0.8 * dy - 0.02 * y[k - 1, 1] + 0.5 * u[k - 1, 1] \
+                + (-0.3 if dy > 0 else 0.3)
+        us.append(u)
+        ys.append(y)
+    return us, ys
+
+
+def _paper_system():
+    data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=2)
+    return data.u, data.y
+
+
+def _random_in_envelope(ss: PWAStateSpace, n: int, seed: int = 0) -> np.ndarray:
+    lower, upper = ss.envelope
+    return np.random.default_rng(seed).uniform(lower, upper, size=(n, lower.size))
+
+
+def _closed_membership(ss: PWAStateSpace, z: np.ndarray) -> np.ndarray:
+    """(N, s): z in the closed region P_i, no tolerance."""
+    return np.column_stack([np.all(z @ H.T <= h, axis=1) for H, h in ss.regions])
+
+
+# --- dynamics ---------------------------------------------------------------------------
+
+def test_state_space_simulates_as_the_default_model(default_30db, default_ss, sim_30db):
+    u, y = sim_30db.u, sim_30db.y
+    assert default_ss.n_modes == default_30db.n_submodels_ == 4
+    assert default_ss.state_names == ["y1(k-1)", "y2(k-1)", "u1(k-1)", "u2(k-1)"]
+    np.testing.assert_allclose(default_ss.simulate(u, y[:10]), default_30db.simulate(u, y[:10]),
+                               rtol=0, atol=1e-8)
+    # lists of experiments are simulated each from its own warm-up, as the model does
+    us, ys = [u[:1500], u[1500:]], [y[:3], y[1500:1502]]
+    for a, b in zip(default_ss.simulate(us, ys), default_30db.simulate(us, ys), strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-8)
+
+
+def test_linear_arx_is_one_mode_that_simulates_as_the_model():
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(600, 2))
+    y = np.zeros((600, 2))
+    for k in range(2, 600):
+        y[k] = (0.5 * y[k - 1] - 0.2 * y[k - 2] + [0.3, -0.1] + u[k - 1] @ [[1.0, 0.2], [0.0, 0.5]]
+                + 0.3 * u[k - 2] + 0.01 * rng.normal(size=2))
+    model = LinearARX(na=2, nb=2, affine=True).fit(u, y)
+    ss = model.to_state_space()
+    assert ss.n_modes == 1 and ss.n_states == 2 * 2 + 2 * 2
+    np.testing.assert_allclose(ss.simulate(u, y[:5]), model.simulate(u, y[:5]), rtol=0, atol=1e-8)
+    # the one mode's matrices are the ARX parameters and the shift of the lags
+    theta = model.theta_
+    np.testing.assert_array_equal(ss.C[0], theta[:8].T)
+    np.testing.assert_array_equal(ss.g[0], theta[8])
+    np.testing.assert_array_equal(ss.A[0][[0, 2]], theta[:8].T)  # newest lag of y1, y2
+    np.testing.assert_array_equal(ss.A[0][1], np.eye(8)[0])      # y1(k-2) ← y1(k-1)
+    np.testing.assert_array_equal(ss.A[0][5], np.eye(8)[4])      # u1(k-2) ← u1(k-1)
+    np.testing.assert_array_equal(ss.B[0][[4, 6]], np.eye(2))    # u(k) → u(k-1)
+    np.testing.assert_array_equal(ss.f[0][[0, 2]], theta[8])
+
+
+def test_step_is_the_one_step_prediction_and_the_shift_of_the_state(default_30db, default_ss,
+                                                                     sim_30db):
+    u, y = sim_30db.u[:500], sim_30db.y[:500]
+    x = default_ss.states(u, y)
+    x_next, y_hat = default_ss.step(x, u[1:])
+    np.testing.assert_allclose(y_hat, default_30db.predict(u, y)[1:], rtol=0, atol=1e-12)
+    # the next state is the measured one with the prediction in the output lags
+    np.testing.assert_allclose(x_next[:-1, 2:], x[1:, 2:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x_next[:, :2], y_hat, rtol=0, atol=1e-12)
+    one_x, one_y = default_ss.step(x[7], u[8])
+    np.testing.assert_array_equal(one_x, x_next[7])
+    np.testing.assert_array_equal(one_y, y_hat[7])
+
+
+def test_states_and_regressors_are_aligned_with_the_data():
+    u, y = _friction(n_exp=2)
+    model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                  scheduling=SignScheduling(switch="offset")).fit(u, y)
+    ss = model.to_state_space()
+    assert ss.state_names == ["y1(k-1)", "y1(k-2)", "u1(k-1)"] and ss.n_initial == 2
+    x, phi = ss.states(u, y), ss.regressors(u, y)
+    assert isinstance(x, list) and len(x) == 2
+    assert x[0].shape == (len(u[0]) - 2, 3)
+    np.testing.assert_array_equal(x[0][:, 0], y[0][1:-1, 0])   # x(k) holds y(k−1) …
+    np.testing.assert_array_equal(x[0][:, 1], y[0][:-2, 0])    # … y(k−2) …
+    np.testing.assert_array_equal(x[0][:, 2], u[0][1:-1, 0])   # … and u(k−1)
+    np.testing.assert_array_equal(phi[0], np.column_stack([x[0], np.ones(len(x[0]))]))
+
+
+def test_leaving_the_envelope_is_refused_or_extrapolated(default_30db, default_ss, sim_30db):
+    u, y = 3 * sim_30db.u[:200], sim_30db.y[:200]
+    with pytest.raises(ValueError, match="leaves the data envelope at sample 1 .*u1"):
+        default_ss.simulate(u, y[:1])
+    assert default_ss.mode_of(default_ss.states(u, y), u[1:]).min() == -1
+    with pytest.raises(ValueError, match="outside the data envelope"):
+        default_ss.step(np.zeros(4), np.array([100.0, 0.0]))
+    # a linear model has one mode: extrapolating it is the model's own simulation
+    linear = LinearARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
+    ls = linear.to_state_space()
+    np.testing.assert_allclose(ls.simulate(u, y[:1], outside="nearest"),
+                               linear.simulate(u, y[:1]), rtol=0, atol=1e-8)
+
+
+# --- regions ------------------------------------------------------------------------------
+
+def test_mode_of_is_the_models_region_on_every_training_row(default_30db, default_ss, sim_30db):
+    x = default_ss.states(sim_30db.u, sim_30db.y)
+    phi = default_ss.regressors(sim_30db.u, sim_30db.y)
+    mode = default_ss.mode_of(x, sim_30db.u[1:])
+    assert mode.min() >= 0
+    np.testing.assert_array_equal(default_ss.mode_regions[mode, 0],
+                                  default_30db.regions_.predict(phi))
+
+
+def test_each_explicit_region_is_the_models_region_inside_the_envelope(default_30db, default_ss):
+    """Random points of the envelope: each lies in exactly one closed region, and region i
+    holds exactly the points the model's argmax gives to it, so removing rows kept the sets."""
+    z = _random_in_envelope(default_ss, 20000)
+    inside = _closed_membership(default_ss, z)
+    np.testing.assert_array_equal(inside.sum(axis=1), 1)
+    model_region = default_30db.regions_.predict(z[:, :default_ss.n_states])
+    np.testing.assert_array_equal(default_ss.mode_regions[inside.argmax(axis=1), 0], model_region)
+    np.testing.assert_array_equal(default_ss.mode_of(z[:, :4], z[:, 4:]), inside.argmax(axis=1))
+    # redundant rows are gone: 3 hyperplanes and 12 box rows per region before
+    assert all(len(h) < 15 for _, h in default_ss.regions)
+
+
+def test_redundant_rows_are_removed_and_the_set_kept():
+    box = Box(np.array([-1.0, 0.0, 2.0]), np.array([1.0, 4.0, 3.0]))
+    H = np.array([[1.0, 1.0, 0.0],     # x + y ≤ 2: shapes the set
+                  [1.0, 1.0, 0.0],     # the same row again: redundant
+                  [1.0, 1.0, 0.0],     # x + y ≤ 6: redundant (the box gives ≤ 5)
+                  [0.0, 0.0, 1.0],     # z ≤ 2.5: shapes the set
+                  [-1.0, 0.0, -1.0],   # −x − z ≤ 0: redundant (x ≥ −1, z ≥ 2)
+                  [0.0, 1.0, 0.0]])    # y ≤ 2.98: cuts a sliver off the corner x = −1, y = 3
+    h = np.array([2.0, 2.0, 6.0, 2.5, 0.0, 2.98])
+    bH, bh = box.rows()
+    Ht, ht = box.to_unit(np.vstack([H, bH]), np.concatenate([h, bh]))
+    keep = irredundant_rows(Ht, ht)
+    # of the two equal rows the later stays (the first is tested while the second is there);
+    # of the box rows y ≤ 4 is implied by y ≤ 2 − x ≤ 3 and z ≤ 3 by z ≤ 2.5
+    np.testing.assert_array_equal(keep, [False, True, False, True, False, True,
+                                         True, False, False, True, True, True])
+    # rays from the Chebyshev centre settle most rows without a program, to the same rows
+    radius, centre = chebyshev_ball(Ht, ht)
+    assert radius > 0.1
+    np.testing.assert_array_equal(irredundant_rows(Ht, ht, interior=centre), keep)
+    pts = np.random.default_rng(0).uniform([-2, -1, 1], [2, 5, 4], size=(20000, 3))
+    full = np.all(pts @ np.vstack([H, bH]).T <= np.concatenate([h, bh]), axis=1)
+    Hk, hk = box.from_unit(Ht[keep], ht[keep])
+    np.testing.assert_array_equal(np.all(pts @ Hk.T <= hk + 1e-12, axis=1), full)
+
+
+def test_a_tie_on_a_boundary_goes_to_the_lowest_region_as_the_model_does(default_30db):
+    """Regions y1(k−1) ≥ 0 (0) and ≤ 0 (1); regions 2 and 3 never win inside the envelope and
+    are dropped. On y1(k−1) = 0 the model's argmax picks 0, and so does mode_of."""
+    model = copy.deepcopy(default_30db)
+    coef = np.zeros((4, 4))
+    coef[0, 0], coef[1, 0] = 1.0, -1.0
+    model.regions_.coef_, model.regions_.intercept_ = coef, np.array([0.0, 0.0, -100.0, -100.0])
+    ss = model.to_state_space()
+    assert ss.n_modes == 2
+    np.testing.assert_array_equal(ss.mode_regions[:, 0], [0, 1])
+    np.testing.assert_array_equal(ss.dropped_modes, [[2, 2], [3, 3]])
+    x = np.array([[0.0, 1.0, 0.5, 0.5], [1e-3, 1.0, 0.5, 0.5], [-1e-3, 1.0, 0.5, 0.5]])
+    u = np.zeros((3, 2))
+    np.testing.assert_array_equal(model.regions_.predict(x), [0, 0, 1])
+    np.testing.assert_array_equal(ss.mode_of(x, u), [0, 0, 1])
+    assert _closed_membership(ss, np.hstack([x, u]))[0].all()  # the tie: in both regions
+
+
+def test_a_sign_tie_goes_to_bit_zero_as_the_model_does():
+    u, y = _friction()
+    model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                  scheduling=SignScheduling(switch="offset")).fit(u, y)
+    ss = model.to_state_space()
+    assert ss.n_modes == 2
+    out = model.structure_.outputs[0]
+    c = (ss.envelope[0][0] + ss.envelope[1][0]) / 2
+    x = np.array([[c, c, 0.0], [c, c - 0.1, 0.0], [c - 0.1, c, 0.0]])  # Δy = 0, > 0, < 0
+    phi = np.column_stack([x, np.ones(3)])
+    np.testing.assert_array_equal(out.regions(phi), [0, 1, 0])
+    np.testing.assert_array_equal(ss.mode_regions[ss.mode_of(x, np.zeros((3, 1))), 0],
+                                  [0, 1, 0])
+    np.testing.assert_allclose(ss.simulate(u[0], y[0][:2]), model.simulate(u[0], y[0][:2]),
+                               rtol=0, atol=1e-8)
+
+
+def test_decoupled_outputs_take_the_product_partition():
+    data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=2)
+    model = PWARX(na=1, nb=1, form="velocity", outputs="decoupled").fit(data.u, data.y)
+    ss = model.to_state_space()
+    sizes = model.structure_.n_regions
+    assert ss.n_modes + len(ss.dropped_modes) == np.prod(sizes)
+    np.testing.assert_allclose(ss.simulate(data.u, data.y[:5]), model.simulate(data.u, data.y[:5]),
+                               rtol=0, atol=1e-8)
+    x, phi = ss.states(data.u, data.y), ss.regressors(data.u, data.y)
+    mode = ss.mode_of(x, data.u[2:])
+    for j, out in enumerate(model.structure_.outputs):
+        np.testing.assert_array_equal(ss.mode_regions[mode, j], out.regions(phi))
+    z = _random_in_envelope(ss, 5000, seed=1)
+    np.testing.assert_array_equal(_closed_membership(ss, z).sum(axis=1), 1)
+
+
+def _model_regions(model, phi: np.ndarray) -> np.ndarray:
+    """(N, m): the fitted model's region of each output's sub-model for each φ row."""
+    if isinstance(model, LinearARX):
+        return np.zeros((len(phi), model.n_outputs_), dtype=int)
+    if not model.structured:
+        return np.tile(model.regions_.predict(phi)[:, None], (1, model.n_outputs_))
+    return np.column_stack([o.regions(phi) for o in model.structure_.outputs])
+
+
+@pytest.mark.parametrize("make, data", [
+    (lambda: PWARX(na=1, nb=1, form="velocity"), _paper_system),
+    (lambda: PWARX(na=1, nb=1, refinement=OutputErrorRefinement(max_iter=2)), _paper_system),
+    (lambda: PWARX(na=2, nb=1, affine=True, scheduling=SignScheduling()), _two_axes),
+    (lambda: LinearARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled"),
+     _two_axes),
+], ids=["joint-velocity-clustered", "joint-level-refined", "joint-scheduled-own-increments",
+        "linear-velocity-decoupled"])
+def test_structured_and_refined_routes_convert_exactly(make, data):
+    u, y = data()
+    model = make().fit(u, y)
+    ss = model.to_state_space()
+    u0, y0 = (u[0], y[0]) if isinstance(u, list) else (u, y)
+    np.testing.assert_allclose(ss.simulate(u0, y0[:5]), model.simulate(u0, y0[:5]),
+                               rtol=0, atol=1e-8)
+    x, phi = ss.states(u0, y0), ss.regressors(u0, y0)
+    mode = ss.mode_of(x, u0[ss.n_initial:])
+    np.testing.assert_array_equal(ss.mode_regions[mode], _model_regions(model, phi))
+    # random points of the envelope: one region each, the model's
+    z = _random_in_envelope(ss, 3000, seed=3)
+    x = z[:, :ss.n_states]
+    np.testing.assert_array_equal(_closed_membership(ss, z).sum(axis=1), 1)
+    phi = np.column_stack([x, np.ones(len(z))]) if model.affine else x
+    np.testing.assert_array_equal(ss.mode_regions[ss.mode_of(x, z[:, ss.n_states:])],
+                                  _model_regions(model, phi))
+
+
+def test_the_envelope_is_the_padded_training_range(default_30db, default_ss, sim_30db):
+    lower, upper = default_ss.envelope
+    y_lo, y_hi = sim_30db.y.min(axis=0), sim_30db.y.max(axis=0)
+    u_lo, u_hi = sim_30db.u.min(axis=0), sim_30db.u.max(axis=0)
+    # z = [y1(k-1), y2(k-1), u1(k-1), u2(k-1), u1(k), u2(k)]: each lag its channel's range
+    u_lower = u_lo - 0.05 * (u_hi - u_lo)
+    np.testing.assert_allclose(lower, np.concatenate([y_lo - 0.05 * (y_hi - y_lo), u_lower,
+                                                      u_lower]))
+    np.testing.assert_allclose(upper[:2], y_hi + 0.05 * (y_hi - y_lo))
+    from_data = default_30db.to_state_space(sim_30db.u, sim_30db.y)
+    np.testing.assert_array_equal(from_data.envelope[0], lower)
+    wider = default_30db.to_state_space(padding=0.2)
+    assert np.all(wider.envelope[0] < lower) and np.all(wider.envelope[1] > upper)
+    old = copy.copy(default_30db)
+    del old.signal_range_
+    with pytest.raises(ValueError, match="pass the training data"):
+        old.to_state_space()
+    with pytest.raises(ValueError, match="padding must be a positive"):
+        default_30db.to_state_space(padding=0.0)
+
+
+def test_uncovered_routes_raise_not_implemented(sim_30db):
+    class NearestRegions(SVMRegions):
+        def predict(self, phi):
+            return np.zeros(len(phi), dtype=int)
+
+    u, y = sim_30db.u[:1500], sim_30db.y[:1500]
+    model = PWARX(na=1, nb=1, regions=NearestRegions()).fit(u, y)
+    with pytest.raises(NotImplementedError, match="NearestRegions"):
+        model.to_state_space()
+    with pytest.raises(NotImplementedError, match="SubspaceSS"):
+        to_state_space(SubspaceSS().fit(u[:300], y[:300]))
+
+
+# --- export ------------------------------------------------------------------------------
+
+def test_json_round_trip_is_exact(default_ss, sim_30db, tmp_path):
+    path = tmp_path / "model.json"
+    text = default_ss.to_json(path)
+    doc = json.loads(text)
+    assert doc["schema_version"] == SCHEMA_VERSION and doc["n_modes"] == 4
+    for back in (PWAStateSpace.from_json(text), PWAStateSpace.from_json(path)):
+        for name in "ABfCg":
+            np.testing.assert_array_equal(getattr(back, name), getattr(default_ss, name))
+        for (H, h), (H0, h0) in zip(back.regions, default_ss.regions, strict=True):
+            np.testing.assert_array_equal(H, H0)
+            np.testing.assert_array_equal(h, h0)
+        np.testing.assert_array_equal(back.envelope[0], default_ss.envelope[0])
+        np.testing.assert_array_equal(back.mode_regions, default_ss.mode_regions)
+        assert back.state_names == default_ss.state_names
+        assert back.source == default_ss.source
+    u, y = sim_30db.u[:300], sim_30db.y[:300]
+    np.testing.assert_array_equal(back.simulate(u, y[:1]), default_ss.simulate(u, y[:1]))
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.update(schema_version=2), "schema version 2 is not supported"),
+    (lambda d: d.update(schema="something-else"), "not a PWA state-space document"),
+    (lambda d: d.pop("B"), r"lacks field\(s\) \['B'\]"),
+    (lambda d: d.update(A=[a[:-1] for a in d["A"]]), r"A has shape \(4, 3, 4\)"),
+    (lambda d: d.update(g=[row + [0.0] for row in d["g"]]), r"g has shape \(4, 3\)"),
+    (lambda d: d["regions"][1].update(h=d["regions"][1]["h"][:-1]), "region 1 h has shape"),
+    (lambda d: d["regions"][0].update(H=[r[:-1] for r in d["regions"][0]["H"]]),
+     "region 0 H has shape"),
+    (lambda d: d["envelope"].update(lower=d["envelope"]["upper"]), "envelope is empty"),
+    (lambda d: d.update(output_lags=2), "the state has 4 entries"),
+    (lambda d: d.update(state_names=["a", "b", "c", "d"]), "state_names"),
+])
+def test_bad_json_is_refused_naming_the_problem(default_ss, change, message):
+    doc = json.loads(default_ss.to_json())
+    change(doc)
+    with pytest.raises(ValueError, match=message):
+        PWAStateSpace.from_json(json.dumps(doc))
+
+
+def test_not_json_is_refused():
+    with pytest.raises(ValueError, match="not a JSON document"):
+        PWAStateSpace.from_json("{not json")
+
+
+def test_mpt3_script_builds_the_pwa_system_from_the_matrices(default_ss, tmp_path):
+    path = tmp_path / "model_pwa.m"
+    script = default_ss.to_mpt3(path)
+    assert path.read_text() == script
+    assert script.count("LTISystem('A', A") == default_ss.n_modes == 4
+    assert "pwa = PWASystem([sys1, sys2, sys3, sys4]);" in script
+    assert "sys3.setDomain('xu', Polyhedron('A', H3, 'b', h3));" in script
+    for value in (default_ss.A[0, 0, 0], default_ss.A[3, 1, 2], default_ss.C[2, 1, 0],
+                  default_ss.regions[1][0][0, 1], default_ss.regions[2][1][-1],
+                  default_ss.envelope[1][5]):
+        assert f"{value:.17g}" in script
+    # the mode's A matrix, row by row, as MATLAB reads it
+    a1 = "A1 = [" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in default_ss.A[0]) + "];"
+    assert a1 in script
+
+
+# --- stability ---------------------------------------------------------------------------
+
+def test_stability_of_the_identified_system_is_certified(default_ss):
+    report = default_ss.stability()
+    np.testing.assert_allclose(report.spectral_radius,
+                               [np.abs(np.linalg.eigvals(a)).max() for a in default_ss.A])
+    assert report.certified and report.method.startswith("common quadratic")
+    P = report.certificates["P"]
+    assert np.linalg.eigvalsh(P).min() > 0
+    for a in default_ss.A:
+        assert np.linalg.eigvalsh(a.T @ P @ a - P).max() < 0
+    assert 0 < report.contraction < 1
+    assert json.dumps(report.to_dict())
+
+
+def _hand_made(A: np.ndarray) -> PWAStateSpace:
+    """Modes x⁺ = A_i x over two output lags of one output, one input that enters nothing."""
+    s = len(A)
+    box = (np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0]))
+    regions = [(np.eye(3), np.ones(3))] * s
+    return PWAStateSpace(A, np.zeros((s, 2, 1)), np.zeros((s, 2)), np.zeros((s, 1, 2)),
+                         np.zeros((s, 1)), regions, *box, output_lags=2, input_lags=0)
+
+
+def test_stability_is_not_certified_when_it_cannot_be():
+    unstable = stability_report(_hand_made(np.array([[[1.1, 0.0], [1.0, 0.0]]])))
+    assert not unstable.certified and unstable.method == "spectral radius"
+    assert "mode(s) [0]" in unstable.message and unstable.certificates == {}
+    # each mode stable, but switching between them diverges: no common quadratic function
+    pair = np.array([[[0.5, 2.0], [0.0, 0.5]], [[0.5, 0.0], [2.0, 0.5]]])
+    switching = stability_report(_hand_made(pair))
+    assert not switching.certified and switching.method.startswith("common quadratic")
+    assert switching.spectral_radius.max() < 1
+    np.testing.assert_allclose(switching.spectral_radius, [0.5, 0.5])
