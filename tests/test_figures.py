@@ -17,10 +17,14 @@ from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.registry import Dataset
 from pwa_pipeline.orchestration import figures
 from pwa_pipeline.orchestration.figures import (
+    MAX_SAMPLES,
     clip_range,
+    context_title,
+    draw_structured_switching,
     parameter_clusters_figure,
     prediction_figure,
     regions_figure,
+    structured_switching_inputs,
     switching_figure,
     to_markdown,
     to_png,
@@ -69,14 +73,15 @@ def _line(ax, label):
 def test_prediction_titles_give_each_outputs_nrmse(fit):
     fig = prediction_figure(fit.data, fit.ev, "pwa | test", WARMUP)
     assert len(fig.axes) == 2
-    assert fig.get_suptitle() == "pwa | test"
+    assert fig.get_suptitle() == ("pwa | test\nMeasured output, one-step prediction and free "
+                                  "run: held-out experiment 1 of 1, samples 0–605 of 1500")
     table = fit.ev.table
     for ax, name in zip(fig.axes, fit.data.y_names, strict=True):
         one = table[(table["mode"] == "one_step") & (table["output"] == name)]["nrmse"].item()
         free = table[(table["mode"] == "free_run") & (table["output"] == name)]["nrmse"].item()
         assert one != free
-        assert ax.get_title(loc="left") == \
-            f"{name}: one-step NRMSE {one:.4g}, free run NRMSE {free:.4g}"
+        assert ax.get_title(loc="left") == f"{name}: NRMSE one-step {one:.4g}, free run {free:.4g}"
+        assert ax.get_ylabel() == name  # a unit-free data set
         n = 606
         assert np.allclose(_line(ax, "measured").get_ydata(),
                            fit.data.y_test[0][:n, fit.data.y_names.index(name)])
@@ -123,10 +128,11 @@ def test_prediction_figure_has_one_legend_of_what_any_output_draws(fit):
     assert _legend_texts(prediction_figure(fit.data, diverged, "t", WARMUP)) == [
         "warm-up", "measured", "one-step", "free run (clipped)", "free run out of range",
         "free run (diverged, clipped)", "diverged free run out of range"]
-    to_png(fig)  # laid out: the legend right of every axes, inside the figure
+    to_png(fig)  # laid out: the legend below every axes and its x label, inside the figure
     box = fig.legends[0].get_window_extent()
-    assert box.x0 >= max(ax.get_window_extent().x1 for ax in fig.axes)
-    assert box.x1 <= fig.bbox.x1
+    assert box.y1 <= min(ax.xaxis.label.get_window_extent().y0 for ax in fig.axes
+                         if ax.get_xlabel())
+    assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1 and box.y0 >= fig.bbox.y0
 
 
 def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
@@ -185,7 +191,10 @@ def test_switching_agreement_matches_a_direct_count(fit):
     for modes in (test.modes, test.modes[1:]):  # per sample or per regressor row
         fig = switching_figure(model, test.u, test.y, modes, test.thetas)
         assert len(fig.axes) == 2
-        assert f"agreement {agreement:.1f} % of {region.size} samples" in fig.get_suptitle()
+        # the agreement is over every row of the experiment, of which the first 605 are drawn
+        assert fig.get_suptitle() == (
+            f"Estimated region vs true mode, held-out experiment 1: agreement "
+            f"{agreement:.1f} % over all {region.size} samples, the first 605 shown")
     shown = fig.axes[1].collections[0].get_offsets()
     assert shown[:, 0].min() == 1 and shown[:, 0].max() == 605
     # Each region sits at the level of the mode it is paired with.
@@ -360,7 +369,7 @@ def test_to_markdown_inlines_a_small_png(fit):
         assert len(png) < 300_000
         width = struct.unpack(">I", png[16:20])[0]  # IHDR: width in pixels
         assert width == round(90 * fig.get_figwidth())
-    assert to_markdown(figs[0]).startswith("![pred (pwa)](data:image/png;base64,")
+    assert to_markdown(figs[0]).startswith("![pred (pwa) Measured output, one-step")
     narrow = _png(to_markdown(figs[0], width=450))
     assert struct.unpack(">I", narrow[16:20])[0] == 450
     small = _png(to_markdown(figs[0], max_bytes=40_000))
@@ -383,3 +392,220 @@ def test_parameter_clusters_are_projected_on_their_principal_components(fit):
         ref = centred[labels == c] @ vt[:2].T
         np.testing.assert_allclose(np.abs(drawn[name]), np.abs(ref), rtol=1e-6, atol=1e-9)
     assert fig.axes[0].get_xlabel() == f"PC 1 ({100 * sv[0]**2 / np.sum(sv**2):.0f} % of variance)"
+
+
+# --- What a control engineer reads at a glance: titles, units, the measured line, the size
+
+CONTEXT = context_title("hure_vasak", "my_set", "PWA")
+
+
+@pytest.fixture(scope="module")
+def structured(fit):
+    """A structured PWARX (velocity form, one model per output, offset switching on the sign
+    of each output's increment) on the fit's training record."""
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+
+    train_u, train_y = fit.data.u_train[0], fit.data.y_train[0]
+    return PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                 scheduling=SignScheduling(switch="offset")).fit(train_u, train_y)
+
+
+@pytest.fixture(scope="module")
+def robot_like():
+    """The robot's channels and units: six outputs q1…q6 in degrees (the simulated system's
+    two outputs and their scaled, noisy copies) and torques tau1, tau2 in N·m, scored as a
+    linear ARX model, and a structured model of them."""
+    from pwa_pipeline import LinearARX
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+
+    rng = np.random.default_rng(3)
+    records = [make_hure_vasak(n_samples=900, snr_db=30, seed=s) for s in (0, 1000)]
+    ys = [np.hstack([r.y, 3 * r.y + rng.normal(0, 0.1, r.y.shape),
+                     -2 * r.y + rng.normal(0, 0.1, r.y.shape)]) for r in records]
+    units = {**{f"q{i}": "deg" for i in range(1, 7)}, "tau1": "N·m", "tau2": "N·m"}
+    data = Dataset("robot_like", [records[0].u], [ys[0]], [records[1].u], [ys[1]],
+                   ["tau1", "tau2"], [f"q{i}" for i in range(1, 7)], units=units)
+    model = LinearARX(na=1, nb=1).fit(records[0].u, ys[0])
+    ev = evaluate(model, records[1].u, ys[1], warmup=WARMUP, output_names=data.y_names)
+    moving = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                   scheduling=SignScheduling(switch="all")).fit(records[0].u, ys[0])
+    return SimpleNamespace(data=data, ev=ev, structured=moving)
+
+
+def _reading_order(fig) -> list:
+    """The figure's axes down each column, then the next (as the outputs are laid out)."""
+    return sorted(fig.axes, key=lambda ax: (round(ax.get_position().x0, 3),
+                                            -ax.get_position().y0))
+
+
+def _pixels(fig) -> tuple[int, int]:
+    """Width and height of the figure's PNG as the pipeline renders it (:func:`to_png`)."""
+    png = to_png(fig)
+    return struct.unpack(">II", png[16:24])
+
+
+def test_every_figure_is_titled_with_its_data_set_set_and_method(fit, structured):
+    """The first line of every figure's title names the data set, the hyper-parameter set
+    and the method; the second says what is drawn."""
+    assert CONTEXT == "hure_vasak | set my_set | PWA"
+    test = fit.test
+    outputs = structured_switching_inputs(structured, test.u, test.y, fit.data.y_names,
+                                          fit.data.u_names)
+    figs = {
+        "prediction": prediction_figure(fit.data, fit.ev, CONTEXT, WARMUP),
+        "switching": switching_figure(fit.model, test.u, test.y, test.modes, test.thetas,
+                                      context=CONTEXT),
+        "switching without truth": switching_figure(fit.model, test.u, test.y,
+                                                    context=CONTEXT),
+        "structured switching": draw_structured_switching(outputs, fit.data.y_names, CONTEXT),
+        "regions": regions_figure(fit.model, fit.reg.phi, fit.names, context=CONTEXT),
+        "parameter clusters": parameter_clusters_figure(
+            fit.model.local_models_, fit.model.clustering_, fit.reg.target, context=CONTEXT),
+    }
+    for name, fig in figs.items():
+        lines = fig.get_suptitle().splitlines()
+        assert len(lines) == 2 and lines[0] == CONTEXT, name
+        assert "hure_vasak" not in lines[1] and "my_set" not in lines[1], name
+        assert to_markdown(fig).startswith(f"![{CONTEXT} {lines[1]}]("), name
+    # the parameter-clusters figure is laid out by hand: its two-line title still fits
+    assert _clusters_layout_faults(figs["parameter clusters"]) == []
+
+
+def test_the_prediction_axes_carry_units_and_fit_a_laptop_screen(robot_like):
+    """Six outputs (the robot's) in a 3 × 2 grid, each y axis ``q<i> [deg]``, at most
+    900 × 650 px as rendered (the figure was 900 × 1134 px stacked)."""
+    fig = prediction_figure(robot_like.data, robot_like.ev, CONTEXT, WARMUP)
+    width, height = _pixels(fig)
+    assert width <= 900 and height <= 650, (width, height)
+    assert 90 * fig.get_figheight() >= 550  # six panels still readable, not squashed
+    boxes = [ax.get_position() for ax in fig.axes]
+    assert len({round(b.x0, 3) for b in boxes}) == 2 and len({round(b.y0, 3) for b in boxes}) == 3
+    # down the first column, then the second; the lowest of each shows the sample axis
+    axes = _reading_order(fig)
+    assert [ax.get_ylabel() for ax in axes] == [f"q{i} [deg]" for i in range(1, 7)]
+    assert [ax.get_title(loc="left").split(":")[0] for ax in axes] == [
+        f"q{i}" for i in range(1, 7)]
+    assert [ax.get_xlabel() for ax in axes] == ["", "", "sample k", "", "", "sample k"]
+
+
+@pytest.mark.parametrize("m", [1, 4, 5, 7])
+def test_the_prediction_grid_keeps_every_output_and_the_sample_axis(fit, m):
+    """Any number of outputs: one axes each, three rows at most, every column's lowest axes
+    labelled, the figure within the laptop bound."""
+    y_test = np.tile(fit.data.y_test[0], (1, 4))[:, :m]
+    names = [f"y{i + 1}" for i in range(m)]
+    data = Dataset("d", fit.data.u_train, [np.tile(fit.data.y_train[0], (1, 4))[:, :m]],
+                   fit.data.u_test, [y_test], fit.data.u_names, names)
+    table = fit.ev.table
+    rows = [{**table.iloc[0].to_dict(), "mode": mode, "output": name}
+            for mode in ("one_step", "free_run") for name in names + ["mean"]]
+    import pandas as pd
+
+    ev = Evaluation(pd.DataFrame(rows), {"one_step": [y_test + 0.1], "free_run": [y_test - 0.1]})
+    fig = prediction_figure(data, ev, CONTEXT, WARMUP)
+    assert [ax.get_ylabel() for ax in _reading_order(fig)] == names
+    columns = -(-m // 3)  # 3 rows at most, filled evenly: 4 outputs in 2 × 2
+    assert len({round(ax.get_position().x0, 3) for ax in fig.axes}) == columns
+    assert len({round(ax.get_position().y0, 3) for ax in fig.axes}) == -(-m // columns)
+    labelled = [ax for ax in fig.axes if ax.get_xlabel() == "sample k"]
+    assert len(labelled) == columns
+    width, height = _pixels(fig)
+    assert width <= 900 and height <= 650
+
+
+def test_the_measured_line_is_drawn_on_top_and_stays_visible(fit, robot_like):
+    """Of every line of every output's axes (one-step, free run, clipped free run and its
+    exit markers) the measured one has the highest z-order; it is opaque and black, and the
+    one-step line under it is wider and translucent, so both show where they coincide."""
+    for fig in (prediction_figure(robot_like.data, robot_like.ev, CONTEXT, WARMUP),
+                prediction_figure(fit.data, _diverged(fit), CONTEXT, WARMUP)):
+        for ax in fig.axes:
+            measured = _line(ax, "measured")
+            others = [ln for ln in ax.get_lines() if ln is not measured]
+            assert len(others) >= 2
+            assert measured.get_zorder() > max(ln.get_zorder() for ln in others)
+            assert measured.get_visible() and measured.get_alpha() in (None, 1.0)
+            assert measured.get_color() == "black"
+            one = _line(ax, "one-step")
+            assert one.get_linewidth() > 2 * measured.get_linewidth()
+            assert one.get_alpha() < 1
+
+
+def test_axes_of_regions_and_regressors_carry_units(fit):
+    units = {"y1": "V", "y2": "V", "u1": "A"}
+    ax = regions_figure(fit.model, fit.reg.phi, fit.names, units=units).axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("y1(k-1) [V]", "y2(k-1) [V]")
+    data = Dataset("d", [], [], [], [], ["u1", "u2"], ["y1", "y2"], units=units)
+    assert [data.label(n) for n in ("y1", "u1(k-2)", "u2", "1")] == [
+        "y1 [V]", "u1(k-2) [A]", "u2", "1"]
+
+
+def test_the_robots_channels_carry_their_units(robot):
+    from pwa_pipeline.datasets.registry import load_dataset
+
+    data = load_dataset("kuka_robot")
+    assert [data.label(n) for n in data.y_names] == [f"q{i} [deg]" for i in range(1, 7)]
+    assert [data.label(n) for n in data.u_names] == [f"tau{i} [N·m]" for i in range(1, 7)]
+
+
+def test_units_are_not_part_of_the_digest(fit):
+    """Caches keyed by the digest stay valid: a unit names the numbers, it changes none."""
+    import dataclasses
+    import pickle
+
+    with_units = dataclasses.replace(fit.data, units={"y1": "V"})
+    assert with_units.digest == fit.data.digest
+    assert dataclasses.replace(fit.data, y_names=["a", "b"]).digest != fit.data.digest
+    # a data set stored (pickled by the IO manager) before units existed loads with none
+    old = dataclasses.replace(fit.data)
+    del old.__dict__["units"]
+    restored = pickle.loads(pickle.dumps(old))
+    assert restored.units == {} and restored.label("y1") == "y1"
+    assert restored.digest == fit.data.digest
+    again = pickle.loads(pickle.dumps(with_units))
+    assert again.units == {"y1": "V"} and again.label("y1(k-1)") == "y1(k-1) [V]"
+
+
+def test_the_structured_switching_figure_shows_each_outputs_regions(fit, structured):
+    test = fit.test
+    outputs = structured_switching_inputs(structured, test.u, test.y, ["q1", "q2"],
+                                          ["tau1", "tau2"])
+    fig = draw_structured_switching(outputs, ["q1", "q2"], CONTEXT)
+    assert len(fig.axes) == 2
+    lags = structured.output_lags_
+    phi = lagged_matrix(test.u, test.y, lags, 1, True)
+    for j, ax in enumerate(fig.axes):
+        region = structured.structure_.outputs[j].regions(phi)
+        assert region.min() == 0 and region.max() == 1  # both signs occur
+        drawn = ax.collections[0].get_offsets()
+        assert np.array_equal(drawn[:, 0], np.arange(lags, MAX_SAMPLES))
+        assert np.array_equal(drawn[:, 1], region[:MAX_SAMPLES - lags])
+        assert [t.get_text() for t in ax.get_yticklabels()] == ["z ≤ 0", "z > 0"]
+        assert ax.get_title(loc="left") == (f"q{j + 1}: offset switching, regions by the sign "
+                                            f"of z = q{j + 1}(k-1) − q{j + 1}(k-2)")
+    assert fig.get_suptitle().splitlines()[1] == (
+        f"Region of each output's model, held-out experiment 1, the first "
+        f"{MAX_SAMPLES - lags} of {phi.shape[0]} samples shown")
+
+
+def test_every_figure_fits_a_laptop_screen(fit, robot_like):
+    """At 90 dpi no figure is wider than 900 px or higher than 650 px: six outputs of a
+    structured model, the regions figure with its longest legend, the clusters figure."""
+    data = robot_like.data
+    outputs = structured_switching_inputs(robot_like.structured, data.u_test[0],
+                                          data.y_test[0], data.y_names, data.u_names)
+    assert len(outputs.regions) == 6
+    rng = np.random.default_rng(0)
+    coef = rng.normal(size=(27, 4))
+    regions = SimpleNamespace(coef_=coef, n_regions_=27,
+                              predict=lambda x: np.argmax(x @ coef.T, axis=1))
+    many = SimpleNamespace(regions_=regions, labels_=np.r_[-1, rng.integers(0, 27, 1999)])
+    local, step, labels = _twenty_seven_clusters()
+    figs = [draw_structured_switching(outputs, data.y_names, CONTEXT),
+            regions_figure(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"], CONTEXT),
+            parameter_clusters_figure(local, step, np.ones((labels.size, 2)), CONTEXT),
+            switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
+                             fit.test.thetas, CONTEXT)]
+    for fig in figs:
+        width, height = _pixels(fig)
+        assert width <= 900 and height <= 650, (fig.get_suptitle(), width, height)

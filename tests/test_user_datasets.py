@@ -150,9 +150,9 @@ def test_a_registered_data_set_is_a_partition_that_runs(tmp_path, csv, mlflow_te
                  "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}")}
     result = dg.materialize(list(defs.assets), partition_key="plant|default",
                             resources=resources)
-    model = result.output_for_node("pwa_model")
+    model = result.asset_value("pwa_model")
     assert result.success and model.n_submodels_ >= 2 and (model.na, model.nb) == (1, 1)
-    scores = result.output_for_node("comparison")
+    scores = result.asset_value("comparison")
     assert set(scores["method"]) == {"pwa", "linear_arx", "subspace"}
     # the file disappears: its partitions are skipped, saying why
     csv.unlink()
@@ -202,3 +202,82 @@ def test_a_broken_hyper_parameter_file_registers_nothing(tmp_path, csv, capsys, 
     assert DatasetRegistry(tmp_path / "datasets.json").names() == []
     monkeypatch.setenv("PWA_HPARAMS", str(BUNDLED_HPARAMS))
     assert main(args) == 0  # the retry registers it: nothing was left half-done
+
+
+def test_units_given_at_registration_reach_the_figures_and_the_listing(tmp_path, csv, capsys,
+                                                                        monkeypatch):
+    """``--units NAME=UNIT …`` is stored with the registration, listed, and labels the axes
+    of the data set's figures (``y1 [deg]``); a column without one stays bare."""
+    from pwa_pipeline import LinearARX
+    from pwa_pipeline.orchestration.cli import main
+    from pwa_pipeline.orchestration.figures import prediction_figure
+    from pwa_pipeline.scoring.evaluation import evaluate
+
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    assert main(["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2",
+                 "--experiment", "run", "--units", "y1=deg", "u2=N·m"]) == 0
+    assert "units    : u2=N·m y1=deg" in capsys.readouterr().out
+    assert main(["list-datasets"]) == 0
+    assert "    units = u2=N·m y1=deg" in capsys.readouterr().out.splitlines()
+    registry = DatasetRegistry(tmp_path / "datasets.json")
+    assert registry.get("plant").units == {"y1": "deg", "u2": "N·m"}
+    data = registry.get("plant").load()
+    assert data.units == {"y1": "deg", "u2": "N·m"}
+    model = LinearARX(na=1, nb=1).fit(data.u_train, data.y_train)
+    ev = evaluate(model, data.u_test, data.y_test, warmup=10, output_names=data.y_names)
+    fig = prediction_figure(data, ev, "plant | set default | linear ARX", 10)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["y1 [deg]", "y2"]
+    assert [data.label(n) for n in data.u_names] == ["u1", "u2 [N·m]"]
+    # the units change no fit or score: the digest is that of the data without them
+    bare = UserDataset("plant", csv, **COLUMNS, experiment="run").load()
+    assert bare.digest == data.digest and bare.units == {}
+
+
+@pytest.mark.parametrize("units, message", [
+    (["speed=m/s"], "a unit is given for 'speed', which is not an input (--u) or output (--y) "
+                    "column; those are ['u1', 'u2', 'y1', 'y2']"),
+    (["run=s"], "a unit is given for 'run', which is not an input (--u) or output (--y) "
+                "column"),
+    (["y1"], "--units 'y1' is not NAME=UNIT (e.g. y1=deg)"),
+    (["y1="], "--units 'y1=' is not NAME=UNIT (e.g. y1=deg)"),
+    (["=deg"], "--units '=deg' is not NAME=UNIT (e.g. y1=deg)"),
+    (["y1=deg", "y1=rad"], "--units gives 'y1' twice (y1=deg, y1=rad)"),
+])
+def test_bad_units_are_refused_with_one_line_naming_them(tmp_path, csv, capsys, monkeypatch,
+                                                         units, message):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    assert main(["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2",
+                 "--experiment", "run", "--units", *units]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pwa-pipeline add-dataset: error: {message}")
+    assert err.count("\n") == 1  # one line
+    assert DatasetRegistry(tmp_path / "datasets.json").names() == []
+
+
+def test_a_registry_written_before_units_loads_without_them(tmp_path, csv, capsys,
+                                                           monkeypatch):
+    """An entry without ``units`` (registries written before they existed) loads with none,
+    is listed as such, and can be replaced by one with units."""
+    import json
+
+    from pwa_pipeline.orchestration.cli import main
+
+    path = tmp_path / "datasets.json"
+    entry = {"name": "plant", "path": str(csv), "u": ["u1", "u2"], "y": ["y1", "y2"],
+             "experiment": "run", "time": "t", "test_experiments": ["d"],
+             "test_fraction": None, "na": 1, "nb": 1, "affine": False}
+    path.write_text(json.dumps({"version": 1, "datasets": {"plant": entry}}))
+    registry = DatasetRegistry(path)
+    spec = registry.get("plant")
+    assert spec.units == {} and spec.test_experiments == ("d",)
+    assert spec.load().units == {}
+    monkeypatch.setenv("PWA_DATASETS", str(path))
+    assert main(["list-datasets"]) == 0
+    assert "    units = none" in capsys.readouterr().out.splitlines()
+    assert main(["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2",
+                 "--experiment", "run", "--time", "t", "--test-experiments", "d",
+                 "--units", "y2=V", "--replace"]) == 0
+    assert registry.get("plant").units == {"y2": "V"}
+    assert json.loads(path.read_text())["datasets"]["plant"]["units"] == {"y2": "V"}

@@ -18,6 +18,10 @@ KUKA_DOWNLOAD = (
 KUKA_FILES = ("forward_identification_reconstructed.mat", "forward_identification_without_raw_data.mat")
 KUKA_VARIABLES = ("u_train", "y_train", "u_test", "y_test")
 KUKA_CHANNELS = 6
+#: Units of the benchmark's channels (its documentation): joint positions in degrees, motor
+#: torques in newton metres.
+KUKA_UNITS = {**{f"q{i}": "deg" for i in range(1, KUKA_CHANNELS + 1)},
+              **{f"tau{i}": "N·m" for i in range(1, KUKA_CHANNELS + 1)}}
 
 
 @dataclass(frozen=True)
@@ -27,10 +31,14 @@ class RobotData:
     Attributes
     ----------
     u_train, y_train : lists of ndarrays of shape (≤606, 6)
-        Motor torques (Nm) and joint positions (degrees) of the training record.
+        Motor torques (N·m) and joint positions (degrees) of the training record.
     u_test, y_test : lists of ndarrays of shape (606, 6)
         The held-out test record.
     path : Path
+    u_names, y_names : list of str
+        ``tau1`` … ``tau6`` and ``q1`` … ``q6``.
+    units : dict of str to str
+        :data:`KUKA_UNITS`: the unit of each channel, for figure axes.
     """
 
     u_train: list[Float2D]
@@ -40,6 +48,7 @@ class RobotData:
     path: Path
     u_names: list[str] = field(default_factory=lambda: [f"tau{i}" for i in range(1, 7)])
     y_names: list[str] = field(default_factory=lambda: [f"q{i}" for i in range(1, 7)])
+    units: dict[str, str] = field(default_factory=lambda: dict(KUKA_UNITS))
 
 
 def default_kuka_path() -> Path:

@@ -26,6 +26,38 @@ DEFAULT_TEST_FRACTION = 0.25
 REGISTRY_VERSION = 1
 
 
+def parse_units(pairs: list[str] | None) -> dict[str, str]:
+    """``--units`` as given on the command line, ``NAME=UNIT`` each, as a dict.
+
+    Parameters
+    ----------
+    pairs : list of str or None
+        E.g. ``["q1=deg", "tau1=N·m"]``; the unit is everything after the first ``=`` (it
+        may hold spaces when quoted).
+
+    Raises
+    ------
+    ValueError
+        A pair without ``=``, with an empty name or unit, or a name given twice; the
+        message names the pair.
+
+    Examples
+    --------
+    >>> parse_units(["q1=deg", "tau1=N·m"])
+    {'q1': 'deg', 'tau1': 'N·m'}
+    """
+    units: dict[str, str] = {}
+    for pair in pairs or ():
+        name, eq, unit = pair.partition("=")
+        name, unit = name.strip(), unit.strip()
+        if not eq or not name or not unit:
+            raise ValueError(f"--units {pair!r} is not NAME=UNIT (e.g. y1=deg)")
+        if name in units:
+            raise ValueError(f"--units gives {name!r} twice ({name}={units[name]}, {pair})")
+        units[name] = unit
+    return units
+
+
 @dataclass(frozen=True)
 class UserDataset:
     """One registered data set.
@@ -52,12 +84,18 @@ class UserDataset:
         Output and input orders of eq. (3) for every hyper-parameter set that gives none.
     affine : bool
         Constant term of eq. (2).
+    units : dict of str to str
+        The unit of input and output columns that have one (``{"y1": "deg"}``), shown on
+        the figures' axes (``y1 [deg]``); a column not in it has none. Left out of the data
+        set's digest, so changing a unit refits and rescores nothing. A registry written
+        before units existed loads with none.
 
     Raises
     ------
     ValueError
         A bad name, empty or repeated columns, orders below 1, a fraction outside (0, 1),
-        or both split rules at once.
+        both split rules at once, or a unit for a column that is not an input or output, or
+        an empty one.
     """
 
     name: str
@@ -71,11 +109,13 @@ class UserDataset:
     na: int = 1
     nb: int = 1
     affine: bool = False
+    units: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self):
         object.__setattr__(self, "path", str(Path(self.path).resolve()))
         for key in ("u", "y", "test_experiments"):
             object.__setattr__(self, key, tuple(str(v) for v in getattr(self, key)))
+        object.__setattr__(self, "units", {str(k): str(v) for k, v in dict(self.units).items()})
         check_name(self.name, "data set")
         if self.name in DATASETS:
             raise ValueError(f"{self.name!r} is a built-in data set; choose another name")
@@ -87,6 +127,13 @@ class UserDataset:
         if repeated:
             raise ValueError(f"column(s) {repeated} are given more than once among the "
                              f"inputs, outputs, experiment and time columns")
+        for column, unit in self.units.items():
+            if column not in (*self.u, *self.y):
+                raise ValueError(f"a unit is given for {column!r}, which is not an input (--u) or "
+                                 f"output (--y) column; those are {[*self.u, *self.y]}")
+            if not unit.strip():
+                raise ValueError(f"the unit of {column!r} is empty; leave the column out of "
+                                 f"the units to give it none")
         for key in ("na", "nb"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -134,7 +181,7 @@ class UserDataset:
         return Dataset(name=self.name, u_train=[u for _, u, _ in train],
                        y_train=[y for _, _, y in train], u_test=[u for _, u, _ in test],
                        y_test=[y for _, _, y in test], u_names=list(self.u),
-                       y_names=list(self.y))
+                       y_names=list(self.y), units=dict(self.units))
 
     def _split(self, table: Table) -> tuple[list[tuple], list[tuple]]:
         """The training and held-out pieces, each ``(label, u, y)`` (see the class doc)."""
@@ -168,6 +215,12 @@ class UserDataset:
     def describe(self) -> dict:
         """The registration as plain values (the registry file's entry)."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    def describe_units(self) -> str:
+        """The units as ``--units`` takes them, inputs then outputs in column order
+        (``u1=N·m y1=deg``), or ``none``."""
+        return " ".join(f"{c}={self.units[c]}" for c in (*self.u, *self.y)
+                        if c in self.units) or "none"
 
 
 class DatasetRegistry:
@@ -208,7 +261,8 @@ class DatasetRegistry:
         return sorted(self._read())
 
     def get(self, name: str) -> UserDataset:
-        """The registration of ``name`` (KeyError naming the known ones)."""
+        """The registration of ``name`` (KeyError naming the known ones); an entry written
+        before units existed has none."""
         entries = self._read()
         if name not in entries:
             raise KeyError(f"no data set {name!r} in {self.path}; registered: {sorted(entries)}")

@@ -7,7 +7,7 @@ linear_arx_model and subspace_model beside it; each model scored by ``<method>_s
 Every asset is partitioned by data set × hyper-parameter set, and every partition's
 configuration is resolved once, by the ``configuration`` asset; only ``leaderboard`` is
 not: it ranks the stored scores of every partition. Methods come from
-:data:`pwa_pipeline.methods.METHODS`.
+``pwa_pipeline.methods.METHODS``.
 """
 
 import dagster as dg

@@ -16,7 +16,7 @@ from ..tracking import MLflowTracker
 
 #: Refresh when any partition's scores were updated since the last tick, unless a refresh or a
 #: run upstream is in progress: after every sweep run, from the command line or the UI, once
-#: the automation sensor :data:`.jobs.LEADERBOARD_SENSOR` is turned on.
+#: the automation sensor ``jobs.LEADERBOARD_SENSOR`` is turned on.
 REFRESH = (dg.AutomationCondition.any_deps_updated() & ~dg.AutomationCondition.in_progress()
            & ~dg.AutomationCondition.any_deps_in_progress())
 

@@ -10,9 +10,11 @@ from ...datasets.registry import GroundTruth
 from ...pwa import PWARX
 from ...pwa.regressors import regressor_names
 from ...scoring.truth import ground_truth_scores
+from ..figures import context_title
 from ..mlflow_models import (
     predictor_fingerprint,
 )
+from ..partitions import split_key
 
 
 def phi_names(pwa: PWARX, data: Dataset) -> list[str]:
@@ -45,9 +47,17 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
     return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
 
 
+def figure_context(partition_key: str, method: str) -> str:
+    """The first line of a figure's title for the partition ``dataset|hparams`` and the
+    method labelled ``method`` (``pwa_pipeline.orchestration.figures.context_title``):
+    drawn by each set itself, never taken from a cache that sets share."""
+    dataset, hparams = split_key(partition_key)
+    return context_title(dataset, hparams, method)
+
+
 def prediction_key(model, data: Dataset) -> tuple[str, str]:
     """What the scores and figure caches key on in place of ``model`` and ``data``: the
-    model's :func:`predictor_fingerprint` and the data's :attr:`~Dataset.digest` (the same
+    model's ``predictor_fingerprint`` and the data's ``Dataset.digest`` (the same
     model on edited held-out data is scored again)."""
     return predictor_fingerprint(model, data.u_names, data.y_names), data.digest
 

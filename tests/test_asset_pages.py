@@ -1,0 +1,120 @@
+"""What the Dagster asset pages promise and show: descriptions in plain Markdown, and every
+figure a description promises on the page, for a structured set too."""
+
+import base64
+import logging
+import re
+import struct
+from types import SimpleNamespace
+
+import dagster as dg
+import numpy as np
+import pytest
+
+from pwa_pipeline.config import HParamsFile
+from pwa_pipeline.datasets import make_hure_vasak
+from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.definitions import defs
+from pwa_pipeline.orchestration.assets.identification import (
+    REGIONS,
+    STRUCTURED_REGIONS,
+    SWITCHING,
+    structured_model,
+)
+from pwa_pipeline.orchestration.definitions import build_definitions
+from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.settings import PipelineSettings
+from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+#: A Sphinx role such as :mod:`x` or :func:`~x.y`, which Dagster shows raw.
+ROLE = re.compile(r":[a-z]+:`")
+
+
+def _descriptions(definitions) -> dict[str, str]:
+    graph = definitions.resolve_asset_graph()
+    return {key.to_user_string(): graph.get(key).description or ""
+            for key in graph.get_all_asset_keys()}
+
+
+def test_asset_descriptions_are_plain_markdown():
+    descriptions = _descriptions(defs)
+    assert len(descriptions) >= 15 and all(descriptions.values())
+    assert {name: text for name, text in descriptions.items() if ROLE.search(text)} == {}
+
+
+def _png_size(markdown: str) -> tuple[int, int]:
+    png = base64.b64decode(markdown.split("base64,", 1)[1].rstrip(")"), validate=True)
+    assert png.startswith(b"\x89PNG")
+    return struct.unpack(">II", png[16:24])
+
+
+@pytest.fixture(scope="module")
+def structured_page(tmp_path_factory):
+    """``pwa_model`` of a set with a structure of its own (velocity form, one model per
+    output, a sign-dependent offset; as the robot's ``robot`` set) on hure_vasak, materialised with
+    what it depends on: its description and its page's metadata."""
+    folder = tmp_path_factory.mktemp("structured")
+    path = folder / "structured.toml"
+    path.write_text('[moving.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
+                    'outputs = "decoupled"\nscheduling.switch = "offset"\n')
+    custom = build_definitions(path)
+    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(folder / "storage")),
+                 "settings": PipelineSettings(cache_dir=str(folder / "cache"),
+                                              hparams_path=str(path)),
+                 # (the scores, which track in MLflow, are not selected)
+                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{folder / 'mlflow.db'}")}
+    result = dg.materialize(list(custom.assets), partition_key="hure_vasak|moving",
+                            resources=resources,
+                            selection=dg.AssetSelection.assets("pwa_model").upstream())
+    assert result.success
+    (event,) = [e for e in result.get_asset_materialization_events()
+                if e.asset_key == dg.AssetKey("pwa_model")]
+    return _descriptions(custom)["pwa_model"], event.materialization.metadata, \
+        result.asset_value("pwa_model")
+
+
+def test_a_structured_sets_model_page_shows_what_its_description_promises(structured_page):
+    """The description promises a switching and a regions entry and says a structured set's
+    regions entry explains why it has no figure; the page holds exactly that: the switching
+    figure of each output's regions, titled with data set, set and method, within a laptop
+    screen, and the reason in place of the regions figure. No reST role shows."""
+    description, metadata, model = structured_page
+    assert model.structured and model.structure_.structures == ["offset", "offset"]
+    assert "*switching*" in description and "*regions*" in description
+    assert "structured set's entry says why it has no such figure" in description
+    assert not ROLE.search(description)
+    switching = metadata[SWITCHING].value
+    assert switching.startswith("![hure_vasak | set moving | PWA Region of each output's model, "
+                                "held-out experiment 1")
+    width, height = _png_size(switching)
+    assert width <= 900 and height <= 650
+    assert metadata[REGIONS].value == STRUCTURED_REGIONS
+    assert STRUCTURED_REGIONS.startswith("No regions figure for a model with a structure")
+
+
+def _header(table: str) -> list[str]:
+    line = next(line for line in table.splitlines() if line.startswith("| output"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
+    """A structure chosen per output on held-out training experiments: the table has one
+    short column per candidate (its held-out free-run MSE), in order of richness, said in
+    a line above it; the outputs carry their units."""
+    record = make_hure_vasak(n_samples=2400, snr_db=30, seed=0)
+    test = make_hure_vasak(n_samples=600, snr_db=30, seed=1000)
+    data = Dataset("hure_vasak", np.split(record.u, 4), np.split(record.y, 4), [test.u],
+                   [test.y], record.u_names, record.y_names, units={"y1": "V"})
+    path = tmp_path / "h.toml"
+    path.write_text('[select.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
+                    'outputs = "decoupled"\nscheduling.switch = "select"\n')
+    configuration = HParamsFile(path).configuration("select", "hure_vasak")
+    context = SimpleNamespace(log=logging.getLogger(__name__))
+    output = structured_model(context, configuration, data, "hure_vasak | set select | PWA")
+    table = output.metadata["structure per output"].value
+    assert table.startswith("Held-out free-run MSE of each candidate structure")
+    assert _header(table) == ["output", "structure", "regions", "linear", "offset", "all"]
+    rows = [line for line in table.splitlines() if line.startswith("| y")]
+    assert [r.split("|")[1].strip() for r in rows] == ["y1 [V]", "y2"]
+    assert output.metadata[SWITCHING].value.startswith("![hure_vasak | set select | PWA ")
+    assert output.metadata[REGIONS].value == STRUCTURED_REGIONS
