@@ -6,14 +6,16 @@ each in its own process group on a free loopback port, on stores under one tempo
 directory (``PWA_PIPELINE_HOME``, ``DAGSTER_HOME``, a sqlite MLflow store), and ends both
 groups, whatever happened. :func:`chromium` launches Debian's ``/usr/bin/chromium`` through
 pip's ``playwright`` (never a browser downloaded by ``playwright install``). The page helpers
-below do what a user does: launch a partition from *Jobs → sweep*, open a figure on an asset
-page, select runs in MLflow and compare them.
+below do what a user does: launch a partition from *Jobs → sweep* (or run one from the command
+line, :meth:`UIStack.cli`), open the asset graph or a figure on an asset page, close MLflow's
+first-visit pop-ups, read a run's page and charts, select runs in MLflow and compare them.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -24,6 +26,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import quote
 
 from pwa_pipeline.orchestration.instance import DAGSTER_YAML
 from pwa_pipeline.orchestration.paths import MLFLOW_TRAINING_VIEW
@@ -39,6 +42,8 @@ INSTALL = ("install them with: python -m pip install -e '.[test]' (playwright) a
            "apt-get install -y chromium (Debian's browser at /usr/bin/chromium; "
            "`playwright install` is not needed)")
 VIEWPORT = {"width": 1280, "height": 800}
+#: A laptop's screen: what a figure must fit without scrolling.
+LAPTOP = {"width": 1366, "height": 768}
 #: The Dagster code location of ``workspace.yaml``.
 LOCATION = "pwa_pipeline"
 
@@ -240,6 +245,27 @@ class UIStack:
             stepStats { stepKey status startTime endTime } } } }"""
         return self.graphql(query, id=run_id)["runOrError"]
 
+    def runs(self) -> list[dict]:
+        """Every Dagster run, newest first: id, job, status, times and tags."""
+        query = """{ runsOrError { ... on Runs { results {
+            runId jobName status creationTime startTime endTime tags { key value } } } } }"""
+        return self.graphql(query)["runsOrError"]["results"]
+
+    def asset(self, name: str, materializations: int = 5) -> dict:
+        """An asset as Dagster sees it: ``staleStatus`` and its latest materialisations
+        (``runId``, ``timestamp`` in ms), newest first."""
+        query = """query($key: [String!]!, $n: Int) {
+            assetNodeOrError(assetKey: {path: $key}) { ... on AssetNode {
+                staleStatus assetMaterializations(limit: $n) { runId timestamp } } } }"""
+        return self.graphql(query, key=[name], n=materializations)["assetNodeOrError"]
+
+    def cli(self, *args: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
+        """``python -m pwa_pipeline <args>`` on these stores, as the README's user types it
+        (its output captured, stdout and stderr together)."""
+        return subprocess.run([sys.executable, "-m", "pwa_pipeline", *args], cwd=ROOT,
+                              env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              stdin=subprocess.DEVNULL, text=True, timeout=timeout)
+
 
 @contextmanager
 def ui_stack(root: Path) -> Iterator[UIStack]:
@@ -372,9 +398,14 @@ def mlflow_experiment_id(stack: UIStack, dataset: str) -> str:
         f"pwa-pipeline/{dataset}").experiment_id
 
 
-def mlflow_runs_url(stack: UIStack, experiment_id: str) -> str:
-    """The runs view of an experiment, as the README links it."""
-    return f"{stack.mlflow_url}/#/experiments/{experiment_id}/runs{MLFLOW_TRAINING_VIEW}"
+def mlflow_runs_url(stack: UIStack, experiment_id: str, search: str = "",
+                    charts: bool = False) -> str:
+    """The runs view of an experiment, as the README links it; ``search`` fills its search
+    box (``tags.hparams = 'paper'``), ``charts`` opens its chart view."""
+    url = f"{stack.mlflow_url}/#/experiments/{experiment_id}/runs{MLFLOW_TRAINING_VIEW}"
+    if search:
+        url += f"&searchFilter={quote(search)}"
+    return url + ("&compareRunsMode=CHART" if charts else "")
 
 
 def compare_all_runs(page) -> None:
@@ -382,3 +413,141 @@ def compare_all_runs(page) -> None:
     page.get_by_role("checkbox").first.check()
     page.get_by_role("button", name="Compare").click()
     page.wait_for_url("**/compare-runs?**")
+
+
+def mlflow_popups(page) -> list[str]:
+    """What MLflow 3.17 puts over a page on a first visit and is shown now: its assistant's
+    panel (opened by itself on the first page), a dialog (the model registry's
+    announcement) and the GenAI tour's tip (*Got it*)."""
+    shown = []
+    if _visible(_ASSISTANT(page)):
+        shown.append("assistant panel")
+    for dialog in page.get_by_role("dialog").all():
+        if dialog.is_visible():
+            shown.append(f"dialog: {dialog.inner_text().strip().splitlines()[0]}")
+    if _visible(page.get_by_role("button", name="Got it")):
+        shown.append("tip")
+    return shown
+
+
+def dismiss_mlflow_popups(page, settle_ms: int = 1000) -> list[str]:
+    """Close :func:`mlflow_popups` the way a user does (they appear within a second of the
+    page's content: wait ``settle_ms`` first); returns what was closed. The browser keeps
+    the assistant closed for the rest of the session."""
+    page.wait_for_timeout(settle_ms)
+    closed = mlflow_popups(page)
+    for dialog in page.get_by_role("dialog").all():
+        if dialog.is_visible():
+            dialog.get_by_role("button", name="Close").first.click()
+    if _visible(_ASSISTANT(page)):
+        # the panel's own close button: the one outside any dialog
+        next(b for b in page.get_by_role("button", name="Close").all() if b.is_visible()).click()
+    if _visible(page.get_by_role("button", name="Got it")):
+        page.get_by_role("button", name="Got it").first.click()
+    if closed:
+        page.wait_for_timeout(300)  # the panel slides away
+    return closed
+
+
+def _ASSISTANT(page):  # noqa: N802
+    """The assistant panel's question box (closed, the panel leaves a button labelled
+    *MLflow Assistant* at the corner)."""
+    return page.get_by_placeholder("Ask a question")
+
+
+def _visible(locator) -> bool:
+    return any(item.is_visible() for item in locator.all())
+
+
+def mlflow_run_page(page) -> dict:
+    """What an MLflow run's page (its *Overview*) shows: ``description``, ``metrics``
+    (``{name: value as shown}``) and ``duration`` (as shown, e.g. ``6.9s``)."""
+    page.get_by_text("Duration", exact=True).first.wait_for()
+    lines = [line.strip() for line in page.inner_text("body").splitlines() if line.strip()]
+    top = lines.index("Description")
+    metrics_at = next(i for i, line in enumerate(lines) if re.fullmatch(r"Metrics \(\d+\)", line))
+    end = next(i for i in range(metrics_at, len(lines)) if lines[i].startswith("Parameters ("))
+    rows = lines[metrics_at + 1:end]
+    if rows[:2] == ["Metric", "Value"]:
+        rows = rows[2:]
+    return {"description": " ".join(lines[top + 1:metrics_at]),
+            "metrics": dict(zip(rows[::2], rows[1::2], strict=True)),
+            "duration": lines[lines.index("Duration") + 1]}
+
+
+def duration_seconds(shown: str) -> float:
+    """MLflow's duration as shown (``244ms``, ``6.9s``, ``1.7min``, ``2.1h``) in seconds."""
+    value, unit = re.fullmatch(r"([\d.]+)\s*(ms|s|min|h|d)", shown.strip()).groups()
+    return float(value) * {"ms": 1e-3, "s": 1, "min": 60, "h": 3600, "d": 86400}[unit]
+
+
+def significant_digits(shown: str) -> int:
+    """How many significant digits a number as shown carries (``0.01539`` → 4, ``4.075`` →
+    4, ``2`` → 1, ``1e+30`` → 1, ``0.421638102396945`` → 15)."""
+    mantissa = re.split(r"[eE]", shown.strip().lstrip("+-−"))[0]
+    digits = mantissa.replace(".", "").lstrip("0")
+    return len(digits.rstrip("0")) if "." not in mantissa else len(digits) or 1
+
+
+def collapse_chart_sections(page, *names: str) -> None:
+    """In a runs view's chart view: fold the sections ``names`` (one per metric prefix,
+    e.g. ``per_output``), as a user clicks their headers."""
+    for name in names:
+        page.get_by_text(name, exact=True).first.click()
+    page.wait_for_timeout(500)
+
+
+#: The texts of the chart card titled ``title``: its title, then its bars' labels and its
+#: axes' tick labels (a card's plot is drawn once it is scrolled into view).
+_CHART_TEXTS = """title => {
+    const heads = [...document.querySelectorAll("h1, h2, h3, h4, h5, span, div")].filter(
+        e => e.childElementCount === 0 && e.textContent === title);
+    for (const head of heads) {
+        let card = head;
+        while (card && !card.querySelector("svg.main-svg")) card = card.parentElement;
+        if (card) return [...card.querySelectorAll("svg text")].map(t => t.textContent);
+    }
+    return null;
+}"""
+
+
+def chart_numbers(page, title: str) -> list[str]:
+    """The numbers drawn in the chart titled ``title`` of a chart view (bar labels and axis
+    ticks, as shown), waiting for its plot to be drawn."""
+    page.get_by_text(title, exact=True).first.scroll_into_view_if_needed()
+    page.wait_for_function(f"() => ({_CHART_TEXTS})({json.dumps(title)})?.length > 0")
+    texts = page.evaluate(_CHART_TEXTS, title)
+    return [t.replace("−", "-") for t in texts if re.fullmatch(r"[-−+]?[\d.]+(e[-+]?\d+)?", t)]
+
+
+# --------------------------------------------------------------------------- the asset graph
+
+def open_asset_graph(page, stack: UIStack, assets: int, vertical: bool = True) -> dict:
+    """*Lineage*: the global asset graph with every group expanded (top to bottom when
+    ``vertical``), zoomed out until all ``assets`` are in view (the graph draws only the
+    nodes in view); the bounding box of each asset's node by its label (a long name is
+    shortened in the middle: ``output…_refinement``)."""
+    page.goto(f"{stack.dagster_url}/asset-groups")
+    page.get_by_text("identification").first.wait_for()
+    items = (["Change graph to vertical orientation"] if vertical else []) + ["Expand all groups"]
+    for item in items:
+        page.locator("[aria-label=settings]").last.click()  # the graph's settings
+        page.get_by_role("menuitem", name=item).click()
+        page.keyboard.press("Escape")
+    page.goto(f"{stack.dagster_url}/asset-groups")  # laid out anew with those choices
+    nodes = page.locator("foreignObject[style]")  # one per asset; groups carry a class
+    nodes.first.wait_for()
+    page.wait_for_timeout(500)  # laid out and zoomed to its centre
+    # the graph's viewport, below the toolbar
+    area = nodes.first.evaluate("n => n.ownerSVGElement.parentElement.getBoundingClientRect()"
+                                ".toJSON()")
+    for _ in range(8):  # each click zooms out by a fixed step
+        boxes = {node.text_content(): node.bounding_box() for node in nodes.all()}
+        if len(boxes) >= assets and all(
+                b and b["y"] >= area["top"] and b["x"] >= area["left"] and
+                b["x"] + b["width"] <= area["right"] and b["y"] + b["height"] <= area["bottom"]
+                for b in boxes.values()):
+            break
+        page.locator("[aria-label=zoom_out]").last.click()
+        page.wait_for_timeout(400)
+    return boxes

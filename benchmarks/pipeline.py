@@ -84,9 +84,11 @@ def _materialise(defs: dg.Definitions, keys: list[str], tmp: Path, cache: bool,
             result = dg.materialize(list(defs.assets), partition_key=key, resources=resources,
                                     selection=SWEEP_SELECTION, instance=instance,
                                     run_config=QUIET, raise_on_error=False)
-        local = result.asset_materializations_for_node("local_models")[0].metadata
-        subs = result.asset_materializations_for_node("sub_models")
-        scored = result.asset_materializations_for_node("pwa_scores")
+        done = {e.asset_key.to_user_string(): e.materialization
+                for e in result.get_asset_materialization_events()}
+        local = done["local_models"].metadata
+        subs = [done["sub_models"]] if "sub_models" in done else []
+        scored = [done["pwa_scores"]] if "pwa_scores" in done else []
         rows.append({"partition": key, "seconds": t.seconds, "success": result.success,
                      "local_models_seconds": local["seconds"].value,
                      "from_cache": local["from_cache"].value,

@@ -13,12 +13,12 @@ from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 
 from ._planted import Planted
+from ._results import holding, materialization
 
 IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
 
 
-def _assets(names):
-    return [a for a in defs.assets if a.key.to_user_string() in names]
+ALL = holding(defs.assets, ["configuration", "raw_benchmark", "pwa_model"])
 
 
 @pytest.fixture()
@@ -37,25 +37,26 @@ def test_bad_cache_entries_are_recomputed_with_a_warning(tmp_path, settings, ass
                  "settings": settings}
     instance = dg.DagsterInstance.ephemeral()
     names = IDENTIFICATION + (["clusters", "sub_models"] if asset == "sub_models" else [])
-    first = dg.materialize(_assets(names), partition_key=partition, resources=resources,
-                           instance=instance)
+    first = dg.materialize(ALL, selection=names, partition_key=partition,
+                           resources=resources, instance=instance)
     [entry] = (tmp_path / "cache" / asset).glob("*.pkl")
-    reference = getattr(first.output_for_node(asset), fitted)
+    reference = getattr(first.asset_value(asset), fitted)
     marker = tmp_path / "marker"
     for damage in (lambda: entry.write_bytes(pickle.dumps(Planted(marker))),
                    lambda: entry.write_bytes(entry.read_bytes()[:100])):
         damage()
-        result = dg.materialize(_assets(names), partition_key=partition, resources=resources,
-                                instance=instance)
-        meta = result.asset_materializations_for_node(asset)[0].metadata
+        result = dg.materialize(ALL, selection=names, partition_key=partition,
+                                resources=resources, instance=instance)
+        meta = materialization(result, asset).metadata
         assert result.success and not meta["from_cache"].value
         logged = [e.user_message for e in instance.all_logs(result.run_id)]
         assert any(f"cache entry {entry} unusable" in m for m in logged)
         assert not marker.exists()
-        np.testing.assert_array_equal(getattr(result.output_for_node(asset), fitted), reference)
-    again = dg.materialize(_assets(names), partition_key=partition, resources=resources)
-    assert again.asset_materializations_for_node(asset)[0].metadata["from_cache"].value
-    np.testing.assert_array_equal(getattr(again.output_for_node(asset), fitted), reference)
+        np.testing.assert_array_equal(getattr(result.asset_value(asset), fitted), reference)
+    again = dg.materialize(ALL, selection=names, partition_key=partition,
+                           resources=resources)
+    assert materialization(again, asset).metadata["from_cache"].value
+    np.testing.assert_array_equal(getattr(again.asset_value(asset), fitted), reference)
 
 
 def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_path,

@@ -10,6 +10,8 @@ from pwa_pipeline.orchestration.files import inside
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 
+from ._results import holding
+
 
 def test_paths_cannot_leave_the_store(tmp_path):
     assert inside(tmp_path, "a", "b.pkl") == (tmp_path / "a" / "b.pkl").resolve()
@@ -48,17 +50,18 @@ def test_a_full_disk_fails_the_step_naming_the_file_and_keeps_what_was_stored(tm
 
     store = PartitionedFileIOManager(base_dir=str(tmp_path))
     names = ("configuration", "raw_benchmark", "regressors")
-    assets = [a for a in defs.assets if a.key.to_user_string() in names]
     resources = {"io_manager": store,
                  "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"))}
-    first = dg.materialize(assets, partition_key="hure_vasak|paper", resources=resources)
+    first = dg.materialize(holding(defs.assets, names), selection=names,
+                           partition_key="hure_vasak|paper", resources=resources)
     before = (tmp_path / "regressors" / "hure_vasak" / "paper.pkl").read_bytes()
 
     def full(*_):
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(module, "save_object", full)
-    again = dg.materialize(assets, partition_key="hure_vasak|paper", resources=resources,
+    again = dg.materialize(holding(defs.assets, names), selection=names,
+                           partition_key="hure_vasak|paper", resources=resources,
                            raise_on_error=False)
     assert first.success and not again.success
     errors = " ".join(str(e.event_specific_data.error) for e in again.all_events

@@ -9,6 +9,7 @@ from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.output_error.simulator import FreeRuns
 
 from ._output_error_cases import _output_noise_system
+from ._results import materialization
 
 
 def test_refinement_removes_the_least_squares_bias_under_output_noise():
@@ -56,16 +57,16 @@ def test_the_pipeline_refines_pwa_and_linear_arx_when_the_set_asks(tmp_path, mlf
                  "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}")}
     result = dg.materialize([a for a in defs.assets if a.partitions_def is not None],
                             partition_key="hure_vasak|oe", resources=resources)
-    step = result.output_for_node("output_error_refinement")
-    model = result.output_for_node("pwa_model")
+    step = result.asset_value("output_error_refinement")
+    model = result.asset_value("pwa_model")
     # the start (step 6's θ_i, refitted with the regions) may already be the best iterate on
     # the held-out experiments: the refinement then keeps it
     assert step.n_iter_ == 3 and step.cost_ <= step.cost_start_
     np.testing.assert_array_equal(model.thetas_, step.thetas_)
-    assert np.abs(model.thetas_ - result.output_for_node("sub_models").thetas_).max() > 0
-    linear = result.output_for_node("linear_arx_model")
+    assert np.abs(model.thetas_ - result.asset_value("sub_models").thetas_).max() > 0
+    linear = result.asset_value("linear_arx_model")
     assert linear.refinement_.n_iter_ >= 1
-    meta = result.asset_materializations_for_node("output_error_refinement")[0].metadata
+    meta = materialization(result, "output_error_refinement").metadata
     assert meta["refined"].value is True and meta["iterations"].value == 3
 
 

@@ -15,6 +15,7 @@ from pwa_pipeline import PWARX, LinearARX, SubspaceSS
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
+from pwa_pipeline.orchestration import figures
 from pwa_pipeline.orchestration.assets import model_facts
 from pwa_pipeline.orchestration.assets import scores as score_assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
@@ -28,6 +29,8 @@ from pwa_pipeline.orchestration.partitions import (
 )
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+from ._results import materialization
 
 # every partitioned asset (what a sweep run materialises); the leaderboard has its own tests
 ASSETS = [a for a in defs.assets if a.partitions_def is not None]
@@ -114,16 +117,16 @@ def test_set_names_and_the_resource_read_the_same_file(tmp_path):
 def test_materialise_hure_vasak_paper(paper_run):
     result, resources, tmp_path = paper_run
     assert result.success
-    model = result.output_for_node("pwa_model")
+    model = result.asset_value("pwa_model")
     assert isinstance(model, PWARX) and model.thetas_.shape == (2, 4, 2)  # 2 of the 4 modes
-    assert isinstance(result.output_for_node("linear_arx_model"), LinearARX)
-    assert isinstance(result.output_for_node("subspace_model"), SubspaceSS)
+    assert isinstance(result.asset_value("linear_arx_model"), LinearARX)
+    assert isinstance(result.asset_value("subspace_model"), SubspaceSS)
     # the model asset is the one the core would fit: same sub-models as PWARX.fit
-    cfg = result.output_for_node("configuration")
-    data = result.output_for_node("raw_benchmark")
+    cfg = result.asset_value("configuration")
+    data = result.asset_value("raw_benchmark")
     direct = cfg.pwa.fit(data.u_train, data.y_train)
     np.testing.assert_array_equal(model.thetas_, direct.thetas_)
-    table = result.output_for_node("comparison")
+    table = result.asset_value("comparison")
     assert list(dict.fromkeys(table["method"])) == list(METHODS)
     assert len(table) == 3 * 2 * 3  # methods × modes × (2 outputs + mean)
     checks = {e.check_name: e.passed for e in result.get_asset_check_evaluations()}
@@ -143,12 +146,23 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert pwa.data.params["submodels"] == "ClusterCentres"
     assert pwa.data.tags["partition"] == "hure_vasak|paper"
     assert pwa.data.tags["dagster_run_id"] == result.run_id
-    assert pwa.data.metrics["n_submodels"] == 2
+    assert pwa.data.metrics["model/n_submodels"] == 2
     free = table[(table.method == "pwa") & (table["mode"] == "free_run") & (table.output == "mean")]
-    assert pwa.data.metrics["free_run_nrmse_mean"] == pytest.approx(free["nrmse"].iloc[0])
+    # headline metrics to 4 significant digits, per-output ones under their prefix
+    assert pwa.data.metrics["free_run_nrmse"] == float(f"{free['nrmse'].iloc[0]:.4g}")
+    assert {k for k in pwa.data.metrics if "/" not in k} == {
+        "one_step_nrmse", "one_step_r2", "free_run_nrmse", "free_run_r2", "free_run_diverged",
+        "fit_seconds"}
+    assert {k.split("/")[0] for k in pwa.data.metrics if "/" in k} == {"per_output", "model"}
+    assert "params.hparams" not in pwa.data.params and "dataset" not in pwa.data.params
+    # the run spans the fit it scores, and says what it is
+    fit = materialization(result, "pwa_model").metadata["fit_seconds"].value
+    assert (pwa.info.end_time - pwa.info.start_time) / 1000 >= fit
+    assert pwa.data.tags["mlflow.note.content"].startswith(
+        "The pwa model of data set hure_vasak, hyper-parameter set paper. Held-out one-step")
     assert {a.path for a in client.list_artifacts(pwa.info.run_id)} == {
         "parameter_matrices.json", "scores.csv", "prediction.png"}
-    meta = result.asset_materializations_for_node("pwa_scores")[0].metadata
+    meta = materialization(result, "pwa_scores").metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
     # the prediction figure is rendered once: the PNG in MLflow is the one on the asset page
     png = Path(mlflow.artifacts.download_artifacts(run_id=pwa.info.run_id,
@@ -164,7 +178,7 @@ def test_materialise_hure_vasak_paper(paper_run):
     experiment = client.get_experiment(pwa.info.experiment_id)
     assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     # numbers on the asset pages carry 4 significant digits; checks name their partition
-    eps = result.asset_materializations_for_node("clusters")[0].metadata["eps"].value
+    eps = materialization(result, "clusters").metadata["eps"].value
     assert eps == float(f"{eps:.4g}")
     evaluations = result.get_asset_check_evaluations()
     assert {e.metadata["partition"].value for e in evaluations} == {"hure_vasak|paper"}
@@ -172,7 +186,7 @@ def test_materialise_hure_vasak_paper(paper_run):
     for asset, key in (("pwa_scores", "prediction"), ("clusters", "local models by cluster"),
                        ("pwa_model", "regions"),
                        ("pwa_model", "switching (first held-out experiment)")):
-        text = result.asset_materializations_for_node(asset)[0].metadata[key].value
+        text = materialization(result, asset).metadata[key].value
         assert text.startswith("![") and "(data:image/png;base64," in text
     sub = next(r for r in runs if r.data.tags["method"] == "subspace")
     assert sub.data.params["order"] == "2" and sub.data.params["warmup"] == "10"
@@ -181,14 +195,14 @@ def test_materialise_hure_vasak_paper(paper_run):
 def test_resolved_parameters_reach_mlflow_and_the_asset_page(resources):
     result = dg.materialize(ASSETS, partition_key="hure_vasak|default", resources=resources,
                             selection=dg.AssetSelection.assets("pwa_scores").upstream())
-    model = result.output_for_node("pwa_model")
+    model = result.asset_value("pwa_model")
     resolved = model.resolved_params()
     assert resolved["local_models__n_rho"] == 12 and resolved["clustering__min_pts"] == 8
     _, runs = _runs(resources, "hure_vasak")
     params = next(r for r in runs if r.data.tags["method"] == "pwa").data.params
     assert params["local_models__n_rho"] == "12" and params["clustering__min_pts"] == "8"
     assert float(params["clustering__eps"]) == pytest.approx(model.clustering_.eps_)
-    page = result.asset_materializations_for_node("pwa_model")[0].metadata
+    page = materialization(result, "pwa_model").metadata
     table = page["resolved parameters"].value
     cells = dict(tuple(c.strip() for c in row.strip("|").split("|"))
                  for row in table.splitlines()[2:])
@@ -202,18 +216,18 @@ def test_local_models_are_reused_when_only_eps_changes(resources, tmp_path):
                             f"local_models.n_rho = 12\nclustering.eps = {eps}\n"
                             f"clustering.min_pts = 8\n" for i, eps in enumerate((0.1, 0.3))))
     sweep = build_definitions(path)
-    steps = [a for a in sweep.assets if a.key.to_user_string() in
-             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters")]
+    steps = ["configuration", "raw_benchmark", "regressors", "local_models", "clusters"]
     resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
-    runs = [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+    runs = [dg.materialize(list(sweep.assets), selection=steps,
+                           partition_key=f"hure_vasak|eps_{i}", resources=resources)
             for i in (0, 1)]
-    meta = [r.asset_materializations_for_node("local_models")[0].metadata for r in runs]
+    meta = [materialization(r, "local_models").metadata for r in runs]
     assert not meta[0]["from_cache"].value and meta[1]["from_cache"].value
     assert meta[0]["cache_key"].value == meta[1]["cache_key"].value
-    clusters = [r.output_for_node("clusters") for r in runs]
+    clusters = [r.asset_value("clusters") for r in runs]
     assert [c.eps_ for c in clusters] == [0.1, 0.3]  # the later step did see each set
     assert not np.array_equal(clusters[0].labels_, clusters[1].labels_)
-    local = [r.output_for_node("local_models") for r in runs]
+    local = [r.asset_value("local_models") for r in runs]
     np.testing.assert_array_equal(local[0].theta_, local[1].theta_)
 
 
@@ -225,11 +239,11 @@ def _two_eps_sets(resources, tmp_path, *assets: str) -> list:
     path.write_text("".join(f"[eps_{i}.hure_vasak]\npreset = \"default\"\nna = 1\nnb = 1\n"
                             f"clustering.eps = {eps}\n" for i, eps in enumerate((0.22, 0.25))))
     sweep = build_definitions(path)
-    steps = [a for a in sweep.assets if a.key.to_user_string() in
-             ("configuration", "raw_benchmark", "regressors", "local_models", "clusters",
-              *assets)]
+    steps = ["configuration", "raw_benchmark", "regressors", "local_models", "clusters",
+             *assets]
     resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
-    return [dg.materialize(steps, partition_key=f"hure_vasak|eps_{i}", resources=resources)
+    return [dg.materialize(list(sweep.assets), selection=steps,
+                           partition_key=f"hure_vasak|eps_{i}", resources=resources)
             for i in (0, 1)]
 
 
@@ -238,11 +252,11 @@ def test_sub_model_steps_are_reused_when_the_clusters_consolidate_alike(resource
     rows) consolidate to the same sub-models: the second takes step 5's steps 2–4 from the
     signed cache, with the first's results; the stored steps hold no cache."""
     runs = _two_eps_sets(resources, tmp_path, "sub_models")
-    meta = [r.asset_materializations_for_node("sub_models")[0].metadata for r in runs]
+    meta = [materialization(r, "sub_models").metadata for r in runs]
     assert [m["from_cache"].value for m in meta] == [False, True]
-    clusters = [r.output_for_node("clusters") for r in runs]
+    clusters = [r.asset_value("clusters") for r in runs]
     assert not np.array_equal(clusters[0].labels_, clusters[1].labels_)
-    subs = [r.output_for_node("sub_models") for r in runs]
+    subs = [r.asset_value("sub_models") for r in runs]
     for name in ("thetas_", "labels_", "weights_"):
         np.testing.assert_array_equal(getattr(subs[0], name), getattr(subs[1], name))
     assert subs[1].memory is None and subs[0].n_submodels_ == 4
@@ -266,9 +280,9 @@ def test_cached_scores_are_those_of_the_same_model_on_the_same_held_out_data(tmp
     model = LinearARX(na=1, nb=1).fit(data.u_train, data.y_train)
     memory = SignedMemory(tmp_path, "scores")
     score = memory.cache(score_assets.scored, ignore=["model", "data"])
-    first = score(model, data, 10, "t", model_facts.prediction_key(model, data))[0]
-    again = score(model, data, 10, "t", model_facts.prediction_key(model, data))[0]
-    other = score(model, edited, 10, "t", model_facts.prediction_key(model, edited))[0]
+    first = score(model, data, 10, model_facts.prediction_key(model, data))
+    again = score(model, data, 10, model_facts.prediction_key(model, data))
+    other = score(model, edited, 10, model_facts.prediction_key(model, edited))
     assert (memory.hits, memory.misses) == (1, 2)
     pd.testing.assert_frame_equal(first.table, again.table)
     assert not np.allclose(first.table["nrmse"], other.table["nrmse"])
@@ -277,16 +291,17 @@ def test_cached_scores_are_those_of_the_same_model_on_the_same_held_out_data(tmp
 def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow_model(
         resources, tmp_path):
     """Two default sets that differ only in ε and end in the same θ_i and regions (their
-    clusterings differ): the second takes the PWA model's scores and figures from the cache,
-    and its MLflow run is linked to the model the first logged (one registered version);
+    clusterings differ): the second takes the PWA model's scores and the numbers of its
+    figures from the cache (each set draws the figures, titled with its own name), and its
+    MLflow run is linked to the model the first logged (one registered version);
     the models' prediction states are equal, their fingerprints too."""
     runs = _two_eps_sets(resources, tmp_path, "sub_models", "svm_regions",
                          "output_error_refinement", "pwa_model", "pwa_scores")
 
     def metadata(run, node: str, key: str):
-        return run.asset_materializations_for_node(node)[0].metadata[key].value
+        return materialization(run, node).metadata[key].value
 
-    models = [r.output_for_node("pwa_model") for r in runs]
+    models = [r.asset_value("pwa_model") for r in runs]
     assert models[0].clustering_.eps_ != models[1].clustering_.eps_
     np.testing.assert_array_equal(models[0].thetas_, models[1].thetas_)
     assert joblib.hash(models[0].prediction_state()) == joblib.hash(models[1].prediction_state())
@@ -294,10 +309,12 @@ def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow
     assert [metadata(r, "pwa_model", "figures_from_cache") for r in runs] == [False, True]
     for node, key in (("pwa_scores", "prediction"), ("pwa_model", "regions"),
                       ("pwa_model", "switching (first held-out experiment)")):
-        assert metadata(runs[0], node, key) == metadata(runs[1], node, key)
-    assert "| hure_vasak](data:image/png" in metadata(runs[0], "pwa_scores", "prediction")
-    pd.testing.assert_frame_equal(runs[1].output_for_node("pwa_scores"),
-                                  runs[0].output_for_node("pwa_scores"))
+        texts = [metadata(r, node, key) for r in runs]
+        assert texts[0] != texts[1]  # the same numbers, each set's own title
+        for i, text in enumerate(texts):
+            assert text.startswith(f"![hure_vasak | set eps_{i} | PWA "), (node, key)
+    pd.testing.assert_frame_equal(runs[1].asset_value("pwa_scores"),
+                                  runs[0].asset_value("pwa_scores"))
     client, tracked = _runs(resources, "hure_vasak")
     run_ids = {r.data.tags["hparams"]: r.info.run_id for r in tracked}
     assert {r.data.tags["model_run_id"] for r in tracked} == {run_ids["eps_0"]}
@@ -321,14 +338,14 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     sweep = build_definitions(path)
     names = ("linear_arx_model", "subspace_model")
     scores = ("linear_arx_scores", "subspace_scores")
-    steps = [a for a in sweep.assets
-             if a.key.to_user_string() in ("configuration", "raw_benchmark", *names, *scores)]
+    steps = ["configuration", "raw_benchmark", *names, *scores]
     resources["settings"] = resources["settings"].with_files(path, tmp_path / "datasets.json")
-    runs = [dg.materialize(steps, partition_key=f"hure_vasak|set_{i}", resources=resources)
+    runs = [dg.materialize(list(sweep.assets), selection=steps,
+                           partition_key=f"hure_vasak|set_{i}", resources=resources)
             for i in range(3)]
 
     def metadata(run, node: str, key: str):
-        return run.asset_materializations_for_node(node)[0].metadata[key].value
+        return materialization(run, node).metadata[key].value
 
     cached = {n: [metadata(r, n, "from_cache") for r in runs] for n in names}
     assert cached == {"linear_arx_model": [False, True, False],
@@ -337,17 +354,19 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
     assert scored == {"linear_arx_scores": [False, True, False],
                       "subspace_scores": [False, True, True]}
     for n in names:  # the model the first set fitted, every fitted attribute equal
-        first, reused = (vars(r.output_for_node(n)) for r in runs[:2])
+        first, reused = (vars(r.asset_value(n)) for r in runs[:2])
         np.testing.assert_equal(reused, first)
-        assert runs[1].output_for_node(n) is not runs[0].output_for_node(n)
+        assert runs[1].asset_value(n) is not runs[0].asset_value(n)
     for n in scores:
-        pd.testing.assert_frame_equal(runs[1].output_for_node(n), runs[0].output_for_node(n))
-        # the figure is the model's, titled by data set (the same for every set sharing it)
-        assert (metadata(runs[1], n, "prediction") == metadata(runs[0], n, "prediction")
-                and "| hure_vasak](data:image/png" in metadata(runs[0], n, "prediction"))
-    assert runs[2].output_for_node("linear_arx_model").na == 2
-    assert not runs[2].output_for_node("linear_arx_scores").equals(
-        runs[0].output_for_node("linear_arx_scores"))
+        pd.testing.assert_frame_equal(runs[1].asset_value(n), runs[0].asset_value(n))
+        # the scores are the model's, the figure drawn by each set with its own name
+        label = METHODS[n.removesuffix("_scores")].label
+        for i in (0, 1):
+            assert metadata(runs[i], n, "prediction").startswith(
+                f"![hure_vasak | set set_{i} | {label} ")
+    assert runs[2].asset_value("linear_arx_model").na == 2
+    assert not runs[2].asset_value("linear_arx_scores").equals(
+        runs[0].asset_value("linear_arx_scores"))
     for folder in ("baselines", "scores"):
         assert len(list((tmp_path / "cache" / folder).glob("*.pkl"))) == 3
 
@@ -377,32 +396,35 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
             == first.inputs.dataset_inputs[0].dataset.digest)
     assert f"runs/{first.info.run_id}?" in reused.data.tags["mlflow.note.content"]
     reused = reused.data.tags
-    data = runs[1].output_for_node("raw_benchmark")
+    data = runs[1].asset_value("raw_benchmark")
     table = example_table(data.u_test[0], data.y_test[0], data.u_names, data.y_names, 5, 30)
     np.testing.assert_allclose(  # the model its URI names is set_1's subspace model
         mlflow.pyfunc.load_model(reused["model_uri"]).predict(table).to_numpy()[5:],
-        runs[1].output_for_node("subspace_model").simulate(data.u_test[0][:30],
+        runs[1].asset_value("subspace_model").simulate(data.u_test[0][:30],
                                                            data.y_test[0][:5])[5:])
 
-    # changed figure code draws the baselines' figures again, their fits still cached
-    monkeypatch.setattr(score_assets, "figures_fingerprint", lambda: "other figure code")
-    run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
+    # the scores' cache holds numbers only: changed figure code draws the figures again
+    # from the cached fits and scores
+    monkeypatch.setattr(figures, "figures_fingerprint", lambda: "other figure code")
+    run = dg.materialize(list(sweep.assets), selection=steps,
+                         partition_key="hure_vasak|set_1", resources=resources)
     assert all(metadata(run, n, "from_cache") for n in names)
-    assert not any(metadata(run, n, "scores_from_cache") for n in scores)
+    assert all(metadata(run, n, "scores_from_cache") for n in scores)
 
     # a model deleted in the MLflow UI is logged again by the next run that scores it
     client.delete_logged_model(first.data.tags["model_id"])
     resources["settings"] = PipelineSettings(
         cache_dir=str(tmp_path / "uncached"), cache_baselines=False, cache_scores=False,
         hparams_path=str(path), datasets_path=str(tmp_path / "datasets.json"))
-    run = dg.materialize(steps, partition_key="hure_vasak|set_1", resources=resources)
+    run = dg.materialize(list(sweep.assets), selection=steps,
+                         partition_key="hure_vasak|set_1", resources=resources)
     again = client.get_run(metadata(run, "subspace_scores", "mlflow_run_id")).data.tags
     assert again["model_run_id"] == metadata(run, "subspace_scores", "mlflow_run_id")
     assert again["model_id"] != first.data.tags["model_id"]
     assert not any(metadata(run, n, "from_cache") for n in names)
     assert not any(metadata(run, n, "scores_from_cache") for n in scores)
-    pd.testing.assert_frame_equal(run.output_for_node("subspace_scores"),
-                                  runs[1].output_for_node("subspace_scores"))
+    pd.testing.assert_frame_equal(run.asset_value("subspace_scores"),
+                                  runs[1].asset_value("subspace_scores"))
     assert not (tmp_path / "uncached").exists()
 
 
@@ -434,18 +456,18 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
     result = dg.materialize([a for a in custom.assets if a.partitions_def is not None],
                             partition_key="hure_vasak|moving", resources=resources)
     assert result.success
-    model = result.output_for_node("pwa_model")
+    model = result.asset_value("pwa_model")
     assert model.structured and set(model.structure_.structures) <= {"linear", "offset", "all"}
-    assert result.output_for_node("output_error_refinement") is None  # refined in pwa_model
+    assert result.asset_value("output_error_refinement") is None  # refined in pwa_model
     for asset in ("local_models", "clusters", "sub_models", "svm_regions"):  # not computed
-        assert result.output_for_node(asset) is None, asset
-        meta = result.asset_materializations_for_node(asset)[0].metadata
+        assert result.asset_value(asset) is None, asset
+        meta = materialization(result, asset).metadata
         assert meta["skipped"].value.startswith("not fitted: the set has a structure")
     checks = {e.check_name: e for e in result.get_asset_check_evaluations()}
     assert {"noise_share_below_limit", "finite_parameters", "at_least_one_sub_model"} <= set(checks)
     assert all(checks[c].passed and "not_applicable" in checks[c].metadata
                for c in ("noise_share_below_limit", "finite_parameters"))
-    linear = result.output_for_node("linear_arx_model")
+    linear = result.asset_value("linear_arx_model")
     assert (linear.form, linear.outputs) == ("velocity", "decoupled")
     client, runs = _runs(resources, "hure_vasak")
     pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
@@ -458,9 +480,12 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
 def test_materialise_kuka_robot(resources, robot):
     result = dg.materialize(ASSETS, partition_key="kuka_robot|default", resources=resources)
     assert result.success
-    data = result.output_for_node("raw_benchmark")
+    data = result.asset_value("raw_benchmark")
     assert data.n_train == 39988 and len(data.u_test) == 6
-    table = result.output_for_node("comparison")
+    shown = materialization(result, "raw_benchmark").metadata
+    assert shown["outputs"].value.startswith("q1 [deg], q2 [deg]")
+    assert shown["inputs"].value.startswith("tau1 [N·m]")
+    table = result.asset_value("comparison")
     one_step = table[(table["mode"] == "one_step") & (table.output == "mean")]
     assert (one_step["nrmse"] < 0.05).all()  # one-step prediction of 10 Hz positions is easy
     _, runs = _runs(resources, "kuka_robot")
@@ -521,7 +546,7 @@ def test_registered_models_load_in_another_process_and_simulate_the_same(paper_r
     client = MlflowClient(tracking_uri=uri)
     names = sorted(m.name for m in client.search_registered_models())
     assert names == [f"pwa-pipeline.hure_vasak.{m}" for m in sorted(METHODS)]
-    data = result.output_for_node("raw_benchmark")
+    data = result.asset_value("raw_benchmark")
     u, y = data.u_test[0][500:700], data.y_test[0][500:700]  # not the logged example
     table = example_table(u, y, data.u_names, data.y_names, 10, rows=200)
     table.to_parquet(tmp_path / "input.parquet")
@@ -535,10 +560,10 @@ def test_registered_models_load_in_another_process_and_simulate_the_same(paper_r
                           timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     loaded = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
-    direct = result.output_for_node("pwa_model").simulate(u, y[:10])
+    direct = result.asset_value("pwa_model").simulate(u, y[:10])
     np.testing.assert_allclose(loaded, direct, rtol=1e-12)
     # the run has a signature, an input example, and its training data as a dataset
-    run_id = result.asset_materializations_for_node("pwa_scores")[0].metadata[
+    run_id = materialization(result, "pwa_scores").metadata[
         "mlflow_run_id"].value
     run = client.get_run(run_id)
     assert [d.dataset.name for d in run.inputs.dataset_inputs] == ["training"]
@@ -553,20 +578,46 @@ def mlflow_model_info(uri, run_id):
     return mlflow.models.get_model_info(f"runs:/{run_id}/model")
 
 
-def test_diverged_scores_are_capped_and_flagged_for_mlflow():
-    from pwa_pipeline.orchestration.reporting import score_metrics
+class _Diverging:
+    """Predicts the measured outputs plus a small error; its free run follows them too
+    until sample ``at`` of experiment 1, where output 2 grows without bound."""
 
-    table = pd.DataFrame([
-        {"mode": "one_step", "output": "mean", "nrmse": 0.2, "r2": 0.96, "rmse": 0.1,
-         "diverged": False},
-        {"mode": "free_run", "output": "mean", "nrmse": 1.2e30, "r2": -1.4e60, "rmse": 3e29,
-         "diverged": True},
-        {"mode": "free_run", "output": "q1", "nrmse": np.nan, "r2": np.nan, "rmse": np.nan,
-         "diverged": True}])
-    m = score_metrics(table)
-    assert m["free_run_nrmse_mean"] == 10 and m["free_run_r2_mean"] == -99
-    assert m["free_run_nrmse_q1"] == 10 and "free_run_rmse_mean" not in m
-    assert m["one_step_rmse_mean"] == 0.1 and m["free_run_diverged"] == 1.0
+    def __init__(self, ys, at):
+        self.ys, self.at = ys, at
+
+    def predict(self, u, y, n_init=None):
+        return [yy + 0.01 for yy in y]
+
+    def simulate(self, u, y_init):
+        runs = [yy + 0.02 for yy in self.ys]
+        runs[1][self.at:, 1] = 1e3 * np.exp(np.arange(len(runs[1]) - self.at))
+        return runs
+
+
+def test_a_diverged_free_run_logs_where_it_diverged_and_no_score():
+    from pwa_pipeline.orchestration.reporting import score_metrics
+    from pwa_pipeline.scoring.evaluation import evaluate
+
+    rng = np.random.default_rng(0)
+    us = [rng.normal(size=(80, 1)) for _ in range(2)]
+    ys = [rng.normal(size=(80, 2)) for _ in range(2)]
+    ev = evaluate(_Diverging(ys, at=37), us, ys, warmup=10, output_names=["q1", "q2"])
+    assert ev.diverged() and (ev.onset.experiment, ev.onset.sample) == (1, 37)
+    # before it: all of experiment 0 and 27 scored samples of experiment 1, error 0.02
+    scale = np.vstack([y[10:] for y in ys]).std(axis=0)
+    assert ev.onset.nrmse_before == pytest.approx(np.mean(0.02 / scale))
+    m = score_metrics(ev)
+    assert m["free_run_diverged"] == 1 and m["free_run_divergence_sample"] == 37
+    assert m["free_run_divergence_experiment"] == 1
+    assert m["free_run_nrmse_before_divergence"] == float(f"{ev.onset.nrmse_before:.4g}")
+    # no free-run number of the mean or of the diverged output; the other output keeps its
+    assert not {"free_run_nrmse", "free_run_r2", "per_output/free_run_nrmse_q2"} & m.keys()
+    assert m["per_output/free_run_nrmse_q1"] == float(f"{0.02 / scale[0]:.4g}")
+    assert m["one_step_nrmse"] == float(f"{np.mean(0.01 / scale):.4g}")
+    # a run that does not diverge logs its scores and no onset
+    calm = score_metrics(evaluate(_Diverging(ys, at=80), us, ys, warmup=10))
+    assert calm["free_run_diverged"] == 0 and "free_run_nrmse" in calm
+    assert not any("divergence" in k for k in calm)
 
 
 def test_registered_model_versions_say_where_they_come_from(paper_run):
@@ -584,7 +635,7 @@ def test_registered_model_versions_say_where_they_come_from(paper_run):
             "dataset": "hure_vasak", "hparams": "paper", "method": method,
             "mlflow_run_id": run.info.run_id, "dagster_run_id": result.run_id,
             "partition": "hure_vasak|paper"}
-        free = run.data.metrics["free_run_nrmse_mean"]
+        free = run.data.metrics["free_run_nrmse"]
         assert version.description.startswith(
             f"The {method} model of data set hure_vasak, hyper-parameter set paper.")
         assert f"free-run NRMSE {free:.4g}" in version.description

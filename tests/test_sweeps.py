@@ -18,6 +18,8 @@ from pwa_pipeline.orchestration.partitions import all_keys
 from pwa_pipeline.orchestration.reporting import leaderboard_markdown
 from pwa_pipeline.scoring.comparison import leaderboard
 
+from ._results import materialization
+
 KEYS = ["hure_vasak|paper", "hure_vasak|default"]
 
 
@@ -29,8 +31,9 @@ def _jobs_of(asset: str) -> set[str]:
 
 def test_every_partitioned_asset_belongs_to_the_sweep_jobs_and_the_leaderboard_to_its_own():
     repo = defs.get_repository_def()
-    partitioned = [a.key.to_user_string() for a in defs.assets if a.partitions_def is not None]
-    assert len(partitioned) == len(list(defs.assets)) - 1
+    partitioned = [k.to_user_string() for a in defs.assets if a.partitions_def is not None
+                   for k in a.keys]
+    assert len(partitioned) == len(defs.resolve_asset_graph().get_all_asset_keys()) - 1
     for asset in partitioned:
         assert _jobs_of(asset) == {"__ASSET_JOB", "sweep", "sweep_dask"}, asset
     assert _jobs_of(LEADERBOARD) == {"__ASSET_JOB", "refresh_leaderboard"}
@@ -143,7 +146,7 @@ def test_a_two_partition_sweep_runs_on_the_dask_executor(dask_sweep):
             "existing": {"address": dask_sweep["address"]}}
     # every step was a task on the cluster (dagster-dask names them <job>.<step>)
     assert {f"sweep_dask.{m}_scores" for m in METHODS} | {
-        "sweep_dask.pwa_model", "sweep_dask.comparison"} <= dask_sweep["tasks"]
+        "sweep_dask.pwa_chain", "sweep_dask.comparison"} <= dask_sweep["tasks"]
     # both partitions' assets stored, scores included, in the run's own store
     for key in KEYS:
         model = runs[0].io_manager.load(dg.AssetKey("pwa_model"), key)
@@ -151,7 +154,7 @@ def test_a_two_partition_sweep_runs_on_the_dask_executor(dask_sweep):
         for method in METHODS:
             scores = dask_sweep["io_manager"].load(dg.AssetKey(f"{method}_scores"), key)
             assert set(scores["mode"]) == {"one_step", "free_run"}
-        comparison = runs[KEYS.index(key)].output_for_node("comparison")
+        comparison = runs[KEYS.index(key)].asset_value("comparison")
         assert list(dict.fromkeys(comparison["method"])) == list(METHODS)
     # and logged: one MLflow run per method and partition, tagged with its Dagster run
     client = MlflowClient(tracking_uri=dask_sweep["uri"])
@@ -167,7 +170,7 @@ def test_the_leaderboard_ranks_every_stored_partition_and_lists_the_missing(dask
 
     board = dask_sweep["board"]
     assert board.success
-    table = board.output_for_node(LEADERBOARD)
+    table = board.asset_value(LEADERBOARD)
     assert sorted(zip(table["hparams"], table["method"], strict=True)) == sorted(
         (k.split("|")[1], m) for k in KEYS for m in METHODS)
     # the leaderboard's numbers are the stored scores' output means
@@ -177,7 +180,7 @@ def test_the_leaderboard_ranks_every_stored_partition_and_lists_the_missing(dask
         free = scores[(scores["mode"] == "free_run") & (scores["output"] == "mean")]
         assert row.free_run_nrmse == free["nrmse"].iloc[0]
     assert (np.diff(table["free_run_nrmse"]) >= 0).all() and table["rank"].iloc[0] == 1
-    meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
+    meta = materialization(board, LEADERBOARD).metadata
     others = set(all_keys(partitions_of(defs))) - set(KEYS)
     assert meta["partitions_scored"].value == 2
     assert meta["partitions_missing"].value == len(others)
@@ -286,8 +289,8 @@ def test_a_leaderboard_with_nothing_scored_yet_lists_every_partition_as_missing(
                                               hparams_path=str(BUNDLED_HPARAMS)),
                  "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")}
     board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources)
-    assert board.success and board.output_for_node(LEADERBOARD).empty
-    meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
+    assert board.success and board.asset_value(LEADERBOARD).empty
+    meta = materialization(board, LEADERBOARD).metadata
     assert meta["partitions_scored"].value == 0
     assert meta["partitions_missing"].value == len(all_keys(partitions_of(defs)))
     assert "No partition has been materialised yet." in meta["leaderboard"].value
@@ -301,7 +304,7 @@ def test_the_leaderboard_is_requested_after_a_partitions_scores_change(tmp_path,
     from pwa_pipeline.orchestration.tracking import MLflowTracker
 
     [sensor] = [s for s in defs.sensors if s.name == LEADERBOARD_SENSOR]
-    assert sensor.default_status == dg.DefaultSensorStatus.STOPPED  # turned on in the UI
+    assert sensor.default_status == dg.DefaultSensorStatus.RUNNING  # never stale
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
     resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
                  "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
@@ -311,8 +314,9 @@ def test_the_leaderboard_is_requested_after_a_partitions_scores_change(tmp_path,
     with dg.instance_for_test() as instance:
         first = dg.evaluate_automation_conditions(defs=defs, instance=instance)
         assert first.get_num_requested(board) == 0
-        swept = [a for a in defs.assets if a.key != board]
-        assert dg.materialize(swept, partition_key="hure_vasak|paper", resources=resources,
+        swept = dg.AssetSelection.all() - dg.AssetSelection.assets(board)
+        assert dg.materialize(list(defs.assets), selection=swept,
+                              partition_key="hure_vasak|paper", resources=resources,
                               instance=instance).success
         after = dg.evaluate_automation_conditions(defs=defs, instance=instance,
                                                   cursor=first.cursor)

@@ -106,7 +106,8 @@ def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkey
     artifacts = {"f.json": {"x": 1.5}, "t.csv": pd.DataFrame({"a": [1, 2]}),
                  "n.md": "# n", "p.png": b"\x89PNG\x00"}
     run_id = tracker.log_run(dataset="d", hparams="s", method="pwa", params={"n_rho": 61},
-                             metrics={"nrmse": float("inf")}, tags={"partition": "d|s"},
+                             metrics={"nrmse": float("inf"), "r2": 0.5},
+                             tags={"partition": "d|s"},
                              artifacts=artifacts).run_id
     assert len(batches) == 1 and stored == ["log_artifacts"]
     folder = Path(mlflow.artifacts.download_artifacts(run_id=run_id,
@@ -117,7 +118,7 @@ def test_a_finished_run_is_filled_in_one_batch(tmp_path, mlflow_template, monkey
     assert (folder / "p.png").read_bytes() == b"\x89PNG\x00"
     run = MlflowClient(tracking_uri=f"sqlite:///{db}").get_run(run_id)
     assert run.info.status == "FINISHED"
-    assert run.data.metrics == {"nrmse": 1e300}
+    assert run.data.metrics == {"r2": 0.5}  # a value not finite is left out
     assert run.data.params == {"method": "pwa", "n_rho": "61"}
     assert {k: run.data.tags[k] for k in ("partition", "latest", "method")} == \
         {"partition": "d|s", "latest": "true", "method": "pwa"}

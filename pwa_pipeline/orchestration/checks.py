@@ -36,9 +36,10 @@ def sub_model_results(subs, partition: str) -> list[dg.AssetCheckResult]:
     """Finite parameters and at least one sub-model, for a fitted sub-model step."""
     n_bad = int((~np.isfinite(subs.thetas_)).sum())
     return [
-        dg.AssetCheckResult(check_name="finite_parameters", passed=n_bad == 0,
+        dg.AssetCheckResult(asset_key="sub_models", check_name="finite_parameters",
+                            passed=n_bad == 0,
                             metadata={"partition": partition, "non_finite_entries": n_bad}),
-        dg.AssetCheckResult(check_name="at_least_one_sub_model",
+        dg.AssetCheckResult(asset_key="sub_models", check_name="at_least_one_sub_model",
                             passed=subs.n_submodels_ >= 1,
                             metadata={"partition": partition,
                                       "n_submodels": int(subs.n_submodels_)}),
@@ -48,7 +49,8 @@ def sub_model_results(subs, partition: str) -> list[dg.AssetCheckResult]:
 def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
     """Noise share below :data:`NOISE_LIMIT`, for a fitted clustering step."""
     return [dg.AssetCheckResult(
-        check_name="noise_share_below_limit", passed=clustering.noise_share_ <= NOISE_LIMIT,
+        asset_key="clusters", check_name="noise_share_below_limit",
+        passed=clustering.noise_share_ <= NOISE_LIMIT,
         metadata=rounded({"partition": partition, "noise_share": clustering.noise_share_,
                           "limit": NOISE_LIMIT}))]
 
@@ -57,7 +59,7 @@ def not_applicable(specs: list[dg.AssetCheckSpec], partition: str,
                    reason: str) -> list[dg.AssetCheckResult]:
     """Results for checks whose rule does not apply to the partition (its asset holds no
     fitted step): passed, with the reason in their metadata."""
-    return [dg.AssetCheckResult(check_name=spec.name, passed=True,
+    return [dg.AssetCheckResult(asset_key=spec.asset_key, check_name=spec.name, passed=True,
                                 metadata={"partition": partition, "not_applicable": reason})
             for spec in specs]
 

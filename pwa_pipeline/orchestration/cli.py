@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
                 if stopped:
                     interrupted.append(key)
                 continue
-            table = result.output_for_node("comparison")
+            table = result.asset_value("comparison")
             print(f"\n{key}: mean over the outputs\n\n"
                   f"{mean_scores(table).to_markdown(floatfmt='.4g')}")
             summaries.append(_summary(key, result, table, seconds))
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
         print(f"\nLeaderboard (every partition stored so far; "
               f"{meta['partitions_missing'].value} not materialised)\n")
-        print(leaderboard_markdown(board.output_for_node(LEADERBOARD)), end="")
+        print(leaderboard_markdown(board.asset_value(LEADERBOARD)), end="")
     else:
         failed.append(LEADERBOARD)
         print(f"\nLeaderboard: FAILED (run {board.run_id} in the Dagster UI)")
@@ -160,7 +160,7 @@ def _summary(key: str, result, table, seconds: float) -> str:
     free = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
     scores = ", ".join(f"{m} {v:.4g}" for m, v in zip(free["method"], free["nrmse"],
                                                       strict=True))
-    model = result.output_for_node("pwa_model")
+    model = result.asset_value("pwa_model")
     return (f"{key}: {model.n_submodels_} PWA sub-model(s); free-run NRMSE {scores} "
             f"({seconds:.1f} s)")
 
@@ -169,14 +169,14 @@ def add_dataset(args: argparse.Namespace) -> int:
     """Check a CSV/Parquet file and register it as a data set (nothing is registered when
     the check fails)."""
     from ..config import HParamsFile
-    from ..datasets.user import DatasetRegistry, UserDataset
+    from ..datasets.user import DatasetRegistry, UserDataset, parse_units
 
     registry = DatasetRegistry(default_datasets_path())
     spec = UserDataset(
         name=args.name, path=args.file, u=tuple(args.u), y=tuple(args.y),
         experiment=args.experiment, time=args.time,
         test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
-        na=args.na, nb=args.nb, affine=args.affine)
+        na=args.na, nb=args.nb, affine=args.affine, units=parse_units(args.units))
     hparams = HParamsFile()  # read and checked first: a broken file registers nothing
     data = registry.add(spec, replace=args.replace)
     sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
@@ -185,6 +185,7 @@ def add_dataset(args: argparse.Namespace) -> int:
           f"  file     : {spec.path}\n"
           f"  inputs   : {', '.join(spec.u)}; outputs: {', '.join(spec.y)}; na = {spec.na}, "
           f"nb = {spec.nb}, affine = {spec.affine}\n"
+          f"  units    : {spec.describe_units()}\n"
           f"  training : {len(data.u_train)} experiment(s), {data.n_train:,} samples\n"
           f"  held out : {len(data.u_test)} experiment(s), {data.n_test:,} samples")
     if sets:
@@ -199,7 +200,7 @@ def add_dataset(args: argparse.Namespace) -> int:
 
 
 def list_datasets(args: argparse.Namespace) -> int:
-    """Print the registered data sets, one per line, with their columns, split and orders."""
+    """Print the registered data sets with their columns, split, orders and units."""
     from pathlib import Path
 
     from ..datasets.user import DatasetRegistry
@@ -214,7 +215,7 @@ def list_datasets(args: argparse.Namespace) -> int:
         state = "" if Path(spec.path).is_file() else "  [FILE MISSING]"
         print(f"  {name}: {spec.path}{state}\n    u = {list(spec.u)}, y = {list(spec.y)}, "
               f"experiment = {spec.experiment}, time = {spec.time}, {split}, na = {spec.na}, "
-              f"nb = {spec.nb}, affine = {spec.affine}")
+              f"nb = {spec.nb}, affine = {spec.affine}\n    units = {spec.describe_units()}")
     return 0
 
 
@@ -318,6 +319,10 @@ def main(argv: list[str] | None = None) -> int:
     p_add.add_argument("--na", type=int, default=1, help="output order (default 1)")
     p_add.add_argument("--nb", type=int, default=1, help="input order (default 1)")
     p_add.add_argument("--affine", action="store_true", help="add a constant term")
+    p_add.add_argument("--units", nargs="+", metavar="NAME=UNIT",
+                       help="units of input or output columns, shown on the figures' axes "
+                            "(e.g. --units y1=deg u1=N·m); a column left out has none. They "
+                            "change no fit or score")
     p_add.add_argument("--replace", action="store_true",
                        help="replace a data set registered under the same name")
     sub.add_parser("list-datasets", help="list the registered data sets")

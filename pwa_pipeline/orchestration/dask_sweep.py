@@ -66,7 +66,7 @@ class PartitionRun:
     io_manager: PartitionedFileIOManager
     interrupted: bool = False
 
-    def output_for_node(self, asset: str):
+    def asset_value(self, asset: str):
         """The stored value of ``asset`` for this partition."""
         return self.io_manager.load(dg.AssetKey(asset), self.key)
 

@@ -67,8 +67,9 @@ def dask_executor(init_context):
     return executor.executor_creation_fn(init_context)
 
 
-#: The automation sensor that refreshes the leaderboard after sweep runs; off until turned on
-#: in the UI (*Automation*), like the schedule. The command line refreshes it at its end.
+#: The automation sensor that refreshes the leaderboard after sweep runs, on by default so
+#: that it is never stale while the daemon runs (``dagster dev`` starts it); it launches
+#: nothing while no scores change. The command line refreshes it at its end.
 LEADERBOARD_SENSOR = "leaderboard_refresh"
 
 
@@ -77,7 +78,7 @@ def build_sensors() -> list:
     daemon)."""
     return [dg.AutomationConditionSensorDefinition(
         LEADERBOARD_SENSOR, target=dg.AssetSelection.assets(LEADERBOARD),
-        default_status=dg.DefaultSensorStatus.STOPPED, minimum_interval_seconds=30,
+        default_status=dg.DefaultSensorStatus.RUNNING, minimum_interval_seconds=30,
         description="Refreshes the leaderboard after any partition's scores change.")]
 
 

@@ -5,12 +5,12 @@ import numpy as np
 import pandas as pd
 
 from ..datasets import Dataset
-from ..scoring.evaluation import DIVERGENCE
+from ..scoring.evaluation import DIVERGENCE, Evaluation
 
 
 def rounded(metadata: dict) -> dict:
     """``metadata`` with every float rounded to 4 significant digits (what the UI shows)."""
-    return {k: float(f"{v:.4g}") if isinstance(v, float | np.floating) else v
+    return {k: _round4(v) if isinstance(v, float | np.floating) else v
             for k, v in metadata.items()}
 
 
@@ -40,23 +40,56 @@ def regions_table(regions, phi_names: list[str]) -> pd.DataFrame:
     return df
 
 
-def score_metrics(table: pd.DataFrame) -> dict[str, float]:
-    """``{<mode>_<metric>_<output>: value}`` from an evaluation table, for MLflow.
+#: The prefix of the per-output metrics in MLflow (its UI groups charts by the part before
+#: the slash, so the run's headline metrics stay few and on top).
+PER_OUTPUT = "per_output/"
+#: The prefix of what a run's model says of itself (sub-models, ε, ground-truth errors).
+MODEL = "model/"
 
-    A diverged run's NRMSE is capped at the divergence limit and its R² at 1 − limit² (a
-    1e30 free run would flatten every chart of the experiment), its RMSE is left out, and
-    ``free_run_diverged`` is 1; the ``scores.csv`` artifact keeps the exact values.
+
+def score_metrics(evaluation: Evaluation) -> dict[str, float]:
+    """The MLflow metrics of an evaluation, each to 4 significant digits (what the UI shows).
+
+    Headline: ``one_step_nrmse``, ``one_step_r2``, ``free_run_nrmse``, ``free_run_r2`` (the
+    means over the outputs, eq. 23–24) and ``free_run_diverged`` (0 or 1). Per output, under
+    :data:`PER_OUTPUT`: ``<mode>_<nrmse|r2|rmse>_<output>``. A diverged free run logs no
+    free-run score at all (a 1e30 NRMSE would set the scale of every chart of the
+    experiment), neither the mean nor those of its diverged outputs, but where it diverged
+    (:class:`~pwa_pipeline.scoring.evaluation.Onset`): ``free_run_divergence_experiment``
+    and ``free_run_divergence_sample`` (the held-out experiment, from 0, and its sample, the
+    warm-up counted) and ``free_run_nrmse_before_divergence``; the ``scores.csv`` artifact
+    keeps every exact value.
     """
-    out = {}
-    for row in table.itertuples(index=False):
-        stem = f"{row.mode}_{{}}_{row.output}"
+    out: dict[str, float] = {}
+    for row in evaluation.table.itertuples(index=False):
         if row.diverged:
-            out[stem.format("nrmse")] = float(np.fmin(row.nrmse, DIVERGENCE))
-            out[stem.format("r2")] = float(np.fmax(row.r2, 1 - DIVERGENCE**2))
+            continue
+        if row.output == "mean":
+            out.update({f"{row.mode}_{k}": getattr(row, k) for k in ("nrmse", "r2")})
         else:
-            out.update({stem.format(k): float(getattr(row, k)) for k in ("nrmse", "r2", "rmse")})
-    out["free_run_diverged"] = float(table.loc[table["mode"] == "free_run", "diverged"].any())
-    return out
+            out.update({f"{PER_OUTPUT}{row.mode}_{k}_{row.output}": getattr(row, k)
+                        for k in ("nrmse", "r2", "rmse")})
+    onset = evaluation.onset
+    out["free_run_diverged"] = float(onset is not None)
+    if onset is not None:
+        out["free_run_divergence_experiment"] = onset.experiment
+        out["free_run_divergence_sample"] = onset.sample
+        if np.isfinite(onset.nrmse_before):
+            out["free_run_nrmse_before_divergence"] = onset.nrmse_before
+    return {k: _round4(v) for k, v in out.items()}
+
+
+def model_metrics(facts: dict, prefix: str = MODEL) -> dict[str, float]:
+    """A model's numeric facts (sub-models, noise share, ground-truth errors) as MLflow
+    metrics under ``prefix``, to 4 significant digits; text and non-finite facts (a
+    comparison that does not apply, a time not recorded) are left out."""
+    return {f"{prefix}{k}": _round4(v) for k, v in facts.items()
+            if isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+            and np.isfinite(v)}
+
+
+def _round4(value: float) -> float:
+    return float(f"{float(value):.4g}")
 
 
 def nrmse_summary(table: pd.DataFrame) -> dict[str, float]:

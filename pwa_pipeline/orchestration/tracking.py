@@ -16,6 +16,7 @@ import pandas as pd
 
 from .credentials import mask_credentials, split_credentials, user_and_password
 from .paths import MLFLOW_TRAINING_VIEW, default_mlflow_ui_url, default_tracking_uri
+from .reporting import MODEL
 
 if TYPE_CHECKING:
     from .mlflow_models import ModelToLog
@@ -240,6 +241,8 @@ class MLflowTracker(dg.ConfigurableResource):
         artifacts: dict[str, object],
         model: "ModelToLog | None" = None,
         run_name: str | None = None,
+        started: float | None = None,
+        description: str = "",
     ) -> "LoggedRun":
         """Create, fill and close one run; returns its id and its experiment's.
 
@@ -256,24 +259,29 @@ class MLflowTracker(dg.ConfigurableResource):
         Either way the run is tagged ``model_uri`` (where the model is), ``model_id`` (its
         MLflow logged model), ``model_run_id`` (the run that logged it) and
         ``model_fingerprint``.
-        ``run_name`` defaults to ``<method>|<hparams>``.
+        ``run_name`` defaults to ``<method>|<hparams>``. ``started`` (seconds since the epoch,
+        default now) is the run's start, so that its duration spans the fit it scores;
+        ``description`` is the run's description (Markdown, ``mlflow.note.content``), to
+        which a reused model's note is added.
         """
         from mlflow.entities import Metric, Param, RunTag
 
         self.check_reachable()
         client = self.client()
         exp_id = self._experiment(client, dataset)
-        run = client.create_run(exp_id, run_name=run_name or f"{method}|{hparams}",
-                                tags={"dataset": dataset, "hparams": hparams,
-                                      "method": method, **tags})
+        run = client.create_run(
+            exp_id, run_name=run_name or f"{method}|{hparams}",
+            start_time=None if started is None else int(1000 * started),
+            tags={"dataset": dataset, "hparams": hparams, "method": method, **tags,
+                  **({"mlflow.note.content": description} if description else {})})
         run_id = run.info.run_id
         batch, batched = None, False
         try:
-            # A diverged free run scores ±inf, which tracking stores reject: log ±1e300 (the
-            # scores.csv artifact keeps the exact value).
+            # tracking stores reject ±inf, and NaN draws no chart: a value not finite (a
+            # fit time not recorded, say) is left out
             values = {k: float(v) for k, v in metrics.items() if v is not None}
-            batch = {"metrics": [Metric(k, float(np.clip(v, -1e300, 1e300)), 0, 0)
-                                 for k, v in values.items()],
+            values = {k: v for k, v in values.items() if np.isfinite(v)}
+            batch = {"metrics": [Metric(k, v, 0, 0) for k, v in values.items()],
                      "params": [Param(k, str(v))
                                 for k, v in {"method": method, **params}.items()]}
             if artifacts:  # one call to the store for all of them
@@ -289,6 +297,8 @@ class MLflowTracker(dg.ConfigurableResource):
                 self._logged_model(client, exp_id, method, fingerprint), version_tags,
                 model_description(dataset, hparams, method, values)),
                 "model_fingerprint": fingerprint}
+            if "mlflow.note.content" in last and description:
+                last["mlflow.note.content"] = f"{description}\n\n{last['mlflow.note.content']}"
             self._unmark_earlier(client, exp_id, run_id, hparams, method)
             # one batch: the metrics, parameters and the tags known last (``tags`` were set
             # when the run was created)
@@ -322,19 +332,23 @@ class LoggedRun(NamedTuple):
 
 def model_description(dataset: str, hparams: str, method: str, metrics: dict[str, float]
                       ) -> str:
-    """The description of a registered model version: what it was fitted on and its
-    headline scores (the mean over the outputs, on the held-out experiments)."""
+    """What a run scored, and its registered model version: the model, what it was fitted
+    on, its headline scores on the held-out experiments (``metrics``, named as
+    :func:`~.reporting.score_metrics` names them; the mean over the outputs), and for a PWA
+    model its sub-models."""
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
-    scores = {label: metrics.get(f"{mode}_nrmse_mean") for label, mode in (
-        ("one-step", "one_step"), ("free-run", "free_run"))}
-    shown = [f"{label} NRMSE {value:.4g}" for label, value in scores.items()
-             if value is not None]
+    shown = [f"{label} NRMSE {metrics[key]:.4g}" for label, key in (
+        ("one-step", "one_step_nrmse"), ("free-run", "free_run_nrmse")) if key in metrics]
+    if metrics.get("free_run_diverged"):
+        shown.append(f"the free run diverged at sample "
+                     f"{int(metrics['free_run_divergence_sample'])} of held-out experiment "
+                     f"{int(metrics['free_run_divergence_experiment'])}")
     if shown:
-        parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs)"
-                     + (", the free run diverged" if metrics.get("free_run_diverged") else "")
-                     + ".")
-    if "n_submodels" in metrics:
-        parts.append(f"{int(metrics['n_submodels'])} sub-model(s).")
+        parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs).")
+    if f"{MODEL}n_submodels" in metrics:
+        parts.append(f"{int(metrics[f'{MODEL}n_submodels'])} sub-model(s).")
+    if "fit_seconds" in metrics:
+        parts.append(f"Fitted in {metrics['fit_seconds']:.3g} s.")
     return " ".join(parts)
 
 

@@ -8,7 +8,9 @@ from the end of the warm-up to the end of the experiment, restarted at every exp
 NRMSE (eq. 21), R² (eq. 22, standard form) and RMSE (data units) are computed per output on
 the scored samples of all experiments together, and averaged over outputs (eq. 23–24).
 A free run whose NRMSE exceeds ``divergence`` (10) or is not finite is flagged diverged; its
-number is reported all the same.
+number is reported all the same, and :class:`Onset` says where it left the data: the first
+scored sample whose error exceeds ``divergence`` standard deviations of its output (one
+exists whenever an NRMSE exceeds ``divergence``), and the NRMSE of the samples before it.
 """
 
 from dataclasses import dataclass
@@ -36,6 +38,28 @@ class Model(Protocol):
 
 
 @dataclass(frozen=True)
+class Onset:
+    """Where a diverged free run left the data.
+
+    Attributes
+    ----------
+    experiment : int
+        The held-out experiment (from 0).
+    sample : int
+        The sample of that experiment (from 0, the warm-up counted) whose error first
+        exceeds ``divergence`` standard deviations of its output, or is not finite.
+    nrmse_before : float
+        Mean over the outputs of the NRMSE (eq. 21, normalised as the evaluation's table) of
+        the scored samples before that one, in all experiments up to it; NaN when it is the
+        first scored sample.
+    """
+
+    experiment: int
+    sample: int
+    nrmse_before: float
+
+
+@dataclass(frozen=True)
 class Evaluation:
     """Scores of one model on one data set.
 
@@ -46,10 +70,13 @@ class Evaluation:
         or ``"mean"``.
     predictions : dict
         ``{"one_step": [...], "free_run": [...]}``, one array per experiment.
+    onset : Onset or None
+        Where the free run diverged; None when it did not.
     """
 
     table: pd.DataFrame
     predictions: dict[str, list[Float2D]]
+    onset: Onset | None = None
 
     def mean(self, mode: str, metric: str = "nrmse") -> float:
         """The output-averaged ``metric`` of ``mode``."""
@@ -132,4 +159,28 @@ def evaluate(
         rows.append({"mode": mode, "output": "mean",
                      **{k: float(np.mean(v)) for k, v in scores.items()},
                      "diverged": bool(flag.any())})
-    return Evaluation(table=pd.DataFrame(rows), predictions=preds)
+    table = pd.DataFrame(rows)
+    diverged = bool(table.loc[table["mode"] == "free_run", "diverged"].any())
+    onset = _onset(ys, preds["free_run"], warmup, truth.std(axis=0), divergence) \
+        if diverged else None
+    return Evaluation(table=table, predictions=preds, onset=onset)
+
+
+def _onset(ys: list[Float2D], free: list[Float2D], warmup: int, scale: np.ndarray,
+           divergence: float) -> Onset:
+    """The :class:`Onset` of a diverged free run ``free`` of the experiments ``ys``, errors
+    normalised by ``scale`` (the standard deviation of each output's scored samples)."""
+    squares, count = np.zeros(scale.shape), 0
+    for e, (yy, est) in enumerate(zip(ys, free, strict=True)):
+        with np.errstate(over="ignore", invalid="ignore"):
+            err = np.abs(est[warmup:] - yy[warmup:]) / scale
+        out = np.flatnonzero((~np.isfinite(err) | (err > divergence)).any(axis=1))
+        stop = out[0] if out.size else err.shape[0]
+        squares += np.sum(err[:stop] ** 2, axis=0)
+        count += stop
+        if out.size:
+            before = float(np.mean(np.sqrt(squares / count))) if count else float("nan")
+            return Onset(experiment=e, sample=warmup + int(stop), nrmse_before=before)
+    # a non-finite mean without a bad sample cannot happen; the end is the honest answer
+    return Onset(experiment=len(ys) - 1, sample=ys[-1].shape[0],
+                 nrmse_before=float(np.mean(np.sqrt(squares / max(count, 1)))))

@@ -4,6 +4,7 @@ by side."""
 import time
 
 import dagster as dg
+import numpy as np
 import pandas as pd
 
 from ...config import Configuration
@@ -18,7 +19,7 @@ from ..checks import (
     comparison_results,
 )
 from ..figures import (
-    figures_fingerprint,
+    context_title,
     png_markdown,
     prediction_figure,
     to_png,
@@ -32,23 +33,24 @@ from ..mlflow_models import (
 from ..partitions import split_key
 from ..reporting import (
     markdown,
+    model_metrics,
     nrmse_summary,
     rounded,
     score_metrics,
     theta_table,
 )
 from ..settings import PipelineSettings
-from ..tracking import MLflowTracker
+from ..tracking import MLflowTracker, model_description
 from .model_facts import latest_metadata, phi_names, prediction_key, truth_metadata
 
 
-def scored(model, data: Dataset, warmup: int, title: str, key: tuple[str, str]
-            ) -> tuple[Evaluation, bytes]:
-    """``model`` scored on ``data``'s held-out experiments by the evaluation protocol, and
-    its prediction figure rendered as PNG: what the scores assets cache (``cache_scores``),
-    keyed by ``key`` (:func:`prediction_key`) in place of the model and the data."""
-    ev = evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
-    return ev, to_png(prediction_figure(data, ev, title, warmup))
+def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluation:
+    """``model`` scored on ``data``'s held-out experiments by the evaluation protocol: what
+    the scores assets cache (``cache_scores``), keyed by ``key`` (``prediction_key``) in
+    place of the model and the data. Numbers only: the prediction figure is drawn from them
+    by each set, with its own title and the data's units, which a shared entry could not
+    hold (the sets sharing it differ in name, and units are not in the data's digest)."""
+    return evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
 
 
 def scores_asset(method: Method, partitions_def):
@@ -56,47 +58,57 @@ def scores_asset(method: Method, partitions_def):
               kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model")},
               description=f"The {method.label} model scored on held-out data by the "
                           f"evaluation protocol (one-step and free run), tracked in MLflow; "
-                          f"the scores and figure cached by what the model predicts with "
+                          f"the scores cached by what the model predicts with "
                           f"(``cache_scores``), the same for every set whose model predicts "
-                          f"alike.")
+                          f"alike. Its page shows the *prediction* figure: measured output, "
+                          f"one-step prediction and free run of the first held-out "
+                          f"experiment, per output in the data's units, titled with the data "
+                          f"set, set and method.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                settings: PipelineSettings, configuration: Configuration,
                raw_benchmark: Dataset, model) -> pd.DataFrame:
+        began = time.time()
         data = raw_benchmark
         dataset, hparams = split_key(context.partition_key)
-        # titled by data set: sets whose models predict alike share the scores and figure
-        title = f"{method.label} | {dataset}"
-        memory = SignedMemory(settings.cache_root(), "scores", warn=context.log.warning,
-                              salt=figures_fingerprint())
+        # the scores are cached (shared by the sets whose models predict alike), the figure
+        # drawn from them for this partition: its set in the title, the data's units
+        memory = SignedMemory(settings.cache_root(), "scores", warn=context.log.warning)
         score = memory.cache(scored, ignore=["model", "data"]) if settings.cache_scores \
             else scored
-        ev, png = score(model, data, configuration.warmup, title,
-                        prediction_key(model, data))
+        ev = score(model, data, configuration.warmup, prediction_key(model, data))
+        figure = prediction_figure(data, ev, context_title(dataset, hparams, method.label),
+                                   configuration.warmup)
+        png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
         fit_seconds = latest_metadata(context, f"{method.name}_model", "fit_seconds")
-        extra_metrics, artifacts = {"fit_seconds": fit_seconds}, {}
+        facts, artifacts = {}, {}
         if isinstance(model, PWARX) and model.structured:
-            extra_metrics.update(n_submodels=model.n_submodels_)
+            facts.update(n_submodels=model.n_submodels_)
             artifacts["structure.json"] = {
                 "outputs": data.y_names, "structure": model.structure_.structures,
                 "regressors": [o.names for o in model.structure_.outputs],
                 "parameters": [o.p.tolist() for o in model.structure_.outputs]}
         elif isinstance(model, PWARX):
-            extra_metrics.update(n_submodels=model.n_submodels_,
-                                 noise_share=model.clustering_.noise_share_,
-                                 eps=model.clustering_.eps_,
-                                 **{k: v for k, v in truth_metadata(model, data).items()
-                                    if not isinstance(v, str)})
+            facts.update(n_submodels=model.n_submodels_,
+                         noise_share=model.clustering_.noise_share_,
+                         eps=model.clustering_.eps_, **truth_metadata(model, data))
             thetas = theta_table(model.thetas_, phi_names(model, data), data.y_names)
             artifacts["parameter_matrices.json"] = {
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
                 "outputs": data.y_names}
+        metrics = {**score_metrics(ev), **model_metrics(facts),
+                   **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
+        params = {k: v for k, v in {**configuration.params(method.name),
+                                    **model.resolved_params()}.items()
+                  if k not in ("dataset", "hparams")}  # (tags of the run)
         t0 = time.perf_counter()
         run = mlflow.log_run(
-            dataset=dataset, hparams=hparams, method=method.name,
-            params={**configuration.params(method.name), **model.resolved_params()},
-            metrics={**score_metrics(ev.table), **extra_metrics},
+            dataset=dataset, hparams=hparams, method=method.name, params=params,
+            metrics=metrics, description=model_description(dataset, hparams, method.name,
+                                                           metrics),
+            # the run spans the fit it scores (when the fit time was recorded)
+            started=began - (0.0 if np.isnan(fit_seconds) else fit_seconds),
             tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
             artifacts={"scores.csv": ev.table, "prediction.png": png, **artifacts},
             model=ModelToLog(
@@ -106,7 +118,7 @@ def scores_asset(method: Method, partitions_def):
                 training=training_dataset(data)))
         log_seconds = time.perf_counter() - t0
         context.add_output_metadata(rounded({
-            "prediction": dg.MetadataValue.md(png_markdown(png, title)),
+            "prediction": dg.MetadataValue.md(png_markdown(png, figure.get_suptitle())),
             "scores_from_cache": memory.hits > 0,
             "mlflow_run_id": run.run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run)),
             "mlflow_log_seconds": log_seconds,
