@@ -6,13 +6,15 @@ z = [x; u] inside the data envelope, the form of MPT3's ``PWASystem``: its state
 non-minimal one of the regressor of eq. (2)–(3) (past outputs and inputs), so it simulates as
 the model of eq. (1) does. It is written as versioned JSON (:meth:`PWAStateSpace.to_json`)
 or as an MPT3 script (:meth:`PWAStateSpace.to_mpt3`), and its stability is reported by
-:meth:`PWAStateSpace.stability`. Only numpy and scipy (and cvxpy for the Lyapunov search)
-are used here.
+:meth:`PWAStateSpace.stability`. :class:`HybridMPC` controls it by model predictive control
+solved as a mixed-integer linear program (HiGHS, through ``scipy.optimize.milp``). Only numpy
+and scipy (and cvxpy for the Lyapunov search) are used here.
 """
 
 from .conversion import PADDING, to_state_space
+from .mpc import ClosedLoop, HybridMPC, MPCSolution
 from .stability import StabilityReport, stability_report
 from .state_space import SCHEMA, SCHEMA_VERSION, PWAStateSpace
 
-__all__ = ["PADDING", "SCHEMA", "SCHEMA_VERSION", "PWAStateSpace", "StabilityReport",
-           "stability_report", "to_state_space"]
+__all__ = ["PADDING", "SCHEMA", "SCHEMA_VERSION", "ClosedLoop", "HybridMPC", "MPCSolution",
+           "PWAStateSpace", "StabilityReport", "stability_report", "to_state_space"]
