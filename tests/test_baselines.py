@@ -78,7 +78,8 @@ def test_evaluation_table_and_divergence_flag():
     u = rng.normal(size=(200, 1))
     y = stable.simulate(u, np.zeros((1, 1)))
     ok = evaluate(stable, u, y, warmup=3, output_names=["pos"])
-    assert list(ok.table.columns) == ["mode", "output", "nrmse", "r2", "rmse", "diverged"]
+    assert list(ok.table.columns) == ["mode", "output", "nrmse", "r2", "rmse", "diverged",
+                                      "outside_share"]
     assert set(ok.table["output"]) == {"pos", "mean"}
     assert not ok.diverged()
     bad = evaluate(unstable, u, y, warmup=3)

@@ -9,6 +9,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
 from ..pwa.arx import ARXModelBase, training_range
+from ..pwa.envelope import PADDING
 from ..pwa.regressors import build_regressors
 from ..pwa.structure_fit import fit_structure
 from ..pwa.structures import COUPLINGS, FORMS
@@ -44,7 +45,8 @@ class LinearARX(ARXModelBase):
     n_inputs_, n_outputs_ : int
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
-        envelope of :meth:`to_state_space`.
+        envelope of :meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope` and of
+        :meth:`to_state_space`.
 
     Examples
     --------
@@ -112,7 +114,7 @@ class LinearARX(ARXModelBase):
         return params
 
     def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
-                       padding: float = 0.05, input_names: list[str] | None = None,
+                       padding: float = PADDING, input_names: list[str] | None = None,
                        output_names: list[str] | None = None):
         """The model as a PWA state-space model with one mode, x⁺ = A x + B u + f,
         y = C x + g, valid in the data envelope (:func:`pwa_pipeline.control.to_state_space`,

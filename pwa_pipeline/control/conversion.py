@@ -29,7 +29,10 @@ slowest), only those non-empty inside the envelope kept.
 spans its channel's training range (the smallest and largest value of that output or input
 over the training experiments; all lags of a channel share it), widened on each side by
 ``padding`` (default 5 %) of that span (of the channel's magnitude, at least 1, when the span
-is zero). A cell whose Chebyshev ball inside the envelope has radius at most
+is zero): over x, the box the fitted model's own
+:meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope` tests φ against
+(:mod:`pwa_pipeline.pwa.envelope`, the one place it is computed), and over u(k) the inputs'
+padded ranges. A cell whose Chebyshev ball inside the envelope has radius at most
 :data:`~.polyhedra.EMPTY_RADIUS` half-widths is dropped and listed in ``dropped_modes``;
 redundant rows are removed by linear programs (:func:`~.polyhedra.irredundant_rows`).
 
@@ -48,11 +51,9 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
+from ..pwa.envelope import PADDING, channel_bounds, regressor_bounds
 from .polyhedra import EMPTY_RADIUS, Box, chebyshev_ball, irredundant_rows
 from .state_space import PWAStateSpace
-
-#: Default widening of the envelope beyond the training range, as a share of each span.
-PADDING = 0.05
 
 
 @dataclass
@@ -247,7 +248,9 @@ def mode_matrices(theta: Float2D, m: int, r: int, lags: int, nb: int, affine: bo
 
 def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
                  padding: float) -> Box:
-    """The data envelope over z = [x; u] from each channel's training range.
+    """The data envelope over z = [x; u] from each channel's training range: over x the
+    box of :func:`~pwa_pipeline.pwa.envelope.regressor_bounds` (φ without the constant),
+    over u(k) each input's :func:`~pwa_pipeline.pwa.envelope.channel_bounds`.
 
     Parameters
     ----------
@@ -257,13 +260,9 @@ def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
         Share of each span added on either side (of max(|min|, |max|, 1) for a constant
         channel).
     """
-    lo, hi = signal_range
-    span = hi - lo
-    pad = padding * np.where(span > 0, span, np.maximum(np.maximum(abs(lo), abs(hi)), 1.0))
-    lo, hi = lo - pad, hi + pad
-    channel = ([p for p in range(m) for _ in range(lags)]
-               + [m + q for q in range(r) for _ in range(nb)] + [m + q for q in range(r)])
-    return Box(lo[channel].astype(float), hi[channel].astype(float))
+    x_lo, x_hi = regressor_bounds(signal_range, m, r, lags, nb, padding)
+    lo, hi = channel_bounds(signal_range, padding)
+    return Box(np.concatenate([x_lo, lo[m:]]), np.concatenate([x_hi, hi[m:]]))
 
 
 def signal_range(u: Signals, y: Signals) -> Float2D:
@@ -292,7 +291,7 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     u, y : array-like or lists of them, optional
         Data whose range makes the envelope (the training data). None: the model's
         ``signal_range_``, the range of its training data recorded at fit.
-    padding : float, default 0.05
+    padding : float, default :data:`~pwa_pipeline.pwa.envelope.PADDING` (0.05)
         Widening of the envelope beyond that range, a share of each channel's span.
     input_names, output_names : list of str, optional
         Names for the state's entries (default ``u1…``, ``y1…``).

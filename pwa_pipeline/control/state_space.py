@@ -25,6 +25,7 @@ import numpy as np
 
 from .._typing import Float2D, Signals
 from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from ..pwa.envelope import PADDING, outside_box
 from ..pwa.regressors import lagged_matrix, n_initial, regressor_names
 
 #: Identifies the JSON document of :meth:`PWAStateSpace.to_json`.
@@ -113,7 +114,7 @@ class PWAStateSpace:
 
     def __init__(self, A, B, f, C, g, regions, lower, upper, *, output_lags: int,
                  input_lags: int, affine: bool = False, input_names: list[str] | None = None,
-                 output_names: list[str] | None = None, padding: float = 0.05,
+                 output_names: list[str] | None = None, padding: float = PADDING,
                  mode_regions=None, dropped_modes=None, source: dict | None = None):
         self.A = _array(A, "A", 3)
         s, n = self.A.shape[0], self.A.shape[1]
@@ -252,10 +253,7 @@ class PWAStateSpace:
         return self._inside(z)[0] if single else self._inside(z)
 
     def _inside(self, z: Float2D) -> np.ndarray:
-        lower, upper = self.envelope
-        slack = TIE_TOL * (upper - lower)
-        with np.errstate(invalid="ignore"):
-            return np.all((z >= lower - slack) & (z <= upper + slack), axis=1)
+        return ~outside_box(z, *self.envelope, slack=TIE_TOL)
 
     def _violation(self, z: Float2D) -> Float2D:
         """Largest violation max_k (H_i z − h_i)_k of each region's rows, shape (N, s)."""

@@ -51,11 +51,15 @@ def score_metrics(evaluation: Evaluation) -> dict[str, float]:
     """The MLflow metrics of an evaluation, each to 4 significant digits (what the UI shows).
 
     Headline: ``one_step_nrmse``, ``one_step_r2``, ``free_run_nrmse``, ``free_run_r2`` (the
-    means over the outputs, eq. 23–24) and ``free_run_diverged`` (0 or 1). Per output, under
+    means over the outputs, eq. 23–24), ``free_run_diverged`` (0 or 1), and
+    ``one_step_outside_share`` and ``free_run_outside_share``, the share of scored samples
+    whose regressor left the model's data envelope (left out for a model without an
+    envelope). Per output, under
     :data:`PER_OUTPUT`: ``<mode>_<nrmse|r2|rmse>_<output>``. A diverged free run logs no
     free-run score at all (a 1e30 NRMSE would set the scale of every chart of the
-    experiment), neither the mean nor those of its diverged outputs, but where it diverged
-    (:class:`~pwa_pipeline.scoring.evaluation.Onset`): ``free_run_divergence_experiment``
+    experiment), neither the mean nor those of its diverged outputs nor its share outside the
+    envelope (its non-finite samples count as outside: the onset says more), but where it
+    diverged (:class:`~pwa_pipeline.scoring.evaluation.Onset`): ``free_run_divergence_experiment``
     and ``free_run_divergence_sample`` (the held-out experiment, from 0, and its sample, the
     warm-up counted) and ``free_run_nrmse_before_divergence``; the ``scores.csv`` artifact
     keeps every exact value.
@@ -69,6 +73,11 @@ def score_metrics(evaluation: Evaluation) -> dict[str, float]:
         else:
             out.update({f"{PER_OUTPUT}{row.mode}_{k}_{row.output}": getattr(row, k)
                         for k in ("nrmse", "r2", "rmse")})
+    if "outside_share" in evaluation.table:
+        means = evaluation.table[evaluation.table["output"] == "mean"]
+        out.update({f"{mode}_outside_share": share for mode, share, diverged in
+                    zip(means["mode"], means["outside_share"], means["diverged"], strict=True)
+                    if np.isfinite(share) and not diverged})
     onset = evaluation.onset
     out["free_run_diverged"] = float(onset is not None)
     if onset is not None:

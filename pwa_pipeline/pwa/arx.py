@@ -13,6 +13,7 @@ from .._validation import (
     check_width,
 )
 from ..scoring.metrics import r2_score
+from .envelope import PADDING, outside_box, regressor_bounds
 from .regressors import lagged_matrix, n_initial
 from .structures import output_lags
 
@@ -39,9 +40,16 @@ class ARXModelBase(BaseEstimator):
     """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
 
     Subclasses set ``na``, ``nb``, ``affine``, ``form`` and ``outputs`` as parameters, the fitted
-    ``n_inputs_`` and ``n_outputs_``, and implement :meth:`_predict_phi`. φ holds
-    :attr:`output_lags_` output lags: na, or na + 1 in the velocity form
-    (:mod:`~.structures`).
+    ``n_inputs_`` and ``n_outputs_`` (and ``signal_range_``, the training range, for the data
+    envelope), and implement :meth:`_predict_phi`. φ holds :attr:`output_lags_` output lags:
+    na, or na + 1 in the velocity form (:mod:`~.structures`).
+
+    **Data envelope.** A model is known only where its training regressors went.
+    :meth:`outside_envelope` says, per sample, whether φ(k) leaves the box of the training
+    range padded by :data:`~.envelope.PADDING` (:mod:`~.envelope`); ``predict`` and
+    ``simulate`` return the same flags next to their numbers with ``return_outside=True``
+    (the numbers are the same either way: outside the envelope the model extrapolates, it
+    is not clipped).
     """
 
     @property
@@ -73,8 +81,9 @@ class ARXModelBase(BaseEstimator):
         return pairs
 
     def predict(
-        self, u: Signals, y: Signals, n_init: int | None = None
-    ) -> Float2D | list[Float2D]:
+        self, u: Signals, y: Signals, n_init: int | None = None, *,
+        return_outside: bool = False,
+    ) -> Float2D | list[Float2D] | tuple:
         """One-step-ahead prediction ŷ(k) = f(φ(k)) from measured past outputs.
 
         Parameters
@@ -85,16 +94,30 @@ class ARXModelBase(BaseEstimator):
         n_init : int, optional
             Rows returned as given (a warm-up window); at least and by default
             max(output lags, nb). From 0 to below each experiment's length.
+        return_outside : bool, default False
+            Also return, per sample, whether the prediction's regressor φ(k) (the measured
+            past outputs and the past inputs) leaves the data envelope
+            (:meth:`outside_envelope`); the predictions are the same either way.
 
         Returns
         -------
         ndarray of shape (N, m), or a list of them
             The first ``n_init`` rows are the given y; the rest are predictions.
+        outside : ndarray of bool, shape (N,), or a list of them (``return_outside`` only)
+            True where φ(k) leaves the envelope; False on the rows returned as given.
+
+        Raises
+        ------
+        ValueError
+            With ``return_outside=True``, if the model records no training range
+            (``signal_range_``).
         """
         pairs = self._experiments(u, y, "y")
         n0 = self.n_initial_
         keep = n0 if n_init is None else max(n_init, n0)
-        out = []
+        if return_outside:
+            lower, upper = self.envelope()
+        out, flags = [], []
         for ue, ye in pairs:
             check_n_init(n_init, ye.shape[0])
             yhat = ye.copy()
@@ -103,9 +126,18 @@ class ARXModelBase(BaseEstimator):
                 yhat[n0:] = self._predict_phi(phi)
                 yhat[:keep] = ye[:keep]
             out.append(yhat)
-        return out if _is_experiment_list(y) else out[0]
+            if return_outside:
+                flag = self._outside(ue, ye, lower, upper)
+                flag[:keep] = False
+                flags.append(flag)
+        many = _is_experiment_list(y)
+        result = out if many else out[0]
+        if return_outside:
+            return result, (flags if many else flags[0])
+        return result
 
-    def simulate(self, u: Signals, y_init: Signals) -> Float2D | list[Float2D]:
+    def simulate(self, u: Signals, y_init: Signals, *, return_outside: bool = False
+                 ) -> Float2D | list[Float2D] | tuple:
         """Free-run simulation: φ(k) is built from the model's own past outputs.
 
         Parameters
@@ -114,18 +146,27 @@ class ARXModelBase(BaseEstimator):
         y_init : array-like of shape (n_init, m) with n_init ≥ max(output lags, nb), or a
             list
             Initial outputs (a warm-up window); simulation starts at sample n_init.
+        return_outside : bool, default False
+            Also return, per sample, whether the simulation's regressor φ(k) (its own past
+            outputs, the warm-up's where the lags reach into it, and the past inputs) leaves
+            the data envelope (:meth:`outside_envelope` of u and the returned outputs); the
+            simulation is the same either way.
 
         Returns
         -------
         ndarray of shape (N, m), or a list of them
             The first n_init rows are ``y_init``. A run that diverges to ±inf or NaN is
             returned as it is (later rows non-finite), not raised.
+        outside : ndarray of bool, shape (N,), or a list of them (``return_outside`` only)
+            True where φ(k) leaves the envelope or is not finite (a diverged run); False on
+            the warm-up rows.
 
         Raises
         ------
         ValueError
             If the input width differs from the fitted one, ``y_init`` has fewer than
-            max(output lags, nb) rows or more rows than u, or any value is non-finite.
+            max(output lags, nb) rows or more rows than u, any value is non-finite, or
+            (``return_outside=True``) the model records no training range.
         """
         check_is_fitted(self)
         u_list = list(u) if _is_experiment_list(u) else [u]
@@ -135,7 +176,9 @@ class ARXModelBase(BaseEstimator):
                 f"u has {len(u_list)} experiment(s) but y_init has {len(y_list)}"
             )
         n0 = self.n_initial_
-        out = []
+        if return_outside:
+            lower, upper = self.envelope()
+        out, flags = [], []
         for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
             ue, ye = as_signal(ue, "u"), as_signal(ye, "y_init")
             check_width(ue, self.n_inputs_, "u", "input(s)")
@@ -150,7 +193,105 @@ class ARXModelBase(BaseEstimator):
                     f"y_init has {ye.shape[0]} rows but u only {ue.shape[0]} (experiment {i})"
                 )
             out.append(self._free_run(ue, ye))
-        return out if _is_experiment_list(u) else out[0]
+            if return_outside:
+                flag = self._outside(ue, out[-1], lower, upper)
+                flag[:ye.shape[0]] = False
+                flags.append(flag)
+        many = _is_experiment_list(u)
+        result = out if many else out[0]
+        if return_outside:
+            return result, (flags if many else flags[0])
+        return result
+
+    def envelope(self, padding: float = PADDING) -> tuple[np.ndarray, np.ndarray]:
+        """The data envelope over φ(k) without the constant
+        (:func:`~.envelope.regressor_bounds`): each entry's channel's training range widened
+        by ``padding`` of its span.
+
+        Parameters
+        ----------
+        padding : float, default :data:`~.envelope.PADDING` (5 %)
+
+        Returns
+        -------
+        lower, upper : ndarrays of shape (m·L + r·nb,)
+            In φ's order (eq. 3; L = :attr:`output_lags_`).
+
+        Raises
+        ------
+        ValueError
+            If the model records no training range (``signal_range_``: e.g. a model joined by
+            ``PWARX.assemble`` without one).
+        """
+        check_is_fitted(self)
+        rng = getattr(self, "signal_range_", None)
+        if rng is None:
+            raise ValueError(
+                f"this {type(self).__name__} does not record the range of its training data "
+                f"(signal_range_), so it has no data envelope: fit it, or pass the range to "
+                f"PWARX.assemble(signal_range=...)")
+        return regressor_bounds(rng, self.n_outputs_, self.n_inputs_, self.output_lags_,
+                                self.nb, padding)
+
+    def outside_envelope(self, u: Signals, y: Signals, padding: float = PADDING
+                         ) -> np.ndarray | list[np.ndarray]:
+        """Whether each sample's regressor φ(k), built from ``u`` and ``y``, leaves the data
+        envelope (:meth:`envelope`): where the model is used outside its training data.
+
+        Pass measured outputs for the samples of a one-step prediction, or the outputs a
+        free run returned (``simulate``'s result, warm-up included) for the samples of that
+        run: φ(k) is built from y's rows before k either way.
+
+        Parameters
+        ----------
+        u : array-like of shape (N, r), or a list of such arrays (one per experiment)
+        y : array-like of shape (N, m), or a list of such arrays
+            May hold NaN or inf (a diverged simulation): a φ(k) with such an entry is
+            outside.
+        padding : float, default :data:`~.envelope.PADDING` (5 %)
+
+        Returns
+        -------
+        ndarray of bool, shape (N,), or a list of them
+            True where φ(k) leaves the envelope; False on the first max(output lags, nb)
+            rows, which have no regressor.
+
+        Raises
+        ------
+        ValueError
+            If the model records no training range, or the signals' shapes do not match the
+            model's or each other.
+        """
+        lower, upper = self.envelope(padding)
+        u_list = list(u) if _is_experiment_list(u) else [u]
+        y_list = list(y) if _is_experiment_list(y) else [y]
+        if len(u_list) != len(y_list):
+            raise ValueError(f"u has {len(u_list)} experiment(s) but y has {len(y_list)}")
+        flags = []
+        for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
+            ue = as_signal(ue, "u")
+            ye = np.asarray(ye, dtype=float)
+            ye = ye[:, None] if ye.ndim == 1 else ye
+            if ye.ndim != 2:
+                raise ValueError(f"y must be 2-D with shape (n_samples, n_outputs), got "
+                                 f"shape {ye.shape}")
+            check_width(ue, self.n_inputs_, "u", "input(s)")
+            check_width(ye, self.n_outputs_, "y", "output(s)")
+            if ue.shape[0] != ye.shape[0]:
+                raise ValueError(f"u and y have different lengths: {ue.shape[0]} and "
+                                 f"{ye.shape[0]} samples (experiment {i})")
+            flags.append(self._outside(ue, ye, lower, upper))
+        return flags if _is_experiment_list(y) else flags[0]
+
+    def _outside(self, u: Float2D, y: Float2D, lower: np.ndarray, upper: np.ndarray
+                 ) -> np.ndarray:
+        """The flags of :meth:`outside_envelope` of one experiment, shape (N,)."""
+        n0, n = self.n_initial_, y.shape[0]
+        flag = np.zeros(n, bool)
+        if n > n0:
+            flag[n0:] = outside_box(lagged_matrix(u, y, self.output_lags_, self.nb, False),
+                                    lower, upper)
+        return flag
 
     def _free_run(self, u: Float2D, y_init: Float2D) -> Float2D:
         na, nb = self.output_lags_, self.nb

@@ -13,6 +13,7 @@ from .._validation import as_experiments
 from .arx import ARXModelBase, training_range
 from .boundaries import ResidualRegions
 from .clustering import DBSCANClustering
+from .envelope import PADDING
 from .local_models import LocalLeastSquares
 from .memory import check_fit_memory
 from .regions import SVMRegions
@@ -111,8 +112,9 @@ class PWARX(ARXModelBase):
         The held-out experiments, each candidate's validation error, the refinements.
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input (set by
-        :meth:`fit`; a model joined by :meth:`assemble` alone has none): the data envelope
-        of :meth:`to_state_space`.
+        :meth:`fit`, or given to :meth:`assemble`; a model joined without it has none): the
+        data envelope of :meth:`~.arx.ARXModelBase.outside_envelope` and of
+        :meth:`to_state_space`.
 
     Examples
     --------
@@ -247,10 +249,11 @@ class PWARX(ARXModelBase):
             t0 = time.perf_counter()
             fitted[name] = self.fit_step(name, reg, **fitted)
             timings[name] = time.perf_counter() - t0
-        self.assemble(reg, **fitted)
+        self.assemble(reg, **fitted, signal_range=self.signal_range_)
         if self.refinement is not None:
             t0 = time.perf_counter()
-            self.assemble(reg, **fitted, refinement=self.fit_refinement(experiments))
+            self.assemble(reg, **fitted, refinement=self.fit_refinement(experiments),
+                          signal_range=self.signal_range_)
             timings["refinement"] = time.perf_counter() - t0
         self.timings_ = timings
         return self
@@ -347,12 +350,44 @@ class PWARX(ARXModelBase):
 
     def assemble(self, reg: Regressors, local_models: BaseEstimator,
                  clustering: BaseEstimator, submodels: BaseEstimator,
-                 regions: BaseEstimator, refinement: BaseEstimator | None = None) -> "PWARX":
+                 regions: BaseEstimator, refinement: BaseEstimator | None = None, *,
+                 signal_range: Float2D | None = None) -> "PWARX":
         """Set the fitted attributes from the fitted steps (and the fitted refinement, whose
-        θ_i replace step 5's); returns self."""
+        θ_i replace step 5's); returns self.
+
+        Parameters
+        ----------
+        reg : Regressors
+            The training regressors the steps were fitted on.
+        local_models, clustering, submodels, regions : fitted step estimators
+        refinement : fitted refinement step, optional
+        signal_range : array-like of shape (2, m + r), optional
+            The training range (:func:`~.arx.training_range` of the training experiments,
+            as :meth:`fit` records it), kept as ``signal_range_``: the model's data
+            envelope. It is taken from the experiments, not from ``reg``: φ's rows hold
+            the lagged outputs and inputs only, so they miss each experiment's first
+            max(na, nb) − na outputs and its inputs before max(na, nb) − nb and at its last
+            sample, and with nb = 0 every input. None: the model records no range (no
+            envelope: :meth:`~.arx.ARXModelBase.outside_envelope` raises and the
+            evaluation reports no share outside it).
+
+        Raises
+        ------
+        ValueError
+            If ``signal_range`` is not of shape (2, m + r).
+        """
         self.n_inputs_ = reg.n_inputs
         self.n_outputs_ = reg.n_outputs
         self.n_features_in_ = self.n_inputs_
+        if signal_range is None:
+            vars(self).pop("signal_range_", None)  # (none from an earlier fit stays)
+        else:
+            rng = np.array(signal_range, dtype=float)
+            if rng.shape != (2, reg.n_outputs + reg.n_inputs):
+                raise ValueError(
+                    f"signal_range has shape {rng.shape}; expected (2, outputs + inputs) = "
+                    f"{(2, reg.n_outputs + reg.n_inputs)}")
+            self.signal_range_ = rng
         self.local_models_, self.clustering_ = local_models, clustering
         self.submodels_, self.regions_ = submodels, regions
         self.thetas_ = self.base_thetas() if refinement is None else refinement.thetas_
@@ -405,7 +440,7 @@ class PWARX(ARXModelBase):
                 if k not in self.FIT_RECORD and k not in self.FIT_PARAMS}
 
     def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
-                       padding: float = 0.05, input_names: list[str] | None = None,
+                       padding: float = PADDING, input_names: list[str] | None = None,
                        output_names: list[str] | None = None):
         """The model as a PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i on
         polyhedral regions of z = [x; u] (:func:`pwa_pipeline.control.to_state_space`, whose

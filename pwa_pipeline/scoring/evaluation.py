@@ -11,6 +11,16 @@ A free run whose NRMSE exceeds ``divergence`` (10) or is not finite is flagged d
 number is reported all the same, and :class:`Onset` says where it left the data: the first
 scored sample whose error exceeds ``divergence`` standard deviations of its output (one
 exists whenever an NRMSE exceeds ``divergence``), and the NRMSE of the samples before it.
+
+Data envelope. A model that records its training range (``signal_range_``: a fitted PWARX
+or LinearARX) says, per scored sample and mode, whether its regressor
+φ(k) left the training data's padded box
+(:meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope`): for one-step φ holds measured
+outputs (the held-out data themselves lie outside the training data), for the free run the
+run's own outputs (the run wandered off, or the data did). ``outside_share`` is the share of
+the scored samples of all experiments so flagged, one value per mode (φ is shared by every
+output); NaN for a model without a range (the subspace model has no regressor). A large
+share means the scores measure extrapolation, not the identified dynamics.
 """
 
 from dataclasses import dataclass
@@ -30,7 +40,8 @@ DIVERGENCE = 10.0
 
 
 class Model(Protocol):
-    """What the protocol needs of a fitted model."""
+    """What the protocol needs of a fitted model (and, optionally, ``signal_range_`` and
+    ``outside_envelope(u, y)`` for the share outside the data envelope)."""
 
     def predict(self, u, y, n_init: int | None = None): ...
 
@@ -66,17 +77,24 @@ class Evaluation:
     Attributes
     ----------
     table : DataFrame
-        Columns ``mode, output, nrmse, r2, rmse, diverged``; ``output`` is an output's name
-        or ``"mean"``.
+        Columns ``mode, output, nrmse, r2, rmse, diverged, outside_share``; ``output`` is
+        an output's name or ``"mean"``; ``outside_share`` is the mode's share of scored
+        samples outside the data envelope, the same on each of its rows (NaN: the model
+        records no envelope).
     predictions : dict
         ``{"one_step": [...], "free_run": [...]}``, one array per experiment.
     onset : Onset or None
         Where the free run diverged; None when it did not.
+    outside : dict or None
+        ``{"one_step": [...], "free_run": [...]}``, per experiment a bool array of shape
+        (N,): True where that mode's φ(k) leaves the data envelope (False on the warm-up);
+        None when the model records no envelope.
     """
 
     table: pd.DataFrame
     predictions: dict[str, list[Float2D]]
     onset: Onset | None = None
+    outside: dict[str, list[np.ndarray]] | None = None
 
     def mean(self, mode: str, metric: str = "nrmse") -> float:
         """The output-averaged ``metric`` of ``mode``."""
@@ -86,6 +104,13 @@ class Evaluation:
     def diverged(self, mode: str = "free_run") -> bool:
         """Whether the ``mode`` run diverged."""
         return bool(self.table.loc[self.table["mode"] == mode, "diverged"].any())
+
+    def outside_share(self, mode: str = "free_run") -> float:
+        """Share of the ``mode`` run's scored samples whose regressor left the data
+        envelope; NaN when the model records none (or the table predates the column)."""
+        if "outside_share" not in self.table:
+            return float("nan")
+        return self.mean(mode, "outside_share")
 
 
 #: Warm-up samples of the evaluation protocol unless a data set sets its own.
@@ -105,7 +130,8 @@ def evaluate(
     Parameters
     ----------
     model : fitted PWARX, LinearARX or SubspaceSS (anything with ``predict(u, y, n_init)``
-        and ``simulate(u, y_init)``)
+        and ``simulate(u, y_init)``; with ``signal_range_`` and ``outside_envelope(u, y)``
+        as well, the share outside the data envelope is reported)
     u, y : arrays or lists of arrays
         Held-out experiments.
     warmup : int, default 10
@@ -147,23 +173,42 @@ def evaluate(
     }
     names = [f"y{i + 1}" for i in range(m)] if output_names is None else list(output_names)
     truth = np.vstack([yy[warmup:] for yy in ys])
+    outside = _outside(model, us, {"one_step": ys, "free_run": preds["free_run"]}, warmup)
     rows = []
     for mode in MODES:
         est = np.vstack([p[warmup:] for p in preds[mode]])
         scores = {"nrmse": nrmse(truth, est), "r2": r2_score(truth, est), "rmse": rmse(truth, est)}
         bad = ~np.isfinite(scores["nrmse"]) | (scores["nrmse"] > divergence)
         flag = bad if mode == "free_run" else np.zeros(m, bool)
+        share = float("nan") if outside is None else \
+            float(np.mean(np.concatenate([o[warmup:] for o in outside[mode]])))
         for i, name in enumerate(names):
             rows.append({"mode": mode, "output": name, **{k: float(v[i]) for k, v in scores.items()},
-                         "diverged": bool(flag[i])})
+                         "diverged": bool(flag[i]), "outside_share": share})
         rows.append({"mode": mode, "output": "mean",
                      **{k: float(np.mean(v)) for k, v in scores.items()},
-                     "diverged": bool(flag.any())})
+                     "diverged": bool(flag.any()), "outside_share": share})
     table = pd.DataFrame(rows)
     diverged = bool(table.loc[table["mode"] == "free_run", "diverged"].any())
     onset = _onset(ys, preds["free_run"], warmup, truth.std(axis=0), divergence) \
         if diverged else None
-    return Evaluation(table=table, predictions=preds, onset=onset)
+    return Evaluation(table=table, predictions=preds, onset=onset, outside=outside)
+
+
+def _outside(model: Model, us: list[Float2D], outputs: dict[str, list[Float2D]],
+             warmup: int) -> dict[str, list[np.ndarray]] | None:
+    """Per mode and experiment, whether each sample's φ(k), built from ``outputs[mode]``
+    (the measured outputs for one-step, the free run's for the free run), leaves the model's
+    data envelope; the warm-up's samples False. None for a model without an envelope."""
+    if getattr(model, "signal_range_", None) is None or not hasattr(model, "outside_envelope"):
+        return None
+    out = {}
+    for mode, ys in outputs.items():
+        flags = [np.asarray(f, bool).copy() for f in model.outside_envelope(us, ys)]
+        for f in flags:
+            f[:warmup] = False
+        out[mode] = flags
+    return out
 
 
 def _onset(ys: list[Float2D], free: list[Float2D], warmup: int, scale: np.ndarray,
