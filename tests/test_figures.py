@@ -70,11 +70,23 @@ def _line(ax, label):
     return lines[0]
 
 
+def _outside_line(ev):
+    """The prediction figure's third title line for ``ev`` (its share of scored samples
+    outside the data envelope), "" when no share is above 0."""
+    means = ev.table[ev.table["output"] == "mean"].set_index("mode")["outside_share"]
+    if not (means > 0).any():
+        return ""
+    return (f"\nRegressor outside the training data (hatched): one-step "
+            f"{100 * means['one_step']:.3g} %, free run {100 * means['free_run']:.3g} % of the "
+            f"scored samples")
+
+
 def test_prediction_titles_give_each_outputs_nrmse(fit):
     fig = prediction_figure(fit.data, fit.ev, "pwa | test", WARMUP)
     assert len(fig.axes) == 2
     assert fig.get_suptitle() == ("pwa | test\nMeasured output, one-step prediction and free "
-                                  "run: held-out experiment 1 of 1, samples 0–605 of 1500")
+                                  "run: held-out experiment 1 of 1, samples 0–605 of 1500"
+                                  + _outside_line(fit.ev))
     table = fit.ev.table
     for ax, name in zip(fig.axes, fit.data.y_names, strict=True):
         one = table[(table["mode"] == "one_step") & (table["output"] == name)]["nrmse"].item()
@@ -122,7 +134,10 @@ def _legend_texts(fig):
 
 def test_prediction_figure_has_one_legend_of_what_any_output_draws(fit):
     fig = prediction_figure(fit.data, fit.ev, "t", WARMUP)
-    assert _legend_texts(fig) == ["warm-up", "measured", "one-step", "free run"]
+    # (the fit's free run leaves the data envelope at a sample of the experiment drawn)
+    outside = ["free run outside the training data"] \
+        if fit.ev.outside["free_run"][0][:MAX_SAMPLES].any() else []
+    assert _legend_texts(fig) == ["warm-up", "measured", "one-step", "free run", *outside]
     # output 1 diverges (clipped, shaded), output 2 is NaN: each entry once, in drawn order
     diverged = _diverged(fit, flagged=False)
     assert _legend_texts(prediction_figure(fit.data, diverged, "t", WARMUP)) == [
@@ -464,9 +479,12 @@ def test_every_figure_is_titled_with_its_data_set_set_and_method(fit, structured
     }
     for name, fig in figs.items():
         lines = fig.get_suptitle().splitlines()
-        assert len(lines) == 2 and lines[0] == CONTEXT, name
+        # (the prediction figure's third line, when there is one, is its share outside the
+        # data envelope)
+        assert len(lines) == 2 + (name == "prediction" and bool(_outside_line(fit.ev))), name
+        assert lines[0] == CONTEXT, name
         assert "hure_vasak" not in lines[1] and "my_set" not in lines[1], name
-        assert to_markdown(fig).startswith(f"![{CONTEXT} {lines[1]}]("), name
+        assert to_markdown(fig).startswith(f"![{CONTEXT} {' '.join(lines[1:])}]("), name
     # the parameter-clusters figure is laid out by hand: its two-line title still fits
     assert _clusters_layout_faults(figs["parameter clusters"]) == []
 

@@ -13,6 +13,7 @@ import pytest
 
 from pwa_pipeline import PWARX, LinearARX, SubspaceSS
 from pwa_pipeline.config import BUNDLED_HPARAMS
+from pwa_pipeline.control import PWAStateSpace
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration import figures
@@ -152,7 +153,7 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert pwa.data.metrics["free_run_nrmse"] == float(f"{free['nrmse'].iloc[0]:.4g}")
     assert {k for k in pwa.data.metrics if "/" not in k} == {
         "one_step_nrmse", "one_step_r2", "free_run_nrmse", "free_run_r2", "free_run_diverged",
-        "fit_seconds"}
+        "one_step_outside_share", "free_run_outside_share", "fit_seconds"}
     assert {k.split("/")[0] for k in pwa.data.metrics if "/" in k} == {"per_output", "model"}
     assert "params.hparams" not in pwa.data.params and "dataset" not in pwa.data.params
     # the run spans the fit it scores, and says what it is
@@ -161,7 +162,20 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert pwa.data.tags["mlflow.note.content"].startswith(
         "The pwa model of data set hure_vasak, hyper-parameter set paper. Held-out one-step")
     assert {a.path for a in client.list_artifacts(pwa.info.run_id)} == {
-        "parameter_matrices.json", "scores.csv", "prediction.png"}
+        "parameter_matrices.json", "scores.csv", "prediction.png", "control"}
+    # the state-space model: its files, and the same JSON beside the registered model
+    exported = result.asset_value("control_model").state_space
+    shown = materialization(result, "control_model").metadata
+    stored = Path(shown["json"].value)
+    assert stored.parent == tmp_path / "exports" / "hure_vasak" / "paper"
+    assert PWAStateSpace.from_json(stored).to_json() == exported.to_json()
+    assert Path(shown["mpt3_script"].value).read_text() == exported.to_mpt3()
+    logged = Path(mlflow.artifacts.download_artifacts(
+        run_id=pwa.info.run_id, artifact_path="control/pwa_state_space.json",
+        tracking_uri=resources["mlflow"].uri()))
+    assert logged.read_text() == stored.read_text()
+    assert pwa.data.metrics["model/control_modes"] == exported.n_modes == shown["n_modes"].value
+    assert shown["regions"].value.startswith("![hure_vasak | set paper | PWA")
     meta = materialization(result, "pwa_scores").metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
     # the prediction figure is rendered once: the PNG in MLflow is the one on the asset page
@@ -296,7 +310,8 @@ def test_sets_that_end_in_the_same_pwa_model_share_its_scores_figures_and_mlflow
     MLflow run is linked to the model the first logged (one registered version);
     the models' prediction states are equal, their fingerprints too."""
     runs = _two_eps_sets(resources, tmp_path, "sub_models", "svm_regions",
-                         "output_error_refinement", "pwa_model", "pwa_scores")
+                         "output_error_refinement", "pwa_model", "control_model",
+                         "pwa_scores")
 
     def metadata(run, node: str, key: str):
         return materialization(run, node).metadata[key].value

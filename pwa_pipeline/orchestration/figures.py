@@ -24,6 +24,7 @@ from __future__ import annotations
 import base64
 import functools
 import io
+import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,6 +64,10 @@ _PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#
             "#17becf")
 _NOISE = "#9a9a9a"
 _DIVERGED = "#d62728"
+_OUTSIDE = {"one_step": ("one-step", "C0", "\\\\\\"), "free_run": ("free run", "C1", "///")}
+"""Label, colour and hatch of the prediction figure's stretches where a mode's regressor
+leaves the data envelope (hatched, so that they are not read as the free run's solid
+out-of-range shading)."""
 _LEGEND_ROWS = 22
 """Entries of a legend column of the regions figure (more fit beside its 5.2-inch axes)."""
 _MAX_LEVELS = 10
@@ -190,8 +195,13 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, context: str,
     as "free run (diverged, clipped)": clipped to the measured range ± 50 % of its span,
     the line stops at the edge where the run leaves that range (a triangle marks each exit,
     the time outside is shaded) instead of lying flat on the clip value. The warm-up window,
-    excluded from the scores, is shaded grey. One legend below the axes lists what any
-    subplot draws.
+    excluded from the scores, is shaded grey. The stretches where the one-step prediction's
+    or the free run's regressor φ(k) leaves the model's data envelope
+    (``evaluation.outside``: the model is used outside its training data there) are hatched
+    in that mode's colour, "<mode> outside the training data", and the title's third line
+    gives each mode's share of scored samples outside it (``outside_share`` of the table,
+    over all held-out experiments) when one is above 0. One legend below the axes lists
+    what any subplot draws.
 
     Parameters
     ----------
@@ -229,6 +239,9 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, context: str,
         ax.xaxis.set_tick_params(labelbottom=True)
         ax.set_xlabel("sample k")
     k = np.arange(n)
+    outside = {mode: np.asarray(flags[0][:n], bool)
+               for mode, flags in (evaluation.outside or {}).items()
+               if mode in _OUTSIDE and np.any(flags[0][:n])}
     for j, ax in enumerate(axes):
         one, free_row = rows["one_step"].iloc[j], rows["free_run"].iloc[j]
         free = evaluation.predictions["free_run"][0][:n, j]
@@ -239,6 +252,13 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, context: str,
         ax.plot(k, evaluation.predictions["one_step"][0][:n, j], color="C0", lw=3.0,
                 alpha=0.5, solid_capstyle="butt", zorder=_Z_ONE_STEP, label="one-step")
         _free_run(ax, k, free, y[:, j], diverged)
+        for mode, mask in outside.items():
+            label, colour, hatch = _OUTSIDE[mode]
+            # each flagged sample k covers [k − ½, k + ½], so that a lone one shows too
+            ax.fill_between(np.repeat(k, 2) + np.tile([-0.5, 0.5], n), 0, 1,
+                            where=np.repeat(mask, 2), transform=ax.get_xaxis_transform(),
+                            facecolor="none", edgecolor=colour, hatch=hatch, lw=0,
+                            alpha=0.45, label=f"{label} outside the training data")
         ax.set_title(f"{data.y_names[j]}: NRMSE one-step {one['nrmse']:.4g}, free run "
                      f"{free_row['nrmse']:.4g}" + (" (diverged)" if diverged else ""),
                      fontsize=8.5, loc="left")
@@ -248,8 +268,24 @@ def prediction_figure(data: Dataset, evaluation: Evaluation, context: str,
     shown = f"samples 0–{n - 1}" + (f" of {data.y_test[0].shape[0]}" if n < len(data.y_test[0])
                                      else "")
     _suptitle(fig, context, f"Measured output, one-step prediction and free run: held-out "
-                            f"experiment 1 of {len(data.y_test)}, {shown}", fontsize=11)
+                            f"experiment 1 of {len(data.y_test)}, {shown}"
+                            + _outside_line(evaluation), fontsize=11)
     return fig
+
+
+def _outside_line(evaluation: Evaluation) -> str:
+    """The prediction figure's title line of each mode's share of scored samples outside
+    the data envelope (``outside_share``), or "" when none is above 0 or known."""
+    if "outside_share" not in evaluation.table:
+        return ""
+    means = evaluation.table[evaluation.table["output"] == "mean"].set_index("mode")
+    shares = {mode: float(means.loc[mode, "outside_share"]) for mode in _OUTSIDE
+              if mode in means.index}
+    shown = [f"{_OUTSIDE[mode][0]} {100 * v:.3g} %" for mode, v in shares.items()]
+    if not any(np.isfinite(v) and v > 0 for v in shares.values()):
+        return ""
+    return ("\nRegressor outside the training data (hatched): " + ", ".join(shown)
+            + " of the scored samples")
 
 
 def _clustering_embedding(local, step, target: np.ndarray) -> np.ndarray:
@@ -875,3 +911,81 @@ def png_markdown(png: bytes, alt: str) -> str:
     ``![<alt>](data:image/png;base64,...)`` (brackets in ``alt`` made parentheses)."""
     alt = " ".join(alt.replace("[", "(").replace("]", ")").split())
     return f"![{alt}](data:image/png;base64,{base64.b64encode(png).decode('ascii')})"
+
+
+def partition_figure(ss, fixed: np.ndarray, title: str, labels: list[str] | None = None
+                     ) -> Figure:
+    """The polyhedral partition of a PWA state-space model in a 2-D slice of z = [x; u],
+    drawn from the H-representations of its regions (not from the classifier).
+
+    The two coordinates are those the region boundaries lean on most (largest sum over the
+    rows of |H_c| times the envelope's half-width in c, rows normalised); the others are held
+    at ``fixed``. Each region's slice {(a, b) : H_ab (a, b) ≤ h − H_rest z_rest} is cut with
+    the envelope and drawn as its polygon (vertices by half-space intersection around its
+    Chebyshev centre); modes whose slice is empty are listed as such.
+
+    Parameters
+    ----------
+    ss : PWAStateSpace
+    fixed : ndarray of shape (n + r,)
+        Where the other coordinates are held (e.g. the median training z).
+    title : str
+        First line of the title (data set, set, method).
+    labels : list of str, optional
+        Axis label of each coordinate of z (default the state's and inputs' names).
+
+    Returns
+    -------
+    Figure
+        One axes.
+    """
+    from matplotlib.patches import Polygon
+    from scipy.optimize import linprog
+    from scipy.spatial import HalfspaceIntersection
+
+    lower, upper = ss.envelope
+    half = (upper - lower) / 2
+    names = labels or [*ss.state_names, *ss.input_names]
+    weight = np.zeros(lower.size)
+    for H, _ in ss.regions:
+        if H.size:
+            weight += (np.abs(H) * half / np.linalg.norm(H * half, axis=1, keepdims=True)
+                       ).sum(axis=0)
+    i, j = np.sort(np.argsort(-weight, kind="stable")[:2])
+    rest = np.setdiff1d(np.arange(lower.size), [i, j])
+    box = np.array([[1.0, 0], [-1, 0], [0, 1], [0, -1]]), np.array(
+        [upper[i], -lower[i], upper[j], -lower[j]])
+    fig = _figure(9.0, 5.6)
+    ax = fig.subplots()
+    empty = []
+    for mode, (H, h) in enumerate(ss.regions):
+        A2 = np.vstack([H[:, [i, j]], box[0]])
+        b2 = np.concatenate([h - H[:, rest] @ fixed[rest], box[1]])
+        norms = np.linalg.norm(A2, axis=1)
+        # the Chebyshev centre: the largest disc inside, an interior point for the intersection
+        lp = linprog([0, 0, -1], A_ub=np.column_stack([A2, norms]), b_ub=b2,
+                     bounds=[(None, None), (None, None), (0, None)], method="highs")
+        if lp.status != 0 or lp.x[2] <= 1e-9 * max(half[i], half[j]):
+            empty.append(mode + 1)
+            continue
+        hull = HalfspaceIntersection(np.column_stack([A2, -b2]), lp.x[:2])
+        vertices = hull.intersections
+        centre = vertices.mean(axis=0)
+        order = np.argsort(np.arctan2(*(vertices - centre).T[::-1]))
+        ax.add_patch(Polygon(vertices[order], closed=True, facecolor=_colour(mode), alpha=0.35,
+                             edgecolor=_colour(mode), lw=1.2, label=f"mode {mode + 1}"))
+    ax.set_xlim(lower[i], upper[i])
+    ax.set_ylim(lower[j], upper[j])
+    ax.set_xlabel(names[i])
+    ax.set_ylabel(names[j])
+    if ax.patches:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False,
+                  ncols=-(-len(ax.patches) // _LEGEND_ROWS))
+    others = "the other coordinates at their training median" if rest.size else \
+        "no other coordinates"
+    what = textwrap.fill(f"Regions of the state-space model in the slice ({names[i]}, "
+                         f"{names[j]}), {others}", width=90)
+    if empty:
+        what += f"\n{len(empty)} of {ss.n_modes} modes do not meet this slice"
+    _suptitle(fig, title, what, fontsize=10)
+    return fig

@@ -89,3 +89,9 @@ class PipelineSettings(dg.ConfigurableResource):
     def cache_root(self) -> Path:
         """The cache folder (local models, step 5, baselines, scores and figures)."""
         return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"
+
+    def exports_root(self) -> Path:
+        """Where files made for use outside the tool are written (the state-space models'
+        JSON and MPT3 scripts): ``exports`` beside the cache folder, so
+        ``<project>/storage/exports`` by default."""
+        return self.cache_root().parent / "exports"

@@ -392,7 +392,9 @@ def _reuse_note(client, logged: dict) -> str:
 
 def _write_artifact(path: Path, obj) -> None:
     """Write an artifact of :meth:`MLflowTracker.log_run` to ``path``: bytes as they are, a
-    DataFrame as CSV, text as it is, anything else as JSON."""
+    DataFrame as CSV, text as it is, anything else as JSON (``path`` may be in a
+    subfolder, e.g. ``control/...``)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     if isinstance(obj, bytes):
         path.write_bytes(obj)
     elif isinstance(obj, pd.DataFrame):

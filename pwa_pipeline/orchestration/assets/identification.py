@@ -20,6 +20,7 @@ from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS
 from ...pwa import PWARX, STEPS
+from ...pwa.arx import training_range
 from ...pwa.regressors import build_regressors
 from ..caches import SignedMemory, cache_key, load_or_compute
 from ..checks import (
@@ -313,10 +314,13 @@ def _pwa_model(run: _ChainRun):
         yield structured_model(run.context, run.configuration, run.data,
                                figure_context(run.partition, METHODS["pwa"].label))
         return
+    # the training range from the experiments, as fit records it (φ's rows miss some
+    # samples of each experiment: PWARX.assemble): the model's data envelope
     model = clone(run.configuration.pwa).assemble(
         run.fitted["regressors"], local_models=run.fitted["local_models"],
         clustering=run.fitted["clusters"], submodels=run.fitted["sub_models"],
-        regions=run.fitted["svm_regions"], refinement=run.fitted["output_error_refinement"])
+        regions=run.fitted["svm_regions"], refinement=run.fitted["output_error_refinement"],
+        signal_range=training_range(as_experiments(run.data.u_train, run.data.y_train)))
     model.timings_ = {step: run.seconds[asset] for step, asset in STEP_ASSETS.items()}
     # the figures' numbers are cached (shared by the sets that end in this model), the
     # figures drawn from them here, titled with this partition's set

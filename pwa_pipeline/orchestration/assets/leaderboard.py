@@ -59,7 +59,7 @@ def leaderboard_asset(partitions_def):
                 params={"partitions": ", ".join(dict.fromkeys(
                     f"{dataset}|{h}" for h in rows["hparams"]))},
                 metrics={"rows": len(rows), "best_free_run_nrmse":
-                         float(scored.min()) if len(scored) else None},
+                         float(f"{scored.min():.4g}") if len(scored) else None},
                 tags={"dagster_run_id": context.run.run_id},
                 artifacts={"leaderboard.csv": rows.reset_index(drop=True),
                            "leaderboard.md": leaderboard_markdown(rows)})

@@ -41,6 +41,7 @@ from ..reporting import (
 )
 from ..settings import PipelineSettings
 from ..tracking import MLflowTracker, model_description
+from .control import JSON_FILE, MPT3_FILE, ControlModel
 from .model_facts import latest_metadata, phi_names, prediction_key, truth_metadata
 
 
@@ -54,8 +55,11 @@ def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluatio
 
 
 def scores_asset(method: Method, partitions_def):
+    # the PWA run also logs the state-space model (beside the registered model it exports)
+    control_in = {"control_model": dg.AssetIn("control_model")} if method.name == "pwa" else {}
     @dg.asset(name=f"{method.name}_scores", partitions_def=partitions_def, group_name="scores",
-              kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model")},
+              kinds={"pandas", "mlflow"}, ins={"model": dg.AssetIn(f"{method.name}_model"),
+                                                **control_in},
               description=f"The {method.label} model scored on held-out data by the "
                           f"evaluation protocol (one-step and free run), tracked in MLflow; "
                           f"the scores cached by what the model predicts with "
@@ -66,7 +70,8 @@ def scores_asset(method: Method, partitions_def):
                           f"set, set and method.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                settings: PipelineSettings, configuration: Configuration,
-               raw_benchmark: Dataset, model) -> pd.DataFrame:
+               raw_benchmark: Dataset, model, **control: ControlModel | None
+               ) -> pd.DataFrame:
         began = time.time()
         data = raw_benchmark
         dataset, hparams = split_key(context.partition_key)
@@ -97,6 +102,13 @@ def scores_asset(method: Method, partitions_def):
             artifacts["parameter_matrices.json"] = {
                 "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
                 "outputs": data.y_names}
+        if (exported := control.get("control_model")) is not None:
+            ss, report = exported.state_space, exported.stability
+            facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),
+                         max_spectral_radius=float(np.max(report.spectral_radius)))
+            artifacts.update({f"control/{JSON_FILE}": ss.to_json(),
+                              f"control/{MPT3_FILE}": ss.to_mpt3(),
+                              "control/stability.json": report.to_dict()})
         metrics = {**score_metrics(ev), **model_metrics(facts),
                    **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
         params = {k: v for k, v in {**configuration.params(method.name),
