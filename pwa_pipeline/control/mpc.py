@@ -245,11 +245,21 @@ class HybridMPC:
 
     Examples
     --------
-    With ``ss = model.to_state_space()`` and x a state of it (e.g. a row of ``ss.states(u, y)``):
+    A state-space model of a fitted model, and x a state of it (a row of ``ss.states``):
 
+    >>> import numpy as np
+    >>> from pwa_pipeline import LinearARX
+    >>> u = np.random.default_rng(0).uniform(-1, 1, size=(300, 1))
+    >>> y = np.zeros((300, 1))
+    >>> for k in range(1, 300):
+    ...     y[k] = 0.5 * y[k - 1] + u[k - 1]
+    >>> ss = LinearARX(na=1, nb=1).fit(u, y).to_state_space()
+    >>> x = ss.states(u, y)[-1]
     >>> mpc = HybridMPC(ss, horizon=10)
-    >>> plan = mpc.solve(x, y_ref=[1.0, 0.5])      # plan.u[0] is the input to apply now
-    >>> run = mpc.closed_loop(x, y_ref=[1.0, 0.5], steps=40)
+    >>> plan = mpc.solve(x, y_ref=[1.0])              # plan.u[0] is the input to apply now
+    >>> run = mpc.closed_loop(x, y_ref=[1.0], steps=20)
+    >>> bool(abs(run.y[-1, 0] - 1.0) < 1e-4)
+    True
     """
 
     def __init__(self, ss: PWAStateSpace, horizon: int, Q=None, R=None, u_min=None,
