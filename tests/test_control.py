@@ -414,6 +414,139 @@ def test_stability_is_not_certified_when_it_cannot_be():
     # each mode stable, but switching between them diverges: no common quadratic function
     pair = np.array([[[0.5, 2.0], [0.0, 0.5]], [[0.5, 0.0], [2.0, 0.5]]])
     switching = stability_report(_hand_made(pair))
-    assert not switching.certified and switching.method.startswith("common quadratic")
+    assert not switching.certified and switching.method.startswith("piecewise quadratic")
+    assert "no common quadratic Lyapunov function was found" in switching.message
     assert switching.spectral_radius.max() < 1
     np.testing.assert_allclose(switching.spectral_radius, [0.5, 0.5])
+
+
+def _flagged(B0, B1, c0=1.0, c1=1.0, split: str = "flag") -> PWAStateSpace:
+    """Two modes x⁺ = A_i x + f_i over three output lags of one output (one input entering
+    nothing): A_i = diag(B_i, 0.5), f_i = (0, 0, c_i), so x3 is a flag that mode i moves to
+    0.5·x3 + c_i. Mode 0 holds where x3 ≤ 0 and mode 1 where x3 ≥ 0 (``split="flag"``), or
+    where u ≤ 0 and u ≥ 0 (``split="input"``: the input picks the mode, any switching).
+    Envelope: x1, x2, u in [−1, 1], x3 in [−2, 2]."""
+    A = np.zeros((2, 3, 3))
+    for i, Bi in enumerate((B0, B1)):
+        A[i, :2, :2], A[i, 2, 2] = Bi, 0.5
+    f = np.array([[0.0, 0.0, c0], [0.0, 0.0, c1]])
+    column = 2 if split == "flag" else 3
+    rows = [np.eye(4)[column], -np.eye(4)[column]]
+    regions = [(rows[0][None, :], np.zeros(1)), (rows[1][None, :], np.zeros(1))]
+    box = (np.array([-1.0, -1.0, -2.0, -1.0]), np.array([1.0, 1.0, 2.0, 1.0]))
+    return PWAStateSpace(A, np.zeros((2, 3, 1)), f, np.zeros((2, 1, 3)), np.zeros((2, 1)),
+                         regions, *box, output_lags=3, input_lags=0)
+
+
+#: Each stable (ρ = 0.5), but alternating between them diverges (ρ(A_1 A_0) ≈ 4.2).
+_SHEAR = (np.array([[0.5, 2.0], [0.0, 0.5]]), np.array([[0.5, 0.0], [2.0, 0.5]]))
+
+
+def _check_certificate(report, ss, pairs):
+    for i in range(ss.n_modes):
+        assert np.linalg.eigvalsh(report.certificates[f"P{i + 1}"]).min() > 0
+    for i, j in pairs:
+        Pi, Pj = report.certificates[f"P{i + 1}"], report.certificates[f"P{j + 1}"]
+        assert np.linalg.eigvalsh(ss.A[i].T @ Pj @ ss.A[i] - Pi).max() < 0
+
+
+def test_piecewise_quadratic_certifies_where_no_common_function_exists():
+    import cvxpy as cp
+
+    ss = _flagged(*_SHEAR)  # mode 1 keeps x3 ≥ 1: the model never goes back to mode 0
+    A0, A1 = ss.A
+    # no common quadratic function: it would contract A_1 A_0, whose spectral radius is > 1
+    assert np.abs(np.linalg.eigvals(A1 @ A0)).max() > 1
+    P = cp.Variable((3, 3), symmetric=True)
+    lmi = cp.Problem(cp.Minimize(0), [P >> np.eye(3)]
+                     + [a.T @ P @ a - P << -np.eye(3) for a in ss.A])
+    lmi.solve(solver="CLARABEL")
+    assert lmi.status == "infeasible"
+
+    report = ss.stability()
+    assert report.certified and report.method.startswith("piecewise quadratic")
+    assert "no common quadratic Lyapunov function was found" in report.message
+    # 0 → 0 only on the face x3 = −2 (kept: closed regions), 0 → 1, 1 → 1; never 1 → 0
+    assert sorted(map(tuple, report.transitions.tolist())) == [(0, 0), (0, 1), (1, 1)]
+    _check_certificate(report, ss, [(0, 0), (0, 1), (1, 1)])
+    assert set(report.certificates) == {"P1", "P2"} and report.P is None
+    assert 0 < report.contraction < 1
+    assert json.dumps(report.to_dict())
+
+
+def test_a_mode_of_spectral_radius_one_or_more_is_decided_by_its_own_transition():
+    # mode 1 (ρ = 1.05) keeps the flag up: it can follow itself, nothing is certified
+    looping = _flagged(_SHEAR[0], np.array([[1.05, 0.0], [0.3, 0.5]])).stability()
+    assert not looping.certified and looping.method == "spectral radius"
+    assert "mode(s) [1]" in looping.message and "follow themselves" in looping.message
+    assert looping.certificates == {}
+    # mode 0 (ρ = 1.2) always raises the flag (x3⁺ ≥ 0.5): it never follows itself, so a
+    # piecewise function can exist, where a common one cannot
+    passing = _flagged(np.array([[1.2, 0.0], [0.0, 0.5]]), _SHEAR[1], c0=1.5)
+    report = passing.stability()
+    assert report.certified and report.method.startswith("piecewise quadratic")
+    assert sorted(map(tuple, report.transitions.tolist())) == [(0, 1), (1, 1)]
+    _check_certificate(report, passing, [(0, 1), (1, 1)])
+
+
+def test_switching_between_stable_modes_is_not_certified_by_the_piecewise_search():
+    # the input picks the mode: every switching sequence can happen, and alternating
+    # diverges, so the decrease across modes (i → j, i ≠ j) must be asked for
+    ss = _flagged(*_SHEAR, c0=0.0, c1=0.0, split="input")
+    x = np.array([0.1, 0.1, 0.0])
+    for _ in range(5):
+        x = ss.A[1] @ ss.A[0] @ x
+    assert np.abs(x).max() > 100
+    report = ss.stability()
+    assert sorted(map(tuple, report.transitions.tolist())) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    assert not report.certified and report.method.startswith("piecewise quadratic")
+    assert "no piecewise-quadratic Lyapunov function" in report.message
+
+
+def _sampled_steps(ss: PWAStateSpace, seed: int = 3) -> set[tuple[int, int]]:
+    """The pairs (mode, next mode) of one step from 4000 random points of the envelope,
+    each with a random next input (steps that leave the envelope left out)."""
+    rng = np.random.default_rng(seed)
+    lower, upper = ss.envelope
+    n = ss.n_states
+    z = rng.uniform(lower, upper, size=(4000, lower.size))
+    mode = ss.mode_of(z[:, :n], z[:, n:])
+    x_next = np.einsum("kij,kj->ki", ss.A[mode], z[:, :n]) \
+        + np.einsum("kij,kj->ki", ss.B[mode], z[:, n:]) + ss.f[mode]
+    following = ss.mode_of(x_next, rng.uniform(lower[n:], upper[n:],
+                                               size=(len(z), ss.n_inputs)))
+    return {(int(i), int(j)) for i, j in zip(mode, following, strict=True) if j >= 0}
+
+
+def test_transitions_hold_every_step_and_leave_out_the_impossible(default_ss):
+    from pwa_pipeline.control.stability import transitions
+
+    possible = transitions(default_ss)
+    seen = _sampled_steps(default_ss)
+    assert len(seen) > 1 and all(possible[i, j] for i, j in seen)
+    # the input drives the flag x3 (off-centre, unevenly scaled envelope): mode 0
+    # (x3 ≤ 1) steps to 0.5·x3 + 0.2·u + 0.1 in [0.5, 1.2], either region; mode 1 (x3 ≥ 1)
+    # to 0.5·x3 + 0.5·u in [1.5, 3.5], never back
+    A = np.zeros((2, 3, 3))
+    A[:, :2, :2], A[:, 2, 2] = 0.5 * np.eye(2), 0.5
+    B = np.zeros((2, 3, 1))
+    B[:, 2, 0] = [0.2, 0.5]
+    flag = np.array([[0.0, 0.0, 1.0, 0.0]])
+    ss = PWAStateSpace(A, B, np.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.0]]),
+                       np.zeros((2, 1, 3)), np.zeros((2, 1)),
+                       [(flag, np.ones(1)), (-flag, -np.ones(1))],
+                       np.array([-1.0, -1.0, 0.0, 2.0]), np.array([1.0, 1.0, 4.0, 3.0]),
+                       output_lags=3, input_lags=0)
+    possible = transitions(ss)
+    assert possible.tolist() == [[True, True], [False, True]]
+    assert _sampled_steps(ss) == {(0, 0), (0, 1), (1, 1)}
+
+
+def test_the_search_keeps_to_its_size_and_time_bounds():
+    ss = _flagged(*_SHEAR)
+    big = ss.stability(max_lmi_size=10)
+    assert not big.certified and big.method.endswith("(not searched: LMI too large)")
+    assert "max_lmi_size = 10" in big.message
+    late = ss.stability(max_seconds=0.0)
+    assert not late.certified and "(not searched: time)" in late.method
+    assert "max_seconds" in late.message
