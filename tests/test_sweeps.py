@@ -223,6 +223,10 @@ def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, m
     rows = [line for line in board.splitlines() if line.startswith("|") and "paper" in line]
     assert sorted(row.split("|")[2].strip() for row in rows) == sorted(METHODS)
     assert (tmp_path / "storage" / "leaderboard.parquet").is_file()
+    # the stores, with where the control models were written
+    exports = tmp_path / "storage" / "exports"
+    assert f"  control models   : {exports} (JSON, MPT3 scripts)" in board
+    assert (exports / "hure_vasak" / "paper" / "pwa_state_space.json").is_file()
     # and it ends with the pages to open, MLflow's in its model-training view
     assert "http://127.0.0.1:3000/locations/pwa_pipeline/jobs/sweep" in board
     assert "http://127.0.0.1:5000/#/experiments?workflowType=machine_learning" in board

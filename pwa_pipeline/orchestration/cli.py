@@ -108,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
 Stores
   Dagster instance : {home}
   assets           : {default_storage_dir()}
+  control models   : {resources["settings"].exports_root()} (JSON, MPT3 scripts)
   MLflow tracking  : {uri}
 Open the UIs on the same stores:
   DAGSTER_HOME={home} dagster dev -w workspace.yaml        # http://127.0.0.1:3000
