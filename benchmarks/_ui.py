@@ -430,10 +430,22 @@ def mlflow_popups(page) -> list[str]:
     return shown
 
 
+#: Where MLflow's UI notes that its assistant opened itself, on a browser's first page.
+_ASSISTANT_OPENED = "mlflow.assistant.fab.autoOpenedOnFirstLoad_v1"
+
+
 def dismiss_mlflow_popups(page, settle_ms: int = 1000) -> list[str]:
-    """Close :func:`mlflow_popups` the way a user does (they appear within a second of the
-    page's content: wait ``settle_ms`` first); returns what was closed. The browser keeps
-    the assistant closed for the rest of the session."""
+    """Close :func:`mlflow_popups` the way a user does, once the assistant has opened itself
+    (or within 5 s) and ``settle_ms`` later (the registry's announcement comes within a
+    second of the page's content); returns what was closed. The browser keeps them closed
+    for the rest of the session."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+    try:
+        page.wait_for_function(f"() => localStorage.getItem({_ASSISTANT_OPENED!r}) !== null",
+                               timeout=5_000)
+    except PlaywrightTimeout:  # an MLflow without the assistant
+        pass
     page.wait_for_timeout(settle_ms)
     closed = mlflow_popups(page)
     for dialog in page.get_by_role("dialog").all():
@@ -497,6 +509,14 @@ def collapse_chart_sections(page, *names: str) -> None:
     page.wait_for_timeout(500)
 
 
+def search_charts(page, pattern: str) -> None:
+    """In a runs view's chart view: type ``pattern`` in *Search metric charts* (a regular
+    expression, case-insensitive: ``^(one_step|free_run)_nrmse$``), leaving the charts whose
+    metric it matches."""
+    page.get_by_placeholder("Search metric charts").fill(pattern)
+    page.wait_for_timeout(800)
+
+
 #: The texts of the chart card titled ``title``: its title, then its bars' labels and its
 #: axes' tick labels (a card's plot is drawn once it is scrolled into view).
 _CHART_TEXTS = """title => {
@@ -520,6 +540,14 @@ def chart_numbers(page, title: str) -> list[str]:
     return [t.replace("−", "-") for t in texts if re.fullmatch(r"[-−+]?[\d.]+(e[-+]?\d+)?", t)]
 
 
+def open_in_app(page, path: str) -> None:
+    """Go to ``path`` inside the single-page app already open (Dagster's), as its own links
+    do: no reload of the app."""
+    page.evaluate("p => { history.pushState({}, '', p); "
+                  "dispatchEvent(new PopStateEvent('popstate')); }", path)
+    page.wait_for_url(f"**{path}")
+
+
 # --------------------------------------------------------------------------- the asset graph
 
 def open_asset_graph(page, stack: UIStack, assets: int, vertical: bool = True) -> dict:
@@ -538,15 +566,14 @@ def open_asset_graph(page, stack: UIStack, assets: int, vertical: bool = True) -
     nodes = page.locator("foreignObject[style]")  # one per asset; groups carry a class
     nodes.first.wait_for()
     page.wait_for_timeout(500)  # laid out and zoomed to its centre
-    # the graph's viewport, below the toolbar
-    area = nodes.first.evaluate("n => n.ownerSVGElement.parentElement.getBoundingClientRect()"
-                                ".toJSON()")
-    for _ in range(8):  # each click zooms out by a fixed step
+    # the graph's part of the page: below its toolbar (that of *Materialize all…*)
+    bar = page.get_by_role("button", name="Materialize all…").first.bounding_box()
+    top, (width, height) = bar["y"] + bar["height"] + 8, page.viewport_size.values()
+    for _ in range(6):  # each click zooms out by a fixed step; nodes too small are not drawn
         boxes = {node.text_content(): node.bounding_box() for node in nodes.all()}
-        if len(boxes) >= assets and all(
-                b and b["y"] >= area["top"] and b["x"] >= area["left"] and
-                b["x"] + b["width"] <= area["right"] and b["y"] + b["height"] <= area["bottom"]
-                for b in boxes.values()):
+        if len(boxes) >= assets and all(b and b["y"] >= top and b["x"] >= 0 and b["x"] +
+                                        b["width"] <= width and b["y"] + b["height"] <= height
+                                        for b in boxes.values()):
             break
         page.locator("[aria-label=zoom_out]").last.click()
         page.wait_for_timeout(400)

@@ -208,6 +208,8 @@ def test_the_leaderboard_ranks_every_stored_partition_and_lists_the_missing(dask
 
 def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, monkeypatch,
                                                     capsys):
+    from mlflow.tracking import MlflowClient
+
     from pwa_pipeline.orchestration.cli import main
 
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
@@ -229,7 +231,15 @@ def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, m
     assert (exports / "hure_vasak" / "paper" / "pwa_state_space.json").is_file()
     # and it ends with the pages to open, MLflow's in its model-training view
     assert "http://127.0.0.1:3000/locations/pwa_pipeline/jobs/sweep" in board
-    assert "http://127.0.0.1:5000/#/experiments?workflowType=machine_learning" in board
+    experiment = MlflowClient(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}"
+                              ).get_experiment_by_name("pwa-pipeline/hure_vasak").experiment_id
+    assert board.endswith(f"     hure_vasak: http://127.0.0.1:5000/#/experiments/{experiment}"
+                          f"/runs?workflowType=machine_learning\n")
+    # its runs are listed on their jobs' pages in the UI, as the UI's own runs
+    with dg.DagsterInstance.get() as instance:
+        runs = instance.get_runs()
+    assert sorted(r.job_name for r in runs) == ["refresh_leaderboard", "sweep"]
+    assert {r.tags[".dagster/repository"] for r in runs} == {"__repository__@pwa_pipeline"}
 
 
 def test_runs_launched_from_the_sweep_page_of_the_ui_are_sweep_runs(tmp_path):

@@ -12,15 +12,13 @@ import sys
 import time
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
-from .credentials import mask_credentials, split_credentials
+from .credentials import mask_credentials
 from .files import check_writable
 from .instance import prepare_instance
-from .partition_runs import cli_definitions, was_interrupted
+from .partition_runs import LOCATION, cli_definitions, run_tags, was_interrupted
 from .paths import (
-    MLFLOW_TRAINING_VIEW,
     dagster_home,
     default_datasets_path,
-    default_mlflow_ui_url,
     default_storage_dir,
     default_tracking_uri,
 )
@@ -33,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from ..scoring.comparison import mean_scores
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
-    from .partitions import DEFAULT_SETS, check_keys, runnable_keys
+    from .partitions import DEFAULT_SETS, check_keys, runnable_keys, split_key
     from .reporting import leaderboard_markdown
 
     defs = cli_definitions(args.tracking_uri)
@@ -90,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         return 130  # as a shell reports SIGINT; the leaderboard is left as it was
     # the leaderboard ranks every partition stored so far, not only the ones just run
     board = defs.resolve_job_def(LEADERBOARD_JOB).execute_in_process(
-        instance=instance, run_config=quiet, raise_on_error=False)
+        instance=instance, run_config=quiet, tags=run_tags(), raise_on_error=False)
     if board.success:
         meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
         print(f"\nLeaderboard (every partition stored so far; "
@@ -100,10 +98,12 @@ def run(args: argparse.Namespace) -> int:
         failed.append(LEADERBOARD)
         print(f"\nLeaderboard: FAILED (run {board.run_id} in the Dagster UI)")
     server = uri.startswith(("http://", "https://"))
-    mlflow_ui = split_credentials(resources["mlflow"].uri())[0].rstrip("/") if server \
-        else default_mlflow_ui_url()
-    serve = "" if server else \
-        f"  mlflow ui --backend-store-uri {uri} --workers 1          # serves {mlflow_ui}\n"
+    tracker = resources["mlflow"]
+    serve = "" if server else (f"  mlflow ui --backend-store-uri {uri} --workers 1          "
+                               f"# serves {tracker.ui_base()}\n")
+    datasets = dict.fromkeys(split_key(key)[0] for key in keys)
+    links = "".join(f"     {dataset}: {url}\n" for dataset in datasets
+                    if (url := tracker.experiment_url(dataset)) is not None)
     print(f"""
 Stores
   Dagster instance : {home}
@@ -112,9 +112,9 @@ Stores
   MLflow tracking  : {uri}
 Open the UIs on the same stores:
   DAGSTER_HOME={home} dagster dev -w workspace.yaml        # http://127.0.0.1:3000
-{serve}  then open http://127.0.0.1:3000/locations/pwa_pipeline/jobs/sweep (launch partitions)
-   and {mlflow_ui}/#/experiments{MLFLOW_TRAINING_VIEW} (the runs of each data set)
-""", end="")
+{serve}  then open http://127.0.0.1:3000/locations/{LOCATION}/jobs/sweep (launch partitions)
+   and the runs of each data set in MLflow:
+{links}""", end="")
     return 1 if failed else 0
 
 

@@ -17,6 +17,7 @@ import dagster as dg
 
 from .io_manager import PartitionedFileIOManager
 from .jobs import dask_run_config
+from .partition_runs import run_tags
 
 
 def sweep_dask_job() -> dg.JobDefinition:
@@ -92,7 +93,7 @@ def sweep_on_dask(keys: list[str], instance: dg.DagsterInstance, address: str,
     for key in keys:
         if before is not None:
             before(key)
-        with dg.execute_job(job, instance, run_config=config,
-                            tags=partitions_def.get_tags_for_partition_key(key)) as result:
+        tags = {**run_tags(), **partitions_def.get_tags_for_partition_key(key)}
+        with dg.execute_job(job, instance, run_config=config, tags=tags) as result:
             success, run_id = result.success, result.run_id
         yield key, PartitionRun(key, success, run_id, io_manager)

@@ -15,6 +15,20 @@ from .doctor import HOST_TAG
 from .interrupts import interrupts_redelivered
 from .jobs import SWEEP_JOB
 
+#: The code location's name, as ``workspace.yaml`` and ``[tool.dg.project]`` give it.
+LOCATION = "pwa_pipeline"
+#: The tag by which Dagster's UI lists a run on its job's page (*Runs* tab): what it writes
+#: itself on the runs it launches, ``<repository>@<location>``. A run executed in this
+#: process has no code location of its own (Dagster offers no public way to give it one),
+#: so the command line's runs carry it to be listed there with the UI's.
+LOCATION_TAGS = {".dagster/repository": f"__repository__@{LOCATION}"}
+
+
+def run_tags() -> dict[str, str]:
+    """The tags of the command line's runs: :data:`LOCATION_TAGS` and this host (for
+    ``doctor``)."""
+    return {**LOCATION_TAGS, HOST_TAG: socket.gethostname()}
+
 
 def was_interrupted(result) -> bool:
     """Whether a partition's run ended by an interrupt (Ctrl-C, SIGINT): Dagster then fails
@@ -42,9 +56,9 @@ def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterIn
                           run_config: dict) -> dg.ExecuteInProcessResult:
     """One partition's run of the ``sweep`` job in this process, so that it is listed among
     the job's runs as a run launched in the UI is (errors are the run's, not raised); tagged
-    with this host for ``doctor``. A Ctrl-C that leaves it running is sent again
+    by :func:`run_tags`. A Ctrl-C that leaves it running is sent again
     (:func:`~.interrupts.interrupts_redelivered`)."""
     with interrupts_redelivered():
         return defs.resolve_job_def(SWEEP_JOB).execute_in_process(
-            partition_key=key, instance=instance, run_config=run_config,
-            tags={HOST_TAG: socket.gethostname()}, raise_on_error=False)
+            partition_key=key, instance=instance, run_config=run_config, tags=run_tags(),
+            raise_on_error=False)

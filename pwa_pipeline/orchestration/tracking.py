@@ -221,13 +221,26 @@ class MLflowTracker(dg.ConfigurableResource):
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
         return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
 
-    def run_url(self, run: "LoggedRun") -> str:
-        """The link to a run in the MLflow UI (credentials never included)."""
+    def ui_base(self) -> str:
+        """Where the MLflow UI of this store is served: the tracking server itself, or
+        ``ui_url`` for a local store (credentials never included)."""
         uri = self.uri()
         base = split_credentials(uri)[0] if uri.startswith(("http://", "https://")) \
             else self.ui_url or default_mlflow_ui_url()
-        return (f"{base.rstrip('/')}/#/experiments/{run.experiment_id}/runs/{run.run_id}"
+        return base.rstrip("/")
+
+    def run_url(self, run: "LoggedRun") -> str:
+        """The link to a run in the MLflow UI, in its model-training view."""
+        return (f"{self.ui_base()}/#/experiments/{run.experiment_id}/runs/{run.run_id}"
                 f"{MLFLOW_TRAINING_VIEW}")
+
+    def experiment_url(self, dataset: str) -> str | None:
+        """The link to the runs of ``dataset``'s experiment in the MLflow UI, in its
+        model-training view (MLflow 3.17's experiment list opens an experiment in its GenAI
+        overview, whatever its kind); None while the experiment does not exist."""
+        exp = self.client().get_experiment_by_name(f"{self.experiment_prefix}/{dataset}")
+        return None if exp is None else (f"{self.ui_base()}/#/experiments/"
+                                         f"{exp.experiment_id}/runs{MLFLOW_TRAINING_VIEW}")
 
     def log_run(
         self,
