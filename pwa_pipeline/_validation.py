@@ -193,3 +193,34 @@ def check_width(arr: Float2D, expected: int, name: str, what: str) -> None:
         raise ValueError(
             f"{name} has {arr.shape[1]} {what} but the model was fitted with {expected}"
         )
+
+
+def warmup_pairs(u: Signals, y_init: Signals, n_inputs: int, n_outputs: int,
+                 n_initial: int) -> list[tuple[Float2D, Float2D]]:
+    """The experiments of a free run, ``(u, y_init)`` per experiment, checked: as many of
+    each, the widths the model was fitted with, and a warm-up of at least ``n_initial`` rows
+    (max(output lags, nb)) and at most u's length.
+
+    Raises
+    ------
+    ValueError
+        Naming what does not fit (and the experiment, for a warm-up longer than its u).
+    """
+    u_list = list(u) if _is_experiment_list(u) else [u]
+    y_list = list(y_init) if _is_experiment_list(y_init) else [y_init]
+    if len(u_list) != len(y_list):
+        raise ValueError(f"u has {len(u_list)} experiment(s) but y_init has {len(y_list)}")
+    pairs = []
+    for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
+        ue, ye = as_signal(ue, "u"), as_signal(ye, "y_init")
+        check_width(ue, n_inputs, "u", "input(s)")
+        check_width(ye, n_outputs, "y_init", "output(s)")
+        if ye.shape[0] < n_initial:
+            raise ValueError(
+                f"warm-up too short: y_init has {ye.shape[0]} row(s), the model needs at "
+                f"least max(output lags, nb) = {n_initial}")
+        if ye.shape[0] > ue.shape[0]:
+            raise ValueError(
+                f"y_init has {ye.shape[0]} rows but u only {ue.shape[0]} (experiment {i})")
+        pairs.append((ue, ye))
+    return pairs

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .._typing import Float2D, Signals
-from .._validation import _is_experiment_list, as_experiments, as_signal, check_width
+from .._validation import _is_experiment_list, as_experiments, check_width, warmup_pairs
 from ..pwa.envelope import PADDING, outside_box
 from ..pwa.regressors import lagged_matrix, n_initial, regressor_names
 
@@ -399,23 +399,8 @@ class PWAStateSpace:
         """
         if outside not in OUTSIDE:
             raise ValueError(f"outside must be one of {OUTSIDE}, got {outside!r}")
-        u_list = list(u) if _is_experiment_list(u) else [u]
-        y_list = list(y_init) if _is_experiment_list(y_init) else [y_init]
-        if len(u_list) != len(y_list):
-            raise ValueError(f"u has {len(u_list)} experiment(s) but y_init has {len(y_list)}")
-        out = []
-        for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
-            ue, ye = as_signal(ue, "u"), as_signal(ye, "y_init")
-            check_width(ue, self.n_inputs, "u", "input(s)")
-            check_width(ye, self.n_outputs, "y_init", "output(s)")
-            if ye.shape[0] < self.n_initial:
-                raise ValueError(
-                    f"warm-up too short: y_init has {ye.shape[0]} row(s), the model needs at "
-                    f"least max(output lags, nb) = {self.n_initial}")
-            if ye.shape[0] > ue.shape[0]:
-                raise ValueError(
-                    f"y_init has {ye.shape[0]} rows but u only {ue.shape[0]} (experiment {i})")
-            out.append(self._free_run(ue, ye, outside, i))
+        pairs = warmup_pairs(u, y_init, self.n_inputs, self.n_outputs, self.n_initial)
+        out = [self._free_run(ue, ye, outside, i) for i, (ue, ye) in enumerate(pairs)]
         return out if _is_experiment_list(u) else out[0]
 
     def _initial_state(self, u: Float2D, y: Float2D, k: int) -> np.ndarray:

@@ -11,6 +11,7 @@ from .._validation import (
     as_signal,
     check_n_init,
     check_width,
+    warmup_pairs,
 )
 from ..scoring.metrics import r2_score
 from .envelope import PADDING, outside_box, regressor_bounds
@@ -130,11 +131,7 @@ class ARXModelBase(BaseEstimator):
                 flag = self._outside(ue, ye, lower, upper)
                 flag[:keep] = False
                 flags.append(flag)
-        many = _is_experiment_list(y)
-        result = out if many else out[0]
-        if return_outside:
-            return result, (flags if many else flags[0])
-        return result
+        return _returned(out, flags if return_outside else None, _is_experiment_list(y))
 
     def simulate(self, u: Signals, y_init: Signals, *, return_outside: bool = False
                  ) -> Float2D | list[Float2D] | tuple:
@@ -169,39 +166,17 @@ class ARXModelBase(BaseEstimator):
             (``return_outside=True``) the model records no training range.
         """
         check_is_fitted(self)
-        u_list = list(u) if _is_experiment_list(u) else [u]
-        y_list = list(y_init) if _is_experiment_list(y_init) else [y_init]
-        if len(u_list) != len(y_list):
-            raise ValueError(
-                f"u has {len(u_list)} experiment(s) but y_init has {len(y_list)}"
-            )
-        n0 = self.n_initial_
+        pairs = warmup_pairs(u, y_init, self.n_inputs_, self.n_outputs_, self.n_initial_)
         if return_outside:
             lower, upper = self.envelope()
         out, flags = [], []
-        for i, (ue, ye) in enumerate(zip(u_list, y_list, strict=True)):
-            ue, ye = as_signal(ue, "u"), as_signal(ye, "y_init")
-            check_width(ue, self.n_inputs_, "u", "input(s)")
-            check_width(ye, self.n_outputs_, "y_init", "output(s)")
-            if ye.shape[0] < n0:
-                raise ValueError(
-                    f"warm-up too short: y_init has {ye.shape[0]} row(s), the model needs at "
-                    f"least max(output lags, nb) = {n0}"
-                )
-            if ye.shape[0] > ue.shape[0]:
-                raise ValueError(
-                    f"y_init has {ye.shape[0]} rows but u only {ue.shape[0]} (experiment {i})"
-                )
+        for ue, ye in pairs:
             out.append(self._free_run(ue, ye))
             if return_outside:
                 flag = self._outside(ue, out[-1], lower, upper)
                 flag[:ye.shape[0]] = False
                 flags.append(flag)
-        many = _is_experiment_list(u)
-        result = out if many else out[0]
-        if return_outside:
-            return result, (flags if many else flags[0])
-        return result
+        return _returned(out, flags if return_outside else None, _is_experiment_list(u))
 
     def envelope(self, padding: float = PADDING) -> tuple[np.ndarray, np.ndarray]:
         """The data envelope over φ(k) without the constant
@@ -318,3 +293,12 @@ class ARXModelBase(BaseEstimator):
         y_true = np.vstack([p[1][n0:] for p in pairs])
         y_pred = np.vstack([p[n0:] for p in yhat])
         return float(np.mean(r2_score(y_true, y_pred)))
+
+
+def _returned(out: list, flags: list | None, many: bool):
+    """What ``predict`` and ``simulate`` return: the arrays of each experiment (one array
+    for a single one), with their envelope flags when asked (``flags`` not None)."""
+    result = out if many else out[0]
+    if flags is None:
+        return result
+    return result, (flags if many else flags[0])
