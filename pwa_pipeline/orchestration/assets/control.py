@@ -27,10 +27,12 @@ CONTROL_CHECKS = [dg.AssetCheckSpec(
 
 @dataclass(frozen=True)
 class ControlModel:
-    """A partition's PWA state-space model and its stability report."""
+    """A partition's PWA state-space model, its stability report, and its files (name →
+    text: the JSON and the MPT3 script), written once and logged by the PWA scores."""
 
     state_space: PWAStateSpace
     stability: StabilityReport
+    files: dict[str, str]
 
 
 def control_model_asset(partitions_def):
@@ -62,7 +64,8 @@ def control_model_asset(partitions_def):
         report = ss.stability()
         dataset, hparams = split_key(context.partition_key)
         folder = inside(settings.exports_root(), dataset, hparams)
-        for name, text in ((JSON_FILE, ss.to_json()), (MPT3_FILE, ss.to_mpt3())):
+        files = {JSON_FILE: ss.to_json(), MPT3_FILE: ss.to_mpt3()}
+        for name, text in files.items():
             atomic_write(folder / name, lambda path, text=text: path.write_text(text))
         states = ss.states(data.u_train, data.y_train)
         inputs = [u[ss.n_initial:] for u in data.u_train]
@@ -72,7 +75,7 @@ def control_model_asset(partitions_def):
                                   names)
         context.log.info(f"control_model: {ss.n_modes} region(s) in {ss.n_states} states; "
                          f"{report.message}")
-        yield dg.Output(ControlModel(ss, report), metadata=rounded({
+        yield dg.Output(ControlModel(ss, report, files), metadata=rounded({
             "exported": True, "n_modes": ss.n_modes, "n_states": ss.n_states,
             "dropped_modes": len(ss.dropped_modes), "envelope padding": ss.padding,
             "stability": report.message, "lyapunov_certified": report.certified,

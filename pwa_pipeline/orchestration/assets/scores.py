@@ -41,7 +41,7 @@ from ..reporting import (
 )
 from ..settings import PipelineSettings
 from ..tracking import MLflowTracker, model_description
-from .control import JSON_FILE, MPT3_FILE, ControlModel
+from .control import ControlModel
 from .model_facts import latest_metadata, phi_names, prediction_key, truth_metadata
 
 
@@ -106,9 +106,8 @@ def scores_asset(method: Method, partitions_def):
             ss, report = exported.state_space, exported.stability
             facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),
                          max_spectral_radius=float(np.max(report.spectral_radius)))
-            artifacts.update({f"control/{JSON_FILE}": ss.to_json(),
-                              f"control/{MPT3_FILE}": ss.to_mpt3(),
-                              "control/stability.json": report.to_dict()})
+            artifacts.update({f"control/{name}": text for name, text in exported.files.items()})
+            artifacts["control/stability.json"] = report.to_dict()
         metrics = {**score_metrics(ev), **model_metrics(facts),
                    **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
         params = {k: v for k, v in {**configuration.params(method.name),
