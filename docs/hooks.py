@@ -123,8 +123,10 @@ def estimators_reference() -> str:
     paper = PWARX.paper(na=1, nb=1, n_rho=required, eps=required, min_pts=required).get_params(deep=True)
     pwarx_docs = parameter_docs(PWARX)
     out = ["## `PWARX`", "",
-           "Keys at the top of a set's table in `hparams.toml`; `preset = \"default\"` or "
-           "`\"paper\"` chooses the step objects (`PWARX.default`, `PWARX.paper`).", "",
+           "Keys at the top of a set's table in `hparams.toml`; `preset = \"default\"`, "
+           "`\"paper\"` or `\"auto\"` chooses the step objects (`PWARX.default`, "
+           "`PWARX.paper`, `PWARX.auto`: the structure search, `na` and `nb` its largest "
+           "orders).", "",
            _table(PWARX, "", None), ""]
 
     listed = {"PWARX"}

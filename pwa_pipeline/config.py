@@ -1,9 +1,11 @@
 """Named hyper-parameter sets (``data/hparams.toml``), read and validated once.
 
 The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys configure
-:class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"`` or ``"paper"``, the
-classmethod that builds its step objects), ``na``, ``nb``, ``affine``, and each step's
-parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
+:class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"``, ``"paper"`` or
+``"auto"``, the classmethod that builds its step objects; ``"auto"`` is the structure search
+of :mod:`~pwa_pipeline.pwa.structure_search`, ``na`` and ``nb`` its largest orders, a
+sub-table ``search`` its parameters, e.g. ``search.max_seconds = 60``), ``na``, ``nb``,
+``affine``, and each step's parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
 subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). A sub-table
 ``refinement`` (e.g. ``refinement.max_iter = 30``) adds simulation-error refinement
@@ -34,6 +36,7 @@ from .methods import METHODS
 from .pwa.estimator import PWARX
 from .pwa.output_error import OutputErrorRefinement
 from .pwa.scheduling import SignScheduling
+from .pwa.structure_search import StructureSearch
 from .scoring.evaluation import WARMUP
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"
@@ -45,8 +48,10 @@ ORDERS = ("na", "nb", "affine")
 #: baseline's parameters (a sub-table).
 BASELINE_KEYS = {"warmup", "subspace"}
 #: Sub-tables that add an optional step object, and an example key of each.
-_STEP_TABLES = {"refinement": OutputErrorRefinement, "scheduling": SignScheduling}
-_EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"'}
+_STEP_TABLES = {"refinement": OutputErrorRefinement, "scheduling": SignScheduling,
+                "search": StructureSearch}
+_EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"',
+             "search": "max_seconds = 60"}
 _PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
                  ("clustering", "min_pts"): "min_pts"}
 
@@ -121,8 +126,13 @@ def build_pwarx(table: dict) -> PWARX:
                 )
             values[arg] = table[step].pop(key)
         model = PWARX.paper(**orders, **values)
+    elif preset == "auto":
+        if not orders.pop("affine", True):
+            raise ValueError("preset 'auto' fits a constant term (its thresholds need it): "
+                             "leave affine out or set it to true")
+        model = PWARX.auto(**orders)
     else:
-        raise ValueError(f"unknown preset {preset!r}; use 'default' or 'paper'")
+        raise ValueError(f"unknown preset {preset!r}; use 'default', 'paper' or 'auto'")
     for key, step_class in _STEP_TABLES.items():
         if key not in table:
             continue
@@ -137,7 +147,8 @@ def build_pwarx(table: dict) -> PWARX:
         model.set_params(**{key: step_class(**values)})
     model.set_params(**_flatten(table))
     model._validate_params()
-    for step in [*model.steps().values(), *filter(None, [model.refinement, model.scheduling])]:
+    for step in [*model.steps().values(),
+                 *filter(None, [model.refinement, model.scheduling, model.search])]:
         step._validate_params()
     return model
 
@@ -249,7 +260,8 @@ class HParamsFile:
         hparams, dataset : str
         orders : dict, optional
             ``na``, ``nb``, ``affine`` of a user's registered data set: with them, a set
-            without a table for ``dataset`` falls back to its ``"*"`` table.
+            without a table for ``dataset`` falls back to its ``"*"`` table (a set of
+            preset ``"auto"`` takes the orders as its largest and always fits the constant).
 
         Raises
         ------
@@ -261,7 +273,10 @@ class HParamsFile:
                            f"known: {self.sets}")
         if (hparams, dataset) not in self._configs:
             if orders is not None and hparams in self._templates:
-                return self._build(hparams, dataset, {**self._templates[hparams], **orders})
+                template = self._templates[hparams]
+                if template.get("preset") == "auto":  # it always fits the constant
+                    orders = {k: v for k, v in orders.items() if k != "affine"}
+                return self._build(hparams, dataset, {**template, **orders})
             known = sorted(d for s, d in self._configs if s == hparams)
             raise KeyError(f"hyper-parameter set {hparams!r} has no values for data set "
                            f"{dataset!r} in {self.path}; it has {known}"

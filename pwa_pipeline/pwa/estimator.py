@@ -19,6 +19,7 @@ from .memory import check_fit_memory
 from .regions import SVMRegions
 from .regressors import Regressors, build_regressors
 from .structure_fit import fit_structure
+from .structure_search import StructureSearch
 from .structures import COUPLINGS, FORMS
 from .submodels import ClusterCentres, RefinedSubModels, output_lag_columns
 
@@ -57,7 +58,8 @@ class PWARX(ARXModelBase):
 
     With ``form="velocity"``, ``outputs="decoupled"`` or ``scheduling``, the fit takes the
     structured route of :mod:`~.structure_fit` (the paper's steps run per output group on ψ
-    when ``scheduling`` is None); the model is then ``structure_`` and ``thetas_``,
+    when ``scheduling`` is None); with ``search`` (:meth:`auto`), the structure search of
+    :mod:`~.structure_search`. The model is then ``structure_`` and ``thetas_``,
     ``regions_``, ``labels_`` and the fitted steps are not set.
 
     Parameters
@@ -89,6 +91,13 @@ class PWARX(ARXModelBase):
         Regions given by the user (:class:`~.scheduling.SignScheduling`, e.g. the sign of
         each output's increment), in place of steps 2–6; sub-models by least squares per
         region, optionally a structure chosen per output on held-out training experiments.
+    search : StructureSearch, optional
+        The structure chosen from the data (:class:`~.structure_search.StructureSearch`,
+        built by :meth:`auto`): form, coupling, regions (scheduling variables it proposes,
+        or the steps' clusters), modes and orders up to ``na``, ``nb``, judged on held-out
+        training experiments and refined; never worse there than its linear reference.
+        Needs ``affine=True`` and leaves ``form``, ``outputs``, ``scheduling`` and
+        ``refinement`` to the search.
 
     Attributes
     ----------
@@ -110,6 +119,9 @@ class PWARX(ARXModelBase):
         Per output its regressor, regions and sub-models (:mod:`~.structures`).
     structure_fit_ : StructureFit (structured route only)
         The held-out experiments, each candidate's validation error, the refinements.
+    structure_search_ : SearchReport (with ``search`` only)
+        Every candidate the search tried, its held-out free-run NRMSE and outcome, and
+        why it chose (:class:`~.structure_search.SearchReport`).
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input (set by
         :meth:`fit`, or given to :meth:`assemble`; a model joined without it has none): the
@@ -131,12 +143,12 @@ class PWARX(ARXModelBase):
     """
 
     FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_", "refinement_",
-                  "structure_fit_", "timings_")
+                  "structure_fit_", "structure_search_", "timings_")
     """Fitted attributes that record the fit (steps 2–5, the refinement, the rows' labels,
     the structure search, the seconds): ``predict`` and ``simulate`` use none of them
     (``thetas_`` and ``regions_``, or ``structure_``, make the model)."""
 
-    FIT_PARAMS = (*STEPS, "refinement")
+    FIT_PARAMS = (*STEPS, "refinement", "search")
     """Parameters that only ``fit`` reads (the unfitted steps): ``predict`` and ``simulate``
     read what they fitted."""
 
@@ -152,6 +164,7 @@ class PWARX(ARXModelBase):
         "form": [StrOptions(set(FORMS))],
         "outputs": [StrOptions(set(COUPLINGS))],
         "scheduling": [HasMethods(["weights"]), None],
+        "search": [HasMethods(["search"]), None],
     }
 
     def __init__(
@@ -167,6 +180,7 @@ class PWARX(ARXModelBase):
         form: str = "level",
         outputs: str = "joint",
         scheduling: BaseEstimator | None = None,
+        search: BaseEstimator | None = None,
     ):
         self.na = na
         self.nb = nb
@@ -179,6 +193,7 @@ class PWARX(ARXModelBase):
         self.form = form
         self.outputs = outputs
         self.scheduling = scheduling
+        self.search = search
 
     @classmethod
     def default(cls, na: int = 1, nb: int = 1, affine: bool = False) -> "PWARX":
@@ -187,6 +202,31 @@ class PWARX(ARXModelBase):
         return cls(na=na, nb=nb, affine=affine, local_models=LocalLeastSquares(),
                    clustering=DBSCANClustering(), submodels=RefinedSubModels(),
                    regions=ResidualRegions())
+
+    @classmethod
+    def auto(cls, na: int = 2, nb: int = 2, **search: object) -> "PWARX":
+        """The structure chosen from the data (:mod:`~.structure_search`): forms, joint or
+        per-output models, regions from scheduling variables the search proposes or from
+        the paper's clustering, modes per output and orders up to (``na``, ``nb``), each
+        judged by its free run on held-out training experiments, refined on the free-run
+        error; never worse there than the best linear ARX model it also fits (which it then
+        returns, and says so in ``structure_search_``).
+
+        Parameters
+        ----------
+        na, nb : int, default 2
+            The largest orders tried.
+        **search
+            Parameters of :class:`~.structure_search.StructureSearch` (e.g.
+            ``max_seconds=60``).
+
+        The clustered candidate runs the default's steps with at most 3 re-assignment
+        sweeps of the sub-models (``submodels__n_refine``; the default's 20 cost minutes
+        on the robot's per-joint regressors for the same held-out error on the tuning
+        machines).
+        """
+        return cls(na=na, nb=nb, affine=True, submodels=RefinedSubModels(n_refine=3),
+                   search=StructureSearch(**search))
 
     @classmethod
     def paper(cls, na: int, nb: int, *, n_rho: int, eps: float, min_pts: int,
@@ -262,7 +302,13 @@ class PWARX(ARXModelBase):
     def structured(self) -> bool:
         """Whether the fit takes the structured route (velocity form, decoupled outputs or
         user regions)."""
-        return super().structured or self.scheduling is not None
+        return super().structured or self.scheduling is not None or self.search is not None
+
+    @property
+    def output_lags_(self) -> int:
+        """Output lags of φ: na, or na + 1 in the velocity form or with a structure search
+        (whose na is the largest order it tries, in either form)."""
+        return self.na + 1 if self.search is not None else super().output_lags_
 
     def _fit_structured(self, experiments: list[tuple[Float2D, Float2D]]) -> "PWARX":
         t0 = time.perf_counter()
@@ -274,10 +320,26 @@ class PWARX(ARXModelBase):
             subs, regions = fitted["submodels"], fitted["regions"]
             return _base_thetas(subs, regions), regions, subs.n_submodels_
 
-        self.structure_fit_ = fit_structure(
-            experiments, self.na, self.nb, self.affine, self.form, self.outputs,
-            scheduling=self.scheduling, refinement=self.refinement,
-            cluster=cluster if self.scheduling is None else None)
+        if self.search is not None:
+            given = [name for name, default in (("form", "level"), ("outputs", "joint"))
+                     if getattr(self, name) != default]
+            given += [name for name in ("scheduling", "refinement")
+                      if getattr(self, name) is not None]
+            if given:
+                raise ValueError(f"the structure search chooses the form, the outputs' "
+                                 f"coupling and the regions and refines them itself; leave "
+                                 f"{', '.join(given)} out (the search's own parameters set "
+                                 f"what it tries)")
+            if not self.affine:
+                raise ValueError("the structure search fits a constant term and proposes "
+                                 "thresholds on it: it needs affine=True (PWARX.auto sets it)")
+            self.structure_fit_, self.structure_search_ = self.search.search(
+                experiments, self.na, self.nb, cluster=cluster)
+        else:
+            self.structure_fit_ = fit_structure(
+                experiments, self.na, self.nb, self.affine, self.form, self.outputs,
+                scheduling=self.scheduling, refinement=self.refinement,
+                cluster=cluster if self.scheduling is None else None)
         self.structure_ = self.structure_fit_.model
         self.n_inputs_ = experiments[0][0].shape[1]
         self.n_outputs_ = experiments[0][1].shape[1]
@@ -403,8 +465,12 @@ class PWARX(ARXModelBase):
         chose filled in (n_ρ, ε, MinPts; on the structured route each output's structure,
         ``structure_y1`` …); fitted models only."""
         out = {"na": self.na, "nb": self.nb, "affine": self.affine}
-        if self.structured:
+        if self.search is not None:
+            out["search"] = type(self.search).__name__
+            out.update({f"search__{k}": v for k, v in self.search.get_params().items()})
+        elif self.structured:
             out.update(form=self.form, outputs=self.outputs)
+        if self.structured:
             if self.scheduling is not None:
                 out["scheduling"] = type(self.scheduling).__name__
                 out.update({f"scheduling__{k}": v

@@ -46,8 +46,16 @@ def phi_names(m: int, r: int, lags: int, nb: int, affine: bool) -> list[str]:
 
 
 def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, form: str,
-                      coupling: str) -> tuple[Float2D, np.ndarray, list[str]]:
+                      coupling: str, phi_lags: int | None = None,
+                      phi_nb: int | None = None) -> tuple[Float2D, np.ndarray, list[str]]:
     """M_j, c_j and ψ_j's entry names for output j (see the module doc).
+
+    Parameters
+    ----------
+    phi_lags, phi_nb : int, optional
+        The output and input lags of φ when φ holds more than ψ_j needs (a structure
+        search builds φ once at its largest orders and picks lower ones from it); by
+        default :func:`output_lags` of ``na`` and ``nb``.
 
     Returns
     -------
@@ -55,8 +63,12 @@ def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, fo
     c : ndarray of shape (D,)
     names : list of str
     """
-    lags = output_lags(na, form)
-    dim = (m * lags + r * nb + int(affine))
+    lags = output_lags(na, form) if phi_lags is None else phi_lags
+    phi_nb = nb if phi_nb is None else phi_nb
+    if lags < output_lags(na, form) or phi_nb < nb:
+        raise ValueError(f"φ with {lags} output and {phi_nb} input lags cannot hold a "
+                         f"{form}-form regressor of orders ({na}, {nb})")
+    dim = (m * lags + r * phi_nb + int(affine))
     own = [j] if coupling == "decoupled" else list(range(m))
     rows, names = [], []
 
@@ -81,7 +93,7 @@ def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, fo
         names += [f"y{q + 1}(k-1)" for q in own]
     for q in range(r):
         for lag in range(1, nb + 1):
-            rows.append(unit(m * lags + q * nb + lag - 1))
+            rows.append(unit(m * lags + q * phi_nb + lag - 1))
             names.append(f"u{q + 1}(k-{lag})")
     if affine:
         rows.append(unit(dim - 1))

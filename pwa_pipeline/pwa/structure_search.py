@@ -1,0 +1,693 @@
+"""Structure search: the model structure of a machine chosen from its data alone
+(:meth:`~.estimator.PWARX.auto`).
+
+The paper's route (clustering local models, eq. 6–10, then an SVM) finds the modes of
+systems whose sub-models differ a lot; on machines the switching is often a small change
+(a friction offset that flips with the velocity's sign, an overflow, a saturating valve)
+that the clustering misses, and a linear ARX model then wins. The search tries the
+structures of :mod:`~.structures` and keeps what the data support:
+
+1. **Hold out.** The last ``validation_fraction`` of the training experiments are held out
+   (one record alone is split in time, :func:`split_experiments`); everything is fitted on
+   the others and judged by the free-run NRMSE (RMSE over the standard deviation, per
+   output) on the held-out ones. The test record plays no part.
+2. **Linear.** Least-squares linear models over every form (level, velocity) and every
+   order pair within the bounds, joint (eq. 1) or one model per output (each output its
+   own form and orders): the best is the linear reference, and its coupling the one the
+   next steps use.
+3. **Scheduled regions.** Per output, greedily, the scheduling variable z = wᵀφ that lowers
+   the held-out error most, from variables the search proposes itself: the sign of each
+   output's increment (velocity sign, Coulomb friction), thresholds of each output and
+   input at quantiles of its training values (overflows, saturations, configurations),
+   the sign of each input and of its increment (dead zones, backlash); with either every
+   parameter switching (``"all"``) or the constant only (``"offset"``). A variable is kept
+   only when it lowers the error by ``min_gain`` (relative), at most ``max_variables`` per
+   output (2^v regions).
+4. **Clusters.** The paper's steps 2–6 on the linear reference's regressors ψ (the
+   estimator's steps), a candidate beside the scheduled regions.
+5. **Refinement.** The last two structures the greedy step kept (the richest and the one
+   before), the clustered one and the linear reference are refined on the free-run error
+   with the one-step error kept in the objective (:mod:`~.output_error`,
+   ``one_step_weight``), the iterate chosen on the held-out experiments: on a machine the
+   least-squares free run can rank structures otherwise than the refined one.
+6. **Never worse than linear.** Per output group, the refined structure with the lowest
+   held-out free-run NRMSE is kept only if it beats the refined linear reference;
+   otherwise the linear model is returned, and the report says so.
+
+Every candidate is a row of :attr:`SearchReport.table`, with its held-out NRMSE and what
+became of it (kept, not better by ``min_gain``, diverged, skipped and why, time limit).
+A candidate whose free run diverges is skipped; when ``max_seconds`` is reached the best
+structure so far is kept and the report is flagged.
+"""
+
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from numbers import Integral, Real
+
+import numpy as np
+import pandas as pd
+from sklearn.base import BaseEstimator
+from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
+
+from .._typing import Float2D
+from ..scoring.evaluation import WARMUP
+from .output_error import OutputErrorRefinement, refine_outputs
+from .output_error.simulator import FreeRuns
+from .regressors import Regressors, build_regressors
+from .scheduling import SignRegions
+from .structure_fit import ProjectedRegions, StructureFit
+from .structures import FORMS, OutputModel, StructuredModel, output_regressors, phi_names
+
+#: Which parameters differ between scheduled regions (see :class:`~.structures.OutputModel`).
+SWITCHES = ("offset", "all")
+#: Quantiles of a signal's training values at which thresholds are proposed.
+QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
+#: Held-out NRMSE above which a free run counts as diverged (as the evaluation's).
+DIVERGED = 10.0
+#: Fewest training rows a scheduled region needs per parameter it switches.
+ROWS_PER_PARAMETER = 3
+
+
+class SearchTimeLimit(UserWarning):
+    """The structure search reached ``max_seconds`` and kept the best structure so far."""
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A scheduling variable z(k) = wᵀφ(k) proposed by the search.
+
+    Attributes
+    ----------
+    name : str
+        As the report writes it, e.g. ``"Δy1(k-1) > 0"`` or ``"u2(k-1) > 0.31"``.
+    weights : ndarray of shape (D,)
+        w over φ's entries.
+    output : int or None
+        The output whose lags it reads (None: inputs only); a decoupled output's regions
+        read only its own output, so that its free run depends on itself alone.
+    """
+
+    name: str
+    weights: np.ndarray = field(repr=False)
+    output: int | None
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """One output's structure: form, orders, scheduling variables and what switches."""
+
+    form: str
+    na: int
+    nb: int
+    variables: tuple[Variable, ...] = ()
+    switch: str = "linear"
+
+    def describe(self) -> str:
+        """E.g. ``"velocity (2, 1), offset on [Δy1(k-1) > 0]"``."""
+        base = f"{self.form} ({self.na}, {self.nb})"
+        if self.switch == "clustered":
+            return f"{base}, clustered"
+        if not self.variables:
+            return f"{base}, linear"
+        return f"{base}, {self.switch} on [{', '.join(v.name for v in self.variables)}]"
+
+
+@dataclass(frozen=True)
+class SearchReport:
+    """What the structure search tried and why it chose.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        One row per candidate: ``stage`` (linear, scheduled, clustered, refined, chosen),
+        ``outputs``, ``structure`` (form, orders, regions), ``regions`` (count),
+        ``validation_nrmse`` (held-out free run, mean over the outputs), ``outcome``,
+        ``seconds`` (since the search started).
+    choice : str
+        Per output group, the structure kept and why, in a sentence each.
+    linear : bool
+        Whether every output kept its linear model: the search returns the linear ARX
+        model (no switching structure beat it on the held-out experiments).
+    time_limited : bool
+        Whether ``max_seconds`` stopped the search (the best structure so far was kept).
+    validation_nrmse : float
+        The returned model's held-out free-run NRMSE (mean over outputs).
+    linear_nrmse : float
+        The refined linear reference's.
+    seconds : float
+    """
+
+    table: pd.DataFrame
+    choice: str
+    linear: bool
+    time_limited: bool
+    validation_nrmse: float
+    linear_nrmse: float
+    seconds: float
+
+    def summary(self) -> pd.DataFrame:
+        """The rows that decided: the best linear candidate of each coupling, the variables
+        kept, the clustered candidates, the refinements and the choices."""
+        t = self.table
+        linear = t[t.stage == "linear"]
+        best = [g.validation_nrmse.idxmin() for _, g in linear.groupby(["outputs", "outcome"])
+                if g.validation_nrmse.notna().any()]
+        decided = t.stage.isin(["clustered", "refined", "chosen"]) \
+            | t.outcome.str.startswith("kept")
+        return t.loc[sorted(set(best) | set(t.index[decided]))]
+
+
+def split_experiments(experiments: list, fraction: float, min_samples: int
+                      ) -> tuple[list, list, str]:
+    """The experiments to fit on and those held out.
+
+    The last ``round(fraction · n)`` experiments (at least one) are held out. A single
+    record is split in time instead: its last ``fraction`` of samples becomes a held-out
+    experiment of its own (its first samples serve as its warm-up).
+
+    Returns
+    -------
+    fit, held : lists of (u, y)
+    how : str
+        The split, in words, for the report.
+
+    Raises
+    ------
+    ValueError
+        When a single record is too short to split into two parts of ``min_samples``
+        samples each (the message gives the lengths needed).
+    """
+    n = len(experiments)
+    if n >= 2:
+        n_val = min(max(1, round(fraction * n)), n - 1)
+        return (experiments[:n - n_val], experiments[n - n_val:],
+                f"experiments {n - n_val + 1}–{n} of {n} held out")
+    u, y = experiments[0]
+    cut = int(round(len(y) * (1 - fraction)))
+    if cut < min_samples or len(y) - cut < min_samples:
+        needed = int(np.ceil(min_samples / min(fraction, 1 - fraction)))
+        raise ValueError(
+            f"the structure search holds out part of the training data and needs at least "
+            f"2 experiments, or one record of at least {needed} samples to split in time; "
+            f"got one record of {len(y)} samples")
+    return ([(u[:cut], y[:cut])], [(u[cut:], y[cut:])],
+            f"a single record: its last {len(y) - cut} of {len(y)} samples held out")
+
+
+class _HeldOut:
+    """The held-out experiments, simulated in lockstep for the NRMSE of candidate models."""
+
+    def __init__(self, experiments: list, lags: int, nb: int, warmup: int):
+        u, y = [e[0] for e in experiments], [e[1] for e in experiments]
+        self.runs = FreeRuns(u, y, lags, nb, True, warmup)
+        self.warmup = warmup
+        scored = np.vstack([ye[warmup:] for ye in y])
+        self.std = scored.std(axis=0)
+        self.std[self.std == 0] = 1.0
+        self.u, self.y = u, y
+
+    def nrmse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
+        """Free-run NRMSE of each output of ``group`` (the others measured), inf where the
+        run diverges."""
+        runs, w = self.runs, self.warmup
+        ysim = runs.y.copy()
+        thetas = [models[j].thetas() for j in group]
+        sse, count = np.zeros(len(group)), 0
+        with np.errstate(over="ignore", invalid="ignore"):
+            for k in range(w, ysim.shape[1]):
+                active = runs.lengths > k
+                phi = runs.phi(ysim, k)
+                for jj, j in enumerate(group):
+                    yk = np.einsum("ed,ed->e", phi, thetas[jj][models[j].regions(phi)])
+                    target = runs.y[:, k, j]
+                    ysim[:, k, j] = np.where(active, yk, target)
+                    sse[jj] += float(np.sum(np.where(active, yk - target, 0.0) ** 2))
+                count += int(active.sum())
+                if not np.all(np.isfinite(sse)):
+                    return np.full(len(group), np.inf)
+        out = np.sqrt(sse / max(count, 1)) / self.std[group]
+        return np.where(out > DIVERGED, np.inf, out)
+
+
+class StructureSearch(BaseEstimator):
+    """Search of a PWARX structure on held-out training experiments (see the module doc).
+
+    The search step of :class:`~.estimator.PWARX` (``search=``; :meth:`PWARX.auto
+    <.estimator.PWARX.auto>` builds one): the estimator's ``na`` and ``nb`` are the largest
+    orders tried.
+
+    Parameters
+    ----------
+    forms : list of {"level", "velocity"}, default both
+    couplings : list of {"joint", "decoupled"}, default both
+    max_variables : int, default 2
+        Scheduling variables per output at most (2^v regions).
+    switches : list of {"offset", "all"}, default both
+    min_gain : float, default 0.02
+        Relative lowering of the held-out NRMSE a richer structure must bring.
+    clustering : bool, default True
+        Also try the paper's clustered regions (the estimator's steps 2–6) on the chosen
+        regressors.
+    refinement : OutputErrorRefinement, optional
+        Refines the best structure and the linear reference on the free-run error. None:
+        ``OutputErrorRefinement(max_iter=30, patience=5, one_step_weight=0.001)``.
+    validation_fraction : float, default 0.2
+        Share of the training experiments held out (the last ones).
+    refit : bool, default False
+        Fit the chosen structure again on every training experiment, the held-out ones
+        included (least squares in its regions, then the refinement, which has no
+        held-out iterate to choose then and runs to its tolerance or ``max_iter``). On the
+        robot's training experiments (fitted on 0–58, scored on 59–65) it lowered the
+        free-run NRMSE from 0.700 to 0.689 and tripled the search's time, so it is off.
+    max_seconds : float, default 150
+        Time bound of the search (a fit may pass it by the candidate and the refinement
+        under way); the best structure so far is then kept and :class:`SearchTimeLimit`
+        warned.
+    """
+
+    _parameter_constraints: dict = {
+        "forms": [list, tuple],
+        "couplings": [list, tuple],
+        "max_variables": [Interval(Integral, 0, 4, closed="both")],
+        "switches": [list, tuple],
+        "min_gain": [Interval(Real, 0, 1, closed="left")],
+        "clustering": ["boolean"],
+        "refinement": [HasMethods(["fit"]), None, StrOptions({"none"})],
+        "validation_fraction": [Interval(Real, 0, 1, closed="neither")],
+        "refit": ["boolean"],
+        "max_seconds": [Interval(Real, 0, None, closed="neither")],
+    }
+
+    def __init__(self, forms=FORMS, couplings=("joint", "decoupled"), max_variables: int = 2,
+                 switches=SWITCHES, min_gain: float = 0.02, clustering: bool = True,
+                 refinement: BaseEstimator | str | None = None,
+                 validation_fraction: float = 0.2, refit: bool = False,
+                 max_seconds: float = 150.0):
+        self.forms = forms
+        self.couplings = couplings
+        self.max_variables = max_variables
+        self.switches = switches
+        self.min_gain = min_gain
+        self.clustering = clustering
+        self.refinement = refinement
+        self.validation_fraction = validation_fraction
+        self.refit = refit
+        self.max_seconds = max_seconds
+
+    def _check(self) -> None:
+        self._validate_params()
+        for name, allowed in (("forms", FORMS), ("couplings", ("joint", "decoupled")),
+                              ("switches", SWITCHES)):
+            values = list(getattr(self, name))
+            bad = [v for v in values if v not in allowed]
+            if not values or bad:
+                raise ValueError(f"StructureSearch {name} must be a non-empty list of "
+                                 f"{list(allowed)}; got {values}")
+
+    def refinement_step(self) -> OutputErrorRefinement | None:
+        """The refinement the search runs (None with ``refinement="none"``)."""
+        if self.refinement == "none":
+            return None
+        if self.refinement is None:
+            return OutputErrorRefinement(max_iter=30, patience=5, one_step_weight=0.001)
+        return self.refinement
+
+    def search(self, experiments: list[tuple[Float2D, Float2D]], na: int, nb: int,
+               cluster: Callable | None = None) -> tuple[StructureFit, SearchReport]:
+        """Search the structure (module doc) on the experiments, orders up to (na, nb).
+
+        Parameters
+        ----------
+        experiments : list of (u, y)
+        na, nb : int
+            Largest orders (na ≥ 1, nb ≥ 1); φ holds na + 1 output lags (the velocity form's
+            level) and nb input lags, and the constant.
+        cluster : callable, optional
+            ``cluster(reg)`` → (θ (s, d, group size), fitted region step, s): the paper's
+            steps 2–6 (the estimator passes its own); None: no clustered candidate.
+
+        Returns
+        -------
+        StructureFit, SearchReport
+
+        Raises
+        ------
+        ValueError
+            Orders below 1, too little data to hold any out (the message says how much is
+            needed), or when every linear candidate diverges on the held-out experiments.
+        """
+        self._check()
+        if na < 1 or nb < 1:
+            raise ValueError(f"the structure search needs na >= 1 and nb >= 1 as its largest "
+                             f"orders; got na={na}, nb={nb}")
+        return _Search(self, experiments, na, nb, cluster).run()
+
+
+class _Search:
+    """One run of :meth:`StructureSearch.search`."""
+
+    def __init__(self, params: StructureSearch, experiments: list, na: int, nb: int,
+                 cluster: Callable | None):
+        self.p, self.na, self.nb, self.cluster = params, na, nb, cluster
+        self.t0 = time.perf_counter()
+        self.lags = na + 1
+        self.warmup = max(self.lags, nb, WARMUP)
+        self.m, self.r = experiments[0][1].shape[1], experiments[0][0].shape[1]
+        self.fit_exp, self.held_exp, self.split = split_experiments(
+            experiments, params.validation_fraction, min_samples=self.warmup + 20)
+        self.n_experiments = len(experiments)
+        self.n_fit = len(self.fit_exp)
+        self.reg = build_regressors(self.fit_exp, self.lags, nb, True)
+        if self.reg.phi.shape[0] < 2 * self.reg.phi.shape[1]:
+            raise ValueError(f"too few samples for the structure search: "
+                             f"{self.reg.phi.shape[0]} regressor rows for "
+                             f"{self.reg.phi.shape[1]} regressor entries")
+        self.held = _HeldOut(self.held_exp, self.lags, nb, self.warmup)
+        self.names = phi_names(self.m, self.r, self.lags, nb, True)
+        self.rows: list[dict] = []
+        self.time_limited = False
+
+    # -- helpers --------------------------------------------------------------------------
+    def late(self) -> bool:
+        """Whether the time bound has passed (sets the flag)."""
+        if time.perf_counter() - self.t0 > self.p.max_seconds:
+            self.time_limited = True
+        return self.time_limited
+
+    def record(self, stage: str, group: list[int], specs: dict, cost: float, outcome: str,
+               models: dict | None = None) -> None:
+        outputs = ", ".join(f"y{j + 1}" for j in group)
+        structure = "; ".join(specs[j].describe() for j in group)
+        regions = "" if models is None else "/".join(str(models[j].n_regions) for j in group)
+        self.rows.append({"stage": stage, "outputs": outputs, "structure": structure,
+                          "regions": regions, "validation_nrmse": cost, "outcome": outcome,
+                          "seconds": round(time.perf_counter() - self.t0, 3)})
+
+    def model(self, j: int, spec: OutputSpec, coupling: str) -> OutputModel:
+        """Output j's model of ``spec``, least squares on the fitting rows."""
+        M, c, names = output_regressors(j, self.m, self.r, spec.na, spec.nb, True, spec.form,
+                                        coupling, phi_lags=self.lags, phi_nb=self.nb)
+        if not spec.variables:
+            om = OutputModel(M, c, np.zeros(len(names), bool), 1, None, "linear", names)
+        else:
+            sign = SignRegions(np.array([v.weights for v in spec.variables]))
+            switching = np.array([n == "1" for n in names]) if spec.switch == "offset" \
+                else np.ones(len(names), bool)
+            om = OutputModel(M, c, switching, sign.n_regions, sign, spec.switch, names)
+        return om.fit(self.reg.phi, self.reg.target[:, j])
+
+    def cost(self, models: dict, group: list[int]) -> float:
+        return float(np.mean(self.held.nrmse(models, group)))
+
+    # -- stages ---------------------------------------------------------------------------
+    def run(self) -> tuple[StructureFit, SearchReport]:
+        linear, coupling = self.linear_stage()
+        groups = [[j] for j in range(self.m)] if coupling == "decoupled" \
+            else [list(range(self.m))]
+        chosen: dict[int, OutputModel] = {}
+        notes, refined_info = [], []
+        lin_costs, final_costs = [], []
+        # the linear reference of every group first: the fallback, whatever time remains
+        references = [self.refined(group, {j: linear[j][0] for j in group},
+                                   {j: linear[j][1] for j in group}, "linear")
+                      for group in groups]
+        for group, (lin_cost, lin_models, lin_info) in zip(groups, references, strict=True):
+            specs = {j: linear[j][0] for j in group}
+            path = self.scheduled_stage(group, specs, {j: linear[j][1] for j in group},
+                                        coupling)
+            candidates = path[-2:] + self.clustered_stage(group, specs, coupling)
+            best = (lin_cost, specs, lin_models, lin_info)
+            for cand_specs, cand_models in candidates:
+                if self.late():
+                    break
+                cost, models, info = self.refined(group, cand_specs, cand_models, "switching")
+                if cost < best[0]:
+                    best = (cost, cand_specs, models, info)
+            keep = best[1] is not specs
+            outcome = ("chosen: beats the linear model on the held-out experiments" if keep
+                       else "chosen: linear (no switching structure beat it on the held-out "
+                            "experiments)")
+            final_costs.append(best[0])
+            best_specs, best_models = best[1], best[2]
+            chosen.update(best_models)
+            refined_info.append(best[3])
+            lin_costs.append(lin_cost)
+            self.record("chosen", group, best_specs, final_costs[-1], outcome, best_models)
+            label = ", ".join(f"y{j + 1}" for j in group)
+            notes.append(f"{label}: {'; '.join(best_specs[j].describe() for j in group)} "
+                         f"(held-out NRMSE {final_costs[-1]:.4g}, linear "
+                         f"{lin_cost:.4g})")
+        if self.p.refit and not self.late():
+            chosen = self.refit(groups, chosen)
+        all_linear = all(o.structure == "linear" for o in chosen.values())
+        weights = [len(g) for g in groups]
+        final = float(np.average(final_costs, weights=weights))
+        lin = float(np.average(lin_costs, weights=weights))
+        choice = (f"{coupling} outputs, {self.split}. "
+                  + ("Linear ARX: no switching structure beat it. " if all_linear else "")
+                  + " ".join(notes))
+        if self.time_limited:
+            choice += f" Time limit of {self.p.max_seconds:g} s reached: best so far kept."
+            warnings.warn(f"the structure search reached its time limit of "
+                          f"{self.p.max_seconds:g} s and kept the best structure so far",
+                          SearchTimeLimit, stacklevel=4)
+        seconds = time.perf_counter() - self.t0
+        report = SearchReport(table=pd.DataFrame(self.rows), choice=choice,
+                              linear=all_linear, time_limited=self.time_limited,
+                              validation_nrmse=final, linear_nrmse=lin, seconds=seconds)
+        n_val = self.n_experiments - self.n_fit
+        fit = StructureFit(
+            model=StructuredModel([chosen[j] for j in range(self.m)], self.lags),
+            validation_experiments=list(range(self.n_experiments - n_val, self.n_experiments)),
+            validation_cost={}, refinement=[i for i in refined_info if i])
+        return fit, report
+
+    def linear_stage(self) -> tuple[dict[int, tuple[OutputSpec, OutputModel]], str]:
+        """The best linear model per output (decoupled) and jointly; returns the better
+        coupling's models and the coupling."""
+        everything = list(range(self.m))
+        orders = [(a, b) for a in range(1, self.na + 1) for b in range(1, self.nb + 1)]
+        per_output: dict[int, tuple] = {}
+        joint: tuple | None = None
+        for form in self.p.forms:
+            for a, b in orders:
+                spec = OutputSpec(form, a, b)
+                specs = dict.fromkeys(everything, spec)
+                if "decoupled" in self.p.couplings:
+                    for j in everything:
+                        models = {j: self.model(j, spec, "decoupled")}
+                        cost = self.cost(models, [j])
+                        self.record("linear", [j], specs, cost, "decoupled", models)
+                        if cost < per_output.get(j, (None, None, np.inf))[2]:
+                            per_output[j] = (spec, models[j], cost)
+                if "joint" in self.p.couplings:
+                    models = {j: self.model(j, spec, "joint") for j in everything}
+                    cost = self.cost(models, everything)
+                    self.record("linear", everything, specs, cost, "joint", models)
+                    if joint is None or cost < joint[0]:
+                        joint = (cost, {j: (spec, models[j]) for j in everything})
+        best_cost, best = {}, {}
+        if len(per_output) == self.m:
+            best_cost["decoupled"] = float(np.mean([per_output[j][2] for j in everything]))
+            best["decoupled"] = {j: per_output[j][:2] for j in everything}
+        if joint is not None:
+            best_cost["joint"], best["joint"] = joint
+        finite = {k: v for k, v in best_cost.items() if np.isfinite(v)}
+        if not finite:
+            raise ValueError("every linear candidate of the structure search diverges in "
+                             "free run on the held-out experiments; check the data (units, "
+                             "drifts) or lower the largest orders")
+        coupling = min(finite, key=finite.get)
+        return best[coupling], coupling
+
+    def variables(self, j: int, coupling: str) -> list[Variable]:
+        """The scheduling variables output j's regions may read."""
+        out = []
+        names, data = self.names, self.reg.phi
+        const = np.zeros(len(names))
+        const[-1] = 1.0
+
+        def unit(name):
+            e = np.zeros(len(names))
+            e[names.index(name)] = 1.0
+            return e
+
+        def thresholds(column: str, owner: int | None):
+            values = data[:, names.index(column)]
+            for t in np.unique(np.round(np.quantile(values, QUANTILES), 12)):
+                out.append(Variable(f"{column} > {t:.4g}", unit(column) - t * const, owner))
+
+        own = [j] if coupling == "decoupled" else range(self.m)
+        for q in own:
+            y1, y2 = f"y{q + 1}(k-1)", f"y{q + 1}(k-2)"
+            out.append(Variable(f"Δy{q + 1}(k-1) > 0", unit(y1) - unit(y2), q))
+            thresholds(y1, q)
+        for q in range(self.r):
+            u1 = f"u{q + 1}(k-1)"
+            values = data[:, names.index(u1)]
+            if values.min() < 0 < values.max():
+                out.append(Variable(f"{u1} > 0", unit(u1), None))
+            thresholds(u1, None)
+            if self.nb >= 2:
+                out.append(Variable(f"Δu{q + 1}(k-1) > 0", unit(u1) - unit(f"u{q + 1}(k-2)"),
+                                    None))
+        return out
+
+    def enough_rows(self, om: OutputModel) -> bool:
+        """Whether every region of a scheduled model holds enough fitting rows."""
+        need = ROWS_PER_PARAMETER * int(om.switching.sum()) + 1
+        counts = np.bincount(om.regions(self.reg.phi), minlength=om.n_regions)
+        return bool(counts.min() >= need)
+
+    def scheduled_stage(self, group: list[int], specs: dict, models: dict, coupling: str
+                        ) -> list[tuple[dict, dict]]:
+        """Greedy choice of scheduling variables per output of the group: the structures
+        kept in turn (specs and least-squares models by output), each with one variable
+        more than the one before."""
+        specs, models = dict(specs), dict(models)
+        path = []
+        current = self.cost(models, group)
+        for j in group:
+            pool = self.variables(j, coupling)
+            for _ in range(self.p.max_variables):
+                if self.late():
+                    break
+                best = None
+                for var in pool:
+                    if var in specs[j].variables:
+                        continue
+                    for switch in self.p.switches:
+                        if self.late():
+                            break
+                        spec = replace(specs[j], variables=specs[j].variables + (var,),
+                                       switch=switch)
+                        trial = {**models, j: self.model(j, spec, coupling)}
+                        tried = {**specs, j: spec}
+                        if not self.enough_rows(trial[j]):
+                            self.record("scheduled", group, tried, np.nan,
+                                        "skipped: a region holds too few training rows")
+                            continue
+                        cost = self.cost(trial, group)
+                        outcome = "diverged" if not np.isfinite(cost) else "tried"
+                        self.record("scheduled", group, tried, cost, outcome, trial)
+                        if np.isfinite(cost) and (best is None or cost < best[0]):
+                            best = (cost, spec, trial[j])
+                if best is None or not best[0] < current * (1 - self.p.min_gain):
+                    break
+                current = best[0]
+                specs[j], models[j] = best[1], best[2]
+                path.append((dict(specs), dict(models)))
+                self.record("scheduled", group, specs, current,
+                            f"kept for y{j + 1}: lowers the held-out NRMSE by "
+                            f"{self.p.min_gain:.0%} or more", models)
+        return path
+
+    def clustered_stage(self, group: list[int], specs: dict, coupling: str
+                        ) -> list[tuple[dict, dict]]:
+        """The paper's clustered regions on the group's regressors (those of its linear
+        reference): a candidate beside the scheduled ones, or none."""
+        if not self.p.clustering or self.cluster is None or self.late():
+            return []
+        base = specs[group[0]]
+        spec = OutputSpec(base.form, base.na, base.nb, switch="clustered")
+        parts = [output_regressors(j, self.m, self.r, spec.na, spec.nb, True, spec.form,
+                                   coupling, phi_lags=self.lags, phi_nb=self.nb)
+                 for j in group]
+        M, names = parts[0][0], parts[0][2]  # the same ψ for every output of the group
+        cs = np.array([c for _, c, _ in parts])
+        tried = dict.fromkeys(group, spec)
+        try:
+            thetas, regions, s = self.cluster(Regressors(
+                phi=self.reg.phi @ M.T, target=self.reg.target[:, group] - self.reg.phi @ cs.T,
+                experiment=self.reg.experiment, time=self.reg.time,
+                n_inputs=self.reg.n_inputs))
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            self.record("clustered", group, tried, np.nan, f"skipped: {exc}")
+            return []
+        trial = {j: OutputModel(M, cs[jj], np.ones(M.shape[0], bool), s,
+                                ProjectedRegions(M, regions), "clustered", names,
+                                p=thetas[:, :, jj].ravel())
+                 for jj, j in enumerate(group)}
+        cost = self.cost(trial, group)
+        useful = bool(np.isfinite(cost)) and s > 1
+        self.record("clustered", group, tried, cost,
+                    "candidate: refined next" if useful else
+                    ("one cluster: the linear model" if s == 1 else "diverged"), trial)
+        return [(tried, trial)] if useful else []
+
+    def refined(self, group: list[int], specs: dict, models: dict, label: str):
+        """The group's models refined on the free-run error (as given without a
+        refinement); returns (held-out NRMSE, models, refinement info)."""
+        step = self.p.refinement_step()
+        cost0 = self.cost(models, group)
+        if step is None or self.late():
+            return cost0, models, {}
+        models = {j: replace_p(models[j]) for j in group}
+        fit_u, fit_y = [e[0] for e in self.fit_exp], [e[1] for e in self.fit_exp]
+        remaining = max(1.0, self.p.max_seconds - (time.perf_counter() - self.t0))
+        try:
+            res = refine_outputs(models, group, fit_u, fit_y, self.lags, self.nb, True,
+                                 self.warmup, validation=(self.held.u, self.held.y),
+                                 max_iter=step.max_iter,
+                                 max_seconds=min(step.max_seconds, remaining), tol=step.tol,
+                                 patience=step.patience, one_step_weight=step.one_step_weight)
+        except ValueError as exc:
+            self.record("refined", group, specs, cost0, f"not refined: {exc}", models)
+            return cost0, models, {}
+        offsets = np.cumsum([0] + [models[j].n_params for j in group])
+        start = {j: models[j].p for j in group}
+        for jj, j in enumerate(group):
+            models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+        cost = self.cost(models, group)
+        if not cost <= cost0:  # the refinement's own choice is on J_w; keep the start if better
+            for j in group:
+                models[j].p = start[j]
+            cost = cost0
+        self.record("refined", group, specs, cost, f"refined ({res.stop})", models)
+        info = {"outputs": group, "structure": label, "seconds": res.seconds,
+                "n_iter": res.n_iter, "stop": res.stop, "cost_start": res.cost_start,
+                "cost": res.cost, "one_step_start": res.one_step_start,
+                "one_step": res.one_step_cost}
+        return cost, models, info
+
+
+    def refit(self, groups: list[list[int]], chosen: dict[int, OutputModel]
+              ) -> dict[int, OutputModel]:
+        """The chosen structure fitted again on every training experiment, held-out ones
+        included: least squares in the chosen regions, then the refinement (no iterate to
+        choose now: it stops by its tolerance or ``max_iter``). A group whose refit free
+        run diverges keeps the models fitted without the held-out experiments."""
+        experiments = self.fit_exp + self.held_exp
+        reg = build_regressors(experiments, self.lags, self.nb, True)
+        u, y = [e[0] for e in experiments], [e[1] for e in experiments]
+        step = self.p.refinement_step()
+        out = dict(chosen)
+        for group in groups:
+            remaining = max(1.0, self.p.max_seconds - (time.perf_counter() - self.t0))
+            models = {j: replace_p(chosen[j]).fit(reg.phi, reg.target[:, j]) for j in group}
+            if step is not None:
+                try:
+                    res = refine_outputs(models, group, u, y, self.lags, self.nb, True,
+                                         self.warmup, max_iter=step.max_iter,
+                                         max_seconds=min(step.max_seconds, remaining),
+                                         tol=step.tol,
+                                         one_step_weight=step.one_step_weight)
+                except ValueError as exc:
+                    self.rows.append({"stage": "refit",
+                                      "outputs": ", ".join(f"y{j + 1}" for j in group),
+                                      "outcome": f"kept as fitted without the held-out "
+                                                 f"experiments: {exc}",
+                                      "seconds": round(time.perf_counter() - self.t0, 3)})
+                    continue
+                offsets = np.cumsum([0] + [models[j].n_params for j in group])
+                for jj, j in enumerate(group):
+                    models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+            out.update(models)
+        return out
+
+
+def replace_p(om: OutputModel) -> OutputModel:
+    """A copy of an output model with its own parameter vector (the refinement sets it)."""
+    return replace(om, p=om.p.copy())

@@ -1,0 +1,206 @@
+"""The structure search (PWARX.auto): it finds the switching a machine was built with, falls
+back to the linear model, and says what it did."""
+
+import copy
+import warnings
+
+import numpy as np
+import pytest
+
+from pwa_pipeline import PWARX, LinearARX
+from pwa_pipeline.config import build_pwarx
+from pwa_pipeline.pwa import SearchTimeLimit, StructureSearch, structure_search
+from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.pwa.structure_search import split_experiments
+
+FAST = {"clustering": False, "max_variables": 1, "forms": ["level"]}
+
+
+def friction_machine(n_experiments: int = 12, n: int = 300, seed: int = 0,
+                     friction: float = 0.08):
+    """y(k) = 1.5 y(k−1) − 0.6 y(k−2) + 0.3 u(k−1) − f·sign(y(k−1) − y(k−2)) + noise: a
+    mass with Coulomb friction, whose offset flips with the sign of the velocity."""
+    rng = np.random.default_rng(seed)
+    us, ys = [], []
+    for _ in range(n_experiments):
+        u = np.repeat(rng.uniform(-1, 1, n // 10), 10)[:, None]
+        y = np.zeros((n, 1))
+        for k in range(2, n):
+            v = y[k - 1, 0] - y[k - 2, 0]
+            y[k, 0] = (1.5 * y[k - 1, 0] - 0.6 * y[k - 2, 0] + 0.3 * u[k - 1, 0]
+                       - friction * np.sign(v))
+        us.append(u)
+        ys.append(y + 0.002 * rng.standard_normal((n, 1)))
+    return us, ys
+
+
+@pytest.fixture(scope="module")
+def friction_fit():
+    u, y = friction_machine()
+    return PWARX.auto(na=2, nb=1, **FAST).fit(u, y), (u, y)
+
+
+def test_search_finds_the_velocity_sign_and_the_friction_offset(friction_fit):
+    model, _ = friction_fit
+    report = model.structure_search_
+    (out,) = model.structure_.outputs
+    assert report.linear is False
+    assert out.n_regions == 2
+    # the one variable kept is the sign of the output's increment, as the machine was built
+    (w,) = out.region_of.weights
+    names = ["y1(k-1)", "y1(k-2)", "y1(k-3)", "u1(k-1)", "1"]
+    assert dict(zip(names, w, strict=True)) == {"y1(k-1)": 1.0, "y1(k-2)": -1.0,
+                                               "y1(k-3)": 0.0, "u1(k-1)": 0.0, "1": 0.0}
+    # its two regions' constants are the friction, ±0.08, within noise
+    thetas = model.structure_.thetas[0]
+    np.testing.assert_allclose(sorted(thetas[:, -1]), [-0.08, 0.08], atol=0.01)
+    np.testing.assert_allclose(thetas[:, names.index("u1(k-1)")], [0.3, 0.3], atol=0.02)
+    assert report.validation_nrmse < 0.8 * report.linear_nrmse
+    chosen = report.table[report.table.stage == "chosen"]
+    assert chosen.structure.item() == "level (2, 1), offset on [Δy1(k-1) > 0]" or \
+        chosen.structure.item() == "level (2, 1), all on [Δy1(k-1) > 0]"
+    assert chosen.outcome.item().startswith("chosen: beats the linear model")
+
+
+def test_search_beats_linear_arx_on_unseen_experiments(friction_fit):
+    model, (u, y) = friction_fit
+    test_u, test_y = friction_machine(n_experiments=4, seed=99)
+    linear = LinearARX(na=2, nb=1, affine=True).fit(u, y)
+    from pwa_pipeline import evaluate
+
+    pwa = evaluate(model, test_u, test_y, warmup=10).mean("free_run")
+    lin = evaluate(linear, test_u, test_y, warmup=10).mean("free_run")
+    assert pwa < 0.5 * lin
+
+
+def test_state_space_export_of_a_searched_model_simulates_alike(friction_fit):
+    model, (u, y) = friction_fit
+    ss = model.to_state_space()
+    np.testing.assert_allclose(ss.simulate(u[0], y[0][:10]), model.simulate(u[0], y[0][:10]),
+                               rtol=0, atol=1e-8)
+    assert ss.n_modes == 2
+
+
+def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
+    u, y = friction_machine(friction=0.0)
+    model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    report = model.structure_search_
+    assert report.linear is True
+    assert model.structure_.structures == ["linear"]
+    assert "Linear ARX: no switching structure beat it" in report.choice
+    assert report.validation_nrmse == report.linear_nrmse
+
+
+def test_the_linear_fallback_wins_over_a_switching_structure_worse_on_held_out_data(
+        monkeypatch):
+    """A switching structure the greedy search kept whose refined free run is worse than the
+    linear model's is not returned (drop the fallback and this fails)."""
+    refined = structure_search._Search.refined
+
+    def worse(self, group, specs, models, label):
+        cost, models, info = refined(self, group, specs, models, label)
+        return (cost * 10 if label == "switching" else cost), models, info
+
+    monkeypatch.setattr(structure_search._Search, "refined", worse)
+    u, y = friction_machine()
+    model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    assert model.structure_.structures == ["linear"]
+    assert model.structure_search_.linear is True
+    assert model.structure_search_.validation_nrmse == model.structure_search_.linear_nrmse
+
+
+def test_one_record_is_split_in_time_and_a_short_one_is_refused():
+    u, y = friction_machine(n_experiments=1, n=1200)
+    model = PWARX.auto(na=2, nb=1, **FAST).fit(u[0], y[0])
+    assert "a single record: its last 240 of 1200 samples held out" in \
+        model.structure_search_.choice
+    with pytest.raises(ValueError, match="needs at least 2 experiments, or one record of at "
+                                         "least 150 samples to split in time; got one record "
+                                         "of 100 samples"):
+        PWARX.auto(na=2, nb=1, **FAST).fit(u[0][:100], y[0][:100])
+
+
+def test_split_holds_out_the_last_experiments():
+    exps = [(np.zeros((5, 1)), np.full((5, 1), i)) for i in range(10)]
+    fit, held, how = split_experiments(exps, 0.2, min_samples=3)
+    assert [e[1][0, 0] for e in held] == [8, 9] and len(fit) == 8
+    assert how == "experiments 9–10 of 10 held out"
+
+
+def test_time_limit_keeps_the_best_so_far_and_flags_it():
+    u, y = friction_machine()
+    with pytest.warns(SearchTimeLimit, match="time limit of 1e-06 s"):
+        model = PWARX.auto(na=2, nb=1, max_seconds=1e-6, **FAST).fit(u, y)
+    report = model.structure_search_
+    assert report.time_limited and "Time limit of 1e-06 s reached" in report.choice
+    assert np.isfinite(model.simulate(u[0], y[0])).all()
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"forms": ["levels"]}, r"forms must be a non-empty list of \['level', 'velocity'\]"),
+    ({"couplings": []}, "couplings must be a non-empty list"),
+    ({"max_variables": 9}, "max_variables"),
+])
+def test_bad_search_parameters_are_named(kwargs, message):
+    u, y = friction_machine(n_experiments=3, n=100)
+    with pytest.raises(ValueError, match=message):
+        PWARX.auto(na=2, nb=1, **kwargs).fit(u, y)
+
+
+def test_the_search_refuses_structures_it_chooses_itself():
+    u, y = friction_machine(n_experiments=3, n=100)
+    with pytest.raises(ValueError, match="leave form, refinement out"):
+        PWARX.auto(na=2, nb=1).set_params(form="velocity",
+                                           refinement=StructureSearch().refinement_step()
+                                           ).fit(u, y)
+    with pytest.raises(ValueError, match="needs affine=True"):
+        PWARX.auto(na=2, nb=1).set_params(affine=False).fit(u, y)
+    with pytest.raises(ValueError, match="na >= 1 and nb >= 1"):
+        PWARX.auto(na=0, nb=1).fit(u, y)
+
+
+def test_preset_auto_in_the_hyper_parameter_file():
+    model = build_pwarx({"preset": "auto", "na": 3, "nb": 2, "search": {"max_seconds": 60}})
+    assert (model.na, model.nb, model.affine) == (3, 2, True)
+    assert model.search.max_seconds == 60
+    with pytest.raises(ValueError, match="preset 'auto' fits a constant term"):
+        build_pwarx({"preset": "auto", "affine": False})
+    with pytest.raises(ValueError, match=r"unknown search parameter\(s\) \['max_second'\]"):
+        build_pwarx({"preset": "auto", "search": {"max_second": 60}})
+
+
+def test_the_report_lists_every_candidate_with_its_outcome(friction_fit):
+    model, _ = friction_fit
+    table = model.structure_search_.table
+    assert list(table.columns) == ["stage", "outputs", "structure", "regions",
+                                   "validation_nrmse", "outcome", "seconds"]
+    assert table.seconds.is_monotonic_increasing
+    assert set(table.stage) >= {"linear", "scheduled", "refined", "chosen"}
+    # every candidate variable was tried with both switches
+    scheduled = table[(table.stage == "scheduled") & (table.outcome == "tried")]
+    assert scheduled.structure.str.contains("offset on").sum() == \
+        scheduled.structure.str.contains("all on").sum() > 5
+    summary = model.structure_search_.summary()
+    assert summary.outcome.str.startswith("kept").sum() == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(summary) < len(table)
+
+
+def test_refit_fits_the_chosen_regions_on_every_training_experiment(friction_fit):
+    model, (u, y) = friction_fit
+    refit = PWARX.auto(na=2, nb=1, refit=True, refinement="none", **FAST).fit(u, y)
+    (out,) = refit.structure_.outputs
+    np.testing.assert_array_equal(out.region_of.weights,
+                                  model.structure_.outputs[0].region_of.weights)
+    # least squares in the same regions on all twelve experiments, held-out ones included
+    everything = copy.deepcopy(out).fit(*_rows(u, y)).p
+    np.testing.assert_allclose(out.p, everything, rtol=1e-10)
+    without_held_out = copy.deepcopy(out).fit(*_rows(u[:10], y[:10])).p
+    assert not np.allclose(out.p, without_held_out, rtol=1e-6)
+
+
+def _rows(u, y):
+    """φ rows (3 output lags, 1 input lag, the constant) and the output of experiments."""
+    reg = build_regressors(list(zip(u, y, strict=True)), 3, 1, True)
+    return reg.phi, reg.target[:, 0]
