@@ -492,6 +492,38 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
     assert "parameters" in open(artifact).read()
 
 
+def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
+                                                                     mlflow_template):
+    path = tmp_path / "auto.toml"
+    path.write_text('[auto.hure_vasak]\npreset = "auto"\nna = 1\nnb = 1\n'
+                    'search.clustering = false\nsearch.max_variables = 1\n'
+                    'search.forms = ["level"]\nsearch.refinement = "none"\n')
+    custom = build_definitions(path)
+    resources = _resources(tmp_path, mlflow_template)
+    resources["settings"] = PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                             hparams_path=str(path))
+    result = dg.materialize([a for a in custom.assets if a.partitions_def is not None],
+                            partition_key="hure_vasak|auto", resources=resources)
+    assert result.success
+    model = result.asset_value("pwa_model")
+    report = model.structure_search_
+    assert model.search.max_variables == 1 and not report.time_limited
+    page = materialization(result, "pwa_model").metadata["structure search"].value
+    assert page.startswith(report.choice)
+    assert f"{len(report.table)} candidates tried" in page and "| chosen" in page
+    client, runs = _runs(resources, "hure_vasak")
+    pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
+    assert pwa_run.data.params["search__max_variables"] == "1"
+    assert pwa_run.data.metrics["model/search_linear"] == float(report.linear)
+    artifact = client.download_artifacts(pwa_run.info.run_id, "structure_search.csv",
+                                         str(tmp_path))
+    logged = pd.read_csv(artifact)
+    assert len(logged) == len(report.table)
+    assert list(logged.stage.unique()) == list(report.table.stage.unique())
+    # the export works for a searched model too
+    assert result.asset_value("control_model").state_space.n_modes >= 1
+
+
 def test_materialise_kuka_robot(resources, robot):
     result = dg.materialize(ASSETS, partition_key="kuka_robot|default", resources=resources)
     assert result.success

@@ -17,7 +17,7 @@ from ..datasets.kuka import find_kuka
 from .settings import PipelineSettings
 
 #: What ``python -m pwa_pipeline run`` materialises unless told otherwise.
-DEFAULT_SETS = ("paper", "default")
+DEFAULT_SETS = ("paper", "default", "auto")
 
 
 def build_partitions(hparams: HParamsFile, registered: list[str]

@@ -355,6 +355,10 @@ def structured_model(context: dg.AssetExecutionContext, configuration: Configura
     figure is not drawn and the metadata says why: each output has its own regions, over
     its own regressors, so no one slice of φ shows them."""
     t0 = time.perf_counter()
+    if (search := configuration.pwa.search) is not None:
+        context.log.info(f"structure search: orders up to ({configuration.pwa.na}, "
+                         f"{configuration.pwa.nb}), at most {search.max_seconds:g} s "
+                         f"(search.max_seconds)")
     model = clone(configuration.pwa).fit(data.u_train, data.y_train)
     fit = model.structure_fit_
     table = pd.DataFrame({"output": [data.label(y) for y in data.y_names],
@@ -374,9 +378,15 @@ def structured_model(context: dg.AssetExecutionContext, configuration: Configura
         structure = dg.MetadataValue.md(
             "Held-out free-run MSE of each candidate structure (in the output's unit "
             "squared); the kept one is under *structure*.\n\n" + structure.value)
+    report = getattr(model, "structure_search_", None)
+    found = {} if report is None else {"structure search": dg.MetadataValue.md(
+        f"{report.choice}\n\n{len(report.table)} candidates tried in {report.seconds:.1f} s; "
+        f"those kept, refined and chosen (every candidate is in the MLflow run's "
+        f"`structure_search.csv`):\n\n{markdown(report.summary()).value}")}
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
         "n_submodels": model.n_submodels_, "fit_seconds": seconds,
         "validation_experiments": ", ".join(map(str, fit.validation_experiments)),
+        **found,
         "structure per output": structure,
         "resolved parameters": markdown(params_table(model.resolved_params())),
         SWITCHING: dg.MetadataValue.md(to_markdown(

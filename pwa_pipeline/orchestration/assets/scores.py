@@ -94,6 +94,10 @@ def scores_asset(method: Method, partitions_def):
                 "outputs": data.y_names, "structure": model.structure_.structures,
                 "regressors": [o.names for o in model.structure_.outputs],
                 "parameters": [o.p.tolist() for o in model.structure_.outputs]}
+            if (search := getattr(model, "structure_search_", None)) is not None:
+                artifacts["structure_search.csv"] = search.table
+                facts.update(search_linear=float(search.linear),
+                             search_time_limited=float(search.time_limited))
         elif isinstance(model, PWARX):
             facts.update(n_submodels=model.n_submodels_,
                          noise_share=model.clustering_.noise_share_,
