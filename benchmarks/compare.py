@@ -6,7 +6,8 @@ experiment after a 10-sample warm-up. PWA runs with the sets ``paper``, ``defaul
 ``output_error`` of data/hparams.toml, the baselines with ``default`` (and linear ARX also with
 ``output_error``), and the PWA model and linear ARX in the robot's structure (set ``robot``:
 velocity form per joint, velocity-sign regions chosen per joint on held-out training
-experiments, refined), on the data sets that set has values for. Writes results/comparison.csv (dataset,
+experiments, refined), and the structure search ``PWARX.auto`` (set ``auto``), on the data
+sets that set has values for. Writes results/comparison.csv (dataset,
 hparams, method, mode, output, nrmse, r2, rmse), results/comparison.md (the paper's Table 1
 layout, one block per data set and mode), results/comparison_fit.csv (fit times, sub-model
 counts, divergence flags) and results/conventions.md: every method's free run in each
@@ -31,10 +32,12 @@ from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores
 
 #: (set, method) pairs compared: the PWA model in both settings, the baselines once, the
 #: PWA model and linear ARX with simulation-error refinement (set ``output_error``) and in
-#: the robot's structure (set ``robot``, on the data sets it has values for).
+#: the robot's structure (set ``robot``, on the data sets it has values for), and the
+#: structure search (set ``auto``; its linear twin is linear ARX of set ``default`` with a
+#: constant, the search's own linear reference is in its report).
 RUNS = ([("paper", "pwa")] + [("default", m) for m in METHODS]
         + [("output_error", "pwa"), ("output_error", "linear_arx"),
-           ("robot", "pwa"), ("robot", "linear_arx")])
+           ("robot", "pwa"), ("robot", "linear_arx"), ("auto", "pwa"), ("auto", "linear_arx")])
 #: Published free-run scores on the KUKA test record, each in its own convention:
 #: Fañanás-Anaya et al. (2025), Table VI — RMSE / range per joint, the test record run once.
 PUBLISHED = [("MA-LSTM-MLP (Fañanás-Anaya et al. 2025)", "range_single_run", 0.125),

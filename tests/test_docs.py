@@ -47,3 +47,17 @@ def test_readme_example_runs():
     assert result.returncode == 0, result.stderr
     expected = [line[4:] for line in shown.splitlines()]
     assert result.stdout.splitlines() == expected
+
+
+@pytest.mark.slow
+def test_readme_machine_example_finds_each_joints_velocity_sign():
+    """The README's structure-search example (about a minute) prints a choice with regions
+    on each joint's velocity sign, as its comment says."""
+    readme = (ROOT / "README.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", readme, re.S)[1]
+    assert "PWARX.auto" in code
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                            text=True, timeout=600, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 0, result.stderr
+    assert "velocity (2, 2)" in result.stdout
+    assert "Δy1(k-1) > 0" in result.stdout and "Δy2(k-1) > 0" in result.stdout
