@@ -204,3 +204,24 @@ def _rows(u, y):
     """φ rows (3 output lags, 1 input lag, the constant) and the output of experiments."""
     reg = build_regressors(list(zip(u, y, strict=True)), 3, 1, True)
     return reg.phi, reg.target[:, 0]
+
+
+def test_a_diverging_candidate_is_listed_and_never_chosen(monkeypatch):
+    """A candidate whose held-out free run blows up is recorded as diverged and skipped."""
+    model_of = structure_search._Search.model
+
+    def unstable_offsets(self, j, spec, coupling):
+        om = model_of(self, j, spec, coupling)
+        if spec.switch == "offset":  # y(k) ≈ 3 y(k−1): every offset candidate diverges
+            om.p = om.p.copy()
+            om.p[0] = 3.0
+        return om
+
+    monkeypatch.setattr(structure_search._Search, "model", unstable_offsets)
+    u, y = friction_machine()
+    model = PWARX.auto(na=2, nb=1, refinement="none", **FAST).fit(u, y)
+    table = model.structure_search_.table
+    offsets = table[(table.stage == "scheduled") & table.structure.str.contains("offset on")]
+    assert len(offsets) > 5 and (offsets.outcome == "diverged").all()
+    assert np.isinf(offsets.validation_nrmse).all()
+    assert model.structure_.structures == ["all"]
