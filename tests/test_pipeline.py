@@ -459,18 +459,26 @@ def test_unreachable_tracking_server_fails_clearly_and_keeps_assets(resources, t
     assert (tmp_path / "storage" / "pwa_model" / "hure_vasak" / "paper.pkl").is_file()
 
 
-def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template):
-    path = tmp_path / "structured.toml"
-    path.write_text('[moving.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
-                    'outputs = "decoupled"\nscheduling.switch = "select"\n'
-                    'refinement.max_iter = 3\n')
+def _materialize_set(tmp_path, mlflow_template, hparams: str, table: str):
+    """Materialise ``hure_vasak|<hparams>`` of a hyper-parameter file holding only
+    ``[<hparams>.hure_vasak]`` with the keys ``table``; returns (result, resources)."""
+    path = tmp_path / "hparams.toml"
+    path.write_text(f"[{hparams}.hure_vasak]\n{table}")
     custom = build_definitions(path)
     resources = _resources(tmp_path, mlflow_template)
     resources["settings"] = PipelineSettings(cache_dir=str(tmp_path / "cache"),
                                              hparams_path=str(path))
     result = dg.materialize([a for a in custom.assets if a.partitions_def is not None],
-                            partition_key="hure_vasak|moving", resources=resources)
+                            partition_key=f"hure_vasak|{hparams}", resources=resources)
     assert result.success
+    return result, resources
+
+
+def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template):
+    result, resources = _materialize_set(
+        tmp_path, mlflow_template, "moving",
+        'na = 1\nnb = 1\naffine = true\nform = "velocity"\noutputs = "decoupled"\n'
+        'scheduling.switch = "select"\nrefinement.max_iter = 3\n')
     model = result.asset_value("pwa_model")
     assert model.structured and set(model.structure_.structures) <= {"linear", "offset", "all"}
     assert result.asset_value("output_error_refinement") is None  # refined in pwa_model
@@ -494,17 +502,10 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
 
 def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
                                                                      mlflow_template):
-    path = tmp_path / "auto.toml"
-    path.write_text('[auto.hure_vasak]\npreset = "auto"\nna = 1\nnb = 1\n'
-                    'search.clustering = false\nsearch.max_variables = 1\n'
-                    'search.forms = ["level"]\nsearch.refinement = "none"\n')
-    custom = build_definitions(path)
-    resources = _resources(tmp_path, mlflow_template)
-    resources["settings"] = PipelineSettings(cache_dir=str(tmp_path / "cache"),
-                                             hparams_path=str(path))
-    result = dg.materialize([a for a in custom.assets if a.partitions_def is not None],
-                            partition_key="hure_vasak|auto", resources=resources)
-    assert result.success
+    result, resources = _materialize_set(
+        tmp_path, mlflow_template, "auto",
+        'preset = "auto"\nna = 1\nnb = 1\nsearch.clustering = false\n'
+        'search.max_variables = 1\nsearch.forms = ["level"]\nsearch.refinement = "none"\n')
     model = result.asset_value("pwa_model")
     report = model.structure_search_
     assert model.search.max_variables == 1 and not report.time_limited
