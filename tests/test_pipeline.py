@@ -1,6 +1,7 @@
 """The Dagster layer: definitions, materialisation, MLflow tracking, schedule, storage."""
 
 import base64
+import logging
 import shutil
 from pathlib import Path
 
@@ -509,9 +510,9 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     model = result.asset_value("pwa_model")
     report = model.structure_search_
     assert model.search.max_variables == 1 and not report.time_limited
-    page = materialization(result, "pwa_model").metadata["structure search"].value
-    assert page.startswith(report.choice)
-    assert f"{len(report.table)} candidates tried" in page and "| chosen" in page
+    page_meta = materialization(result, "pwa_model").metadata
+    page = page_meta["structure search"].value
+    assert page.startswith(f"{len(report.table)} candidates tried") and "| chosen" in page
     client, runs = _runs(resources, "hure_vasak")
     pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
     assert pwa_run.data.params["search__max_variables"] == "1"
@@ -521,8 +522,33 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     logged = pd.read_csv(artifact)
     assert len(logged) == len(report.table)
     assert list(logged.stage.unique()) == list(report.table.stage.unique())
+    assert list(logged.columns[:4]) == ["stage", "outputs", "validation_nrmse", "outcome"]
+    np.testing.assert_allclose(logged.validation_nrmse, report.table.validation_nrmse,
+                               rtol=5e-4)
+    assert pwa_run.data.metrics["model/search_linear_nrmse"] == pytest.approx(
+        report.linear_nrmse, rel=1e-3)
+    assert page_meta["structure chosen"].value == report.choice
+    assert page_meta["structure per output"].value.count("level (1, 1)") == 2
     # the export works for a searched model too
     assert result.asset_value("control_model").state_space.n_modes >= 1
+
+
+def test_a_core_loggers_lines_reach_the_run_log_while_the_step_runs():
+    from pwa_pipeline.orchestration.assets.identification import forwarded
+
+    got = []
+
+    class RunLog:
+        def info(self, message):
+            got.append(message)
+
+    core = logging.getLogger("pwa_pipeline.pwa.some_step")
+    with forwarded(core.name, RunLog()):
+        core.info("stage %d of %d", 1, 3)
+        core.debug("not at INFO")
+    core.info("after the step")
+    assert got == ["stage 1 of 3"]
+    assert not core.handlers
 
 
 def test_materialise_kuka_robot(resources, robot):

@@ -225,3 +225,13 @@ def test_a_diverging_candidate_is_listed_and_never_chosen(monkeypatch):
     assert len(offsets) > 5 and (offsets.outcome == "diverged").all()
     assert np.isinf(offsets.validation_nrmse).all()
     assert model.structure_.structures == ["all"]
+
+
+def test_the_search_says_its_progress_a_line_per_stage(caplog):
+    u, y = friction_machine()
+    with caplog.at_level("INFO", logger=structure_search.SEARCH_LOG):
+        PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    lines = [r.getMessage() for r in caplog.records if r.name == structure_search.SEARCH_LOG]
+    assert lines[0].startswith("structure search: linear reference decoupled (y1 level (2, 1)")
+    assert lines[1].startswith("structure search: y1: scheduled regions and clusters (")
+    assert lines[2].startswith("structure search: y1: level (2, 1)") and "of at most 150 s" in lines[2]

@@ -40,6 +40,7 @@ A candidate whose free run diverges is skipped; when ``max_seconds`` is reached 
 structure so far is kept and the report is flagged.
 """
 
+import logging
 import time
 import warnings
 from collections.abc import Callable
@@ -68,6 +69,9 @@ QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
 DIVERGED = 10.0
 #: Fewest training rows a scheduled region needs per parameter it switches.
 ROWS_PER_PARAMETER = 3
+#: The standard-library logger of the search's progress: a line per stage at INFO.
+SEARCH_LOG = __name__
+_log = logging.getLogger(SEARCH_LOG)
 
 
 class SearchTimeLimit(UserWarning):
@@ -127,6 +131,8 @@ class SearchReport:
         ``seconds`` (since the search started).
     choice : str
         Per output group, the structure kept and why, in a sentence each.
+    structures : list of str
+        Each output's structure as the table writes it (form, orders, regions).
     linear : bool
         Whether every output kept its linear model: the search returns the linear ARX
         model (no switching structure beat it on the held-out experiments).
@@ -141,6 +147,7 @@ class SearchReport:
 
     table: pd.DataFrame
     choice: str
+    structures: list[str]
     linear: bool
     time_limited: bool
     validation_nrmse: float
@@ -149,14 +156,18 @@ class SearchReport:
 
     def summary(self) -> pd.DataFrame:
         """The rows that decided: the best linear candidate of each coupling, the variables
-        kept, the clustered candidates, the refinements and the choices."""
+        kept, the clustered candidates, the refinements and the choices (a linear row's
+        outcome says which coupling it is the best of)."""
         t = self.table
         linear = t[t.stage == "linear"]
         best = [g.validation_nrmse.idxmin() for _, g in linear.groupby(["outputs", "outcome"])
                 if g.validation_nrmse.notna().any()]
         decided = t.stage.isin(["clustered", "refined", "chosen"]) \
             | t.outcome.str.startswith("kept")
-        return t.loc[sorted(set(best) | set(t.index[decided]))]
+        out = t.loc[sorted(set(best) | set(t.index[decided]))].copy()
+        out.loc[out.stage == "linear", "outcome"] = \
+            "best " + out.outcome[out.stage == "linear"] + " linear"
+        return out
 
 
 def split_experiments(experiments: list, fraction: float, min_samples: int
@@ -370,6 +381,10 @@ class _Search:
         self.time_limited = False
 
     # -- helpers --------------------------------------------------------------------------
+    def elapsed(self) -> str:
+        """Seconds since the search started, against its bound, for the progress lines."""
+        return f"{time.perf_counter() - self.t0:.0f} of at most {self.p.max_seconds:g} s"
+
     def late(self) -> bool:
         """Whether the time bound has passed (sets the flag)."""
         if time.perf_counter() - self.t0 > self.p.max_seconds:
@@ -378,7 +393,7 @@ class _Search:
 
     def record(self, stage: str, group: list[int], specs: dict, cost: float, outcome: str,
                models: dict | None = None) -> None:
-        outputs = ", ".join(f"y{j + 1}" for j in group)
+        outputs = _outputs(group)
         structure = "; ".join(specs[j].describe() for j in group)
         regions = "" if models is None else "/".join(str(models[j].n_regions) for j in group)
         self.rows.append({"stage": stage, "outputs": outputs, "structure": structure,
@@ -407,14 +422,20 @@ class _Search:
         groups = [[j] for j in range(self.m)] if coupling == "decoupled" \
             else [list(range(self.m))]
         chosen: dict[int, OutputModel] = {}
+        described: dict[int, str] = {}
         notes, refined_info = [], []
         lin_costs, final_costs = [], []
+        _log.info(f"structure search: linear reference {coupling} "
+                  f"({'; '.join(f'y{j + 1} {linear[j][0].describe()}' for j in range(self.m))}), "
+                  f"{self.split}; refining it ({self.elapsed()})")
         # the linear reference of every group first: the fallback, whatever time remains
         references = [self.refined(group, {j: linear[j][0] for j in group},
                                    {j: linear[j][1] for j in group}, "linear")
                       for group in groups]
         for group, (lin_cost, lin_models, lin_info) in zip(groups, references, strict=True):
             specs = {j: linear[j][0] for j in group}
+            _log.info(f"structure search: {_outputs(group)}: scheduled regions and clusters "
+                      f"({self.elapsed()})")
             path = self.scheduled_stage(group, specs, {j: linear[j][1] for j in group},
                                         coupling)
             candidates = path[-2:] + self.clustered_stage(group, specs, coupling)
@@ -435,17 +456,24 @@ class _Search:
             refined_info.append(best[3])
             lin_costs.append(lin_cost)
             self.record("chosen", group, best_specs, final_costs[-1], outcome, best_models)
-            label = ", ".join(f"y{j + 1}" for j in group)
-            notes.append(f"{label}: {'; '.join(best_specs[j].describe() for j in group)} "
-                         f"(held-out NRMSE {final_costs[-1]:.4g}, linear "
-                         f"{lin_cost:.4g})")
+            for j in group:
+                described[j] = best_specs[j].describe() + (
+                    f" ({best_models[j].n_regions} regions)" if best_models[j].n_regions > 1
+                    else "")
+            kept = "; ".join(f"y{j + 1}: {described[j]}" for j in group)
+            notes.append(f"{kept}. Held-out free-run NRMSE {final_costs[-1]:#.4g}, refined "
+                         f"linear reference {lin_cost:#.4g}.")
+            _log.info(f"structure search: {kept} (held-out NRMSE {final_costs[-1]:#.4g}, "
+                      f"linear {lin_cost:#.4g}; {self.elapsed()})")
         if self.p.refit and not self.late():
             chosen = self.refit(groups, chosen)
         all_linear = all(o.structure == "linear" for o in chosen.values())
         weights = [len(g) for g in groups]
         final = float(np.average(final_costs, weights=weights))
         lin = float(np.average(lin_costs, weights=weights))
-        choice = (f"{coupling} outputs, {self.split}. "
+        outputs = ("One model for all outputs (joint)" if coupling == "joint"
+                   else "One model per output (decoupled)")
+        choice = (f"{outputs}; {self.split}. "
                   + ("Linear ARX: no switching structure beat it. " if all_linear else "")
                   + " ".join(notes))
         if self.time_limited:
@@ -455,6 +483,7 @@ class _Search:
                           SearchTimeLimit, stacklevel=4)
         seconds = time.perf_counter() - self.t0
         report = SearchReport(table=pd.DataFrame(self.rows), choice=choice,
+                              structures=[described[j] for j in range(self.m)],
                               linear=all_linear, time_limited=self.time_limited,
                               validation_nrmse=final, linear_nrmse=lin, seconds=seconds)
         n_val = self.n_experiments - self.n_fit
@@ -675,8 +704,7 @@ class _Search:
                                          tol=step.tol,
                                          one_step_weight=step.one_step_weight)
                 except ValueError as exc:
-                    self.rows.append({"stage": "refit",
-                                      "outputs": ", ".join(f"y{j + 1}" for j in group),
+                    self.rows.append({"stage": "refit", "outputs": _outputs(group),
                                       "outcome": f"kept as fitted without the held-out "
                                                  f"experiments: {exc}",
                                       "seconds": round(time.perf_counter() - self.t0, 3)})
@@ -686,6 +714,11 @@ class _Search:
                     models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
             out.update(models)
         return out
+
+
+def _outputs(group: list[int]) -> str:
+    """E.g. ``"y1, y2"``."""
+    return ", ".join(f"y{j + 1}" for j in group)
 
 
 def replace_p(om: OutputModel) -> OutputModel:

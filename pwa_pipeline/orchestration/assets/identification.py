@@ -8,7 +8,10 @@ of every earlier one (the clustering needs φ, the sub-models the local models) 
 Selecting some of its assets fits the steps before them again, unstored, the costly ones
 from the store's caches."""
 
+import logging
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import dagster as dg
@@ -22,6 +25,7 @@ from ...methods import METHODS
 from ...pwa import PWARX, STEPS
 from ...pwa.arx import training_range
 from ...pwa.regressors import build_regressors
+from ...pwa.structure_search import SEARCH_LOG
 from ..caches import SignedMemory, cache_key, load_or_compute
 from ..checks import (
     CLUSTER_CHECKS,
@@ -68,8 +72,8 @@ CHAIN = ("regressors", "local_models", "clusters", "sub_models", "svm_regions",
 STEP_ASSETS = {**dict(zip(STEPS, CHAIN[1:5], strict=True)),
                "refinement": "output_error_refinement"}
 #: Why the step assets hold nothing for a set with a structure of its own.
-STRUCTURED_SKIP = ("not fitted: the set has a structure of its own (form, outputs or "
-                   "scheduling), whose steps pwa_model fits per output group")
+STRUCTURED_SKIP = ("not fitted: the set has a structure of its own or searches one (form, "
+                   "outputs, scheduling, or preset auto), which pwa_model fits whole")
 _DESCRIPTIONS = {
     "regressors": "φ(k) and y(k) of the training experiments (eq. 2–3), never spanning two "
                   "of them.",
@@ -101,9 +105,32 @@ _DESCRIPTIONS = {
 }
 
 
+@contextmanager
+def forwarded(logger_name: str, log) -> Iterator[None]:
+    """Send the INFO records of the standard-library logger ``logger_name`` (a core step's
+    progress, e.g. the structure search's stages) to ``log`` (Dagster's ``context.log``)
+    while the block runs."""
+
+    class Forward(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            log.info(record.getMessage())
+
+    logger, handler = logging.getLogger(logger_name), Forward(logging.INFO)
+    level = logger.level
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
 def _skipped(context: dg.AssetExecutionContext, asset: str) -> dg.Output:
-    """The empty output of a step asset of a structured set, said in the log too."""
-    context.log.info(f"{asset}: {STRUCTURED_SKIP}")
+    """The empty output of a step asset of a structured set, said once in the log (by the
+    first step) for all four."""
+    if asset == "local_models":
+        context.log.info(f"local_models, clusters, sub_models, svm_regions: {STRUCTURED_SKIP}")
     return dg.Output(None, output_name=asset, metadata={"skipped": STRUCTURED_SKIP,
                                                          "seconds": 0.0})
 
@@ -359,18 +386,28 @@ def structured_model(context: dg.AssetExecutionContext, configuration: Configura
         context.log.info(f"structure search: orders up to ({configuration.pwa.na}, "
                          f"{configuration.pwa.nb}), at most {search.max_seconds:g} s "
                          f"(search.max_seconds)")
-    model = clone(configuration.pwa).fit(data.u_train, data.y_train)
+    with forwarded(SEARCH_LOG, context.log):  # the search's progress, a line per stage
+        model = clone(configuration.pwa).fit(data.u_train, data.y_train)
     fit = model.structure_fit_
     table = pd.DataFrame({"output": [data.label(y) for y in data.y_names],
                           "structure": model.structure_.structures,
                           "regions": model.structure_.n_regions})
+    report = getattr(model, "structure_search_", None)
+    if report is not None:  # what the search chose, per output, in place of the kind alone
+        table["structure"] = report.structures
     kinds = {k for costs in fit.validation_cost.values() for k in costs}
     for kind in sorted(kinds, key=["linear", "offset", "all", "clustered"].index):
         table[kind] = [fit.validation_cost[j].get(kind, float("nan"))
                        for j in range(len(data.y_names))]
-    context.log.info(f"structured PWA model: {', '.join(model.structure_.structures)} in "
-                     f"{time.perf_counter() - t0:.1f} s")
     seconds = time.perf_counter() - t0
+    shapes = zip(data.y_names, model.structure_.structures, model.structure_.n_regions,
+                 strict=True)
+    context.log.info("structured PWA model: " + ", ".join(
+        f"{data.label(y)} {s} ({n} region{'s' if n > 1 else ''})" for y, s, n in shapes)
+        + f" in {seconds:.1f} s")
+    if report is not None:
+        context.log.info(f"structure search: {len(report.table)} candidates in "
+                         f"{report.seconds:.1f} s. {report.choice}")
     switching = structured_switching_inputs(model, data.u_test[0], data.y_test[0],
                                             data.y_names, data.u_names)
     structure = markdown(table.set_index("output"))
@@ -378,14 +415,25 @@ def structured_model(context: dg.AssetExecutionContext, configuration: Configura
         structure = dg.MetadataValue.md(
             "Held-out free-run MSE of each candidate structure (in the output's unit "
             "squared); the kept one is under *structure*.\n\n" + structure.value)
-    report = getattr(model, "structure_search_", None)
-    found = {} if report is None else {"structure search": dg.MetadataValue.md(
-        f"{report.choice}\n\n{len(report.table)} candidates tried in {report.seconds:.1f} s; "
-        f"those kept, refined and chosen (every candidate is in the MLflow run's "
-        f"`structure_search.csv`):\n\n{markdown(report.summary()).value}")}
+    found = {}
+    if report is not None:
+        # the rows that decided, without the row numbers (the CSV has none), missing
+        # errors (a skipped candidate) shown as a dash
+        rows = report.summary().rename(columns={"validation_nrmse": "held-out NRMSE",
+                                                "seconds": "elapsed (s)"})
+        rows["held-out NRMSE"] = rows["held-out NRMSE"].astype(object).where(
+            rows["held-out NRMSE"].notna(), None)
+        found = {"structure chosen": dg.MetadataValue.md(report.choice),
+                 "structure search": dg.MetadataValue.md(
+                     f"{len(report.table)} candidates tried in {report.seconds:.1f} s; those "
+                     f"kept, refined and chosen (every candidate is in the MLflow run's "
+                     f"`structure_search.csv`):\n\n"
+                     f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
+    held_out = ", ".join(map(str, fit.validation_experiments)) or (
+        "none: one record, split in time" if report is not None else "none")
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
         "n_submodels": model.n_submodels_, "fit_seconds": seconds,
-        "validation_experiments": ", ".join(map(str, fit.validation_experiments)),
+        "validation_experiments": held_out,
         **found,
         "structure per output": structure,
         "resolved parameters": markdown(params_table(model.resolved_params())),

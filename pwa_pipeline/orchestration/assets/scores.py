@@ -95,9 +95,16 @@ def scores_asset(method: Method, partitions_def):
                 "regressors": [o.names for o in model.structure_.outputs],
                 "parameters": [o.p.tolist() for o in model.structure_.outputs]}
             if (search := getattr(model, "structure_search_", None)) is not None:
-                artifacts["structure_search.csv"] = search.table
+                # the columns a reader compares first, numbers to 4 significant digits
+                artifacts["structure_search.csv"] = search.table[
+                    ["stage", "outputs", "validation_nrmse", "outcome", "regions", "seconds",
+                     "structure"]].assign(validation_nrmse=lambda t: t.validation_nrmse.map(
+                         lambda v: float(f"{v:.4g}")))
                 facts.update(search_linear=float(search.linear),
-                             search_time_limited=float(search.time_limited))
+                             search_time_limited=float(search.time_limited),
+                             search_validation_nrmse=search.validation_nrmse,
+                             search_linear_nrmse=search.linear_nrmse,
+                             search_seconds=search.seconds)
         elif isinstance(model, PWARX):
             facts.update(n_submodels=model.n_submodels_,
                          noise_share=model.clustering_.noise_share_,
