@@ -88,14 +88,10 @@ class Variable:
         As the report writes it, e.g. ``"Δy1(k-1) > 0"`` or ``"u2(k-1) > 0.31"``.
     weights : ndarray of shape (D,)
         w over φ's entries.
-    output : int or None
-        The output whose lags it reads (None: inputs only); a decoupled output's regions
-        read only its own output, so that its free run depends on itself alone.
     """
 
     name: str
     weights: np.ndarray = field(repr=False)
-    output: int | None
 
 
 @dataclass(frozen=True)
@@ -543,25 +539,26 @@ class _Search:
             e[names.index(name)] = 1.0
             return e
 
-        def thresholds(column: str, owner: int | None):
+        def thresholds(column: str):
             values = data[:, names.index(column)]
             for t in np.unique(np.round(np.quantile(values, QUANTILES), 12)):
-                out.append(Variable(f"{column} > {t:.4g}", unit(column) - t * const, owner))
+                out.append(Variable(f"{column} > {t:.4g}", unit(column) - t * const))
 
+        # a decoupled output's regions read its own output only, so that its free run
+        # depends on itself and the inputs alone
         own = [j] if coupling == "decoupled" else range(self.m)
         for q in own:
             y1, y2 = f"y{q + 1}(k-1)", f"y{q + 1}(k-2)"
-            out.append(Variable(f"Δy{q + 1}(k-1) > 0", unit(y1) - unit(y2), q))
-            thresholds(y1, q)
+            out.append(Variable(f"Δy{q + 1}(k-1) > 0", unit(y1) - unit(y2)))
+            thresholds(y1)
         for q in range(self.r):
             u1 = f"u{q + 1}(k-1)"
             values = data[:, names.index(u1)]
             if values.min() < 0 < values.max():
-                out.append(Variable(f"{u1} > 0", unit(u1), None))
-            thresholds(u1, None)
+                out.append(Variable(f"{u1} > 0", unit(u1)))
+            thresholds(u1)
             if self.nb >= 2:
-                out.append(Variable(f"Δu{q + 1}(k-1) > 0", unit(u1) - unit(f"u{q + 1}(k-2)"),
-                                    None))
+                out.append(Variable(f"Δu{q + 1}(k-1) > 0", unit(u1) - unit(f"u{q + 1}(k-2)")))
         return out
 
     def enough_rows(self, om: OutputModel) -> bool:
@@ -585,7 +582,7 @@ class _Search:
                     break
                 best = None
                 for var in pool:
-                    if var in specs[j].variables:
+                    if var.name in {v.name for v in specs[j].variables}:
                         continue
                     for switch in self.p.switches:
                         if self.late():
