@@ -234,4 +234,4 @@ def test_the_search_says_its_progress_a_line_per_stage(caplog):
     lines = [r.getMessage() for r in caplog.records if r.name == structure_search.SEARCH_LOG]
     assert lines[0].startswith("structure search: linear reference decoupled (y1 level (2, 1)")
     assert lines[1].startswith("structure search: y1: scheduled regions and clusters (")
-    assert lines[2].startswith("structure search: y1: level (2, 1)") and "of at most 150 s" in lines[2]
+    assert lines[2].startswith("structure search: y1: level (2, 1)") and "of at most 180 s" in lines[2]

@@ -268,7 +268,7 @@ class StructureSearch(BaseEstimator):
         held-out iterate to choose then and runs to its tolerance or ``max_iter``). On the
         robot's training experiments (fitted on 0–58, scored on 59–65) it lowered the
         free-run NRMSE from 0.700 to 0.689 and tripled the search's time, so it is off.
-    max_seconds : float, default 150
+    max_seconds : float, default 180
         Time bound of the search (a fit may pass it by the candidate and the refinement
         under way); the best structure so far is then kept and :class:`SearchTimeLimit`
         warned.
@@ -291,7 +291,7 @@ class StructureSearch(BaseEstimator):
                  switches=SWITCHES, min_gain: float = 0.02, clustering: bool = True,
                  refinement: BaseEstimator | str | None = None,
                  validation_fraction: float = 0.2, refit: bool = False,
-                 max_seconds: float = 150.0):
+                 max_seconds: float = 180.0):
         self.forms = forms
         self.couplings = couplings
         self.max_variables = max_variables
