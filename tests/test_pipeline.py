@@ -529,8 +529,16 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
         report.linear_nrmse, rel=1e-3)
     assert page_meta["structure chosen"].value == report.choice
     assert page_meta["structure per output"].value.count("level (1, 1)") == 2
-    # the export works for a searched model too
+    # the export works for a searched model too, and the registered model simulates as it
     assert result.asset_value("control_model").state_space.n_modes >= 1
+    from pwa_pipeline.orchestration.mlflow_models import example_table
+
+    data = result.asset_value("raw_benchmark")
+    u, y = data.u_test[0][:200], data.y_test[0][:200]
+    mlflow.set_tracking_uri(resources["mlflow"].tracking_uri)
+    loaded = mlflow.pyfunc.load_model(pwa_run.data.tags["model_uri"]).predict(
+        example_table(u, y, data.u_names, data.y_names, 10, rows=200)).to_numpy()
+    np.testing.assert_allclose(loaded[10:], model.simulate(u, y[:10])[10:], rtol=1e-12)
 
 
 def test_a_core_loggers_lines_reach_the_run_log_while_the_step_runs():

@@ -148,7 +148,7 @@ class PWARX(ARXModelBase):
     the structure search, the seconds): ``predict`` and ``simulate`` use none of them
     (``thetas_`` and ``regions_``, or ``structure_``, make the model)."""
 
-    FIT_PARAMS = (*STEPS, "refinement", "search")
+    FIT_PARAMS = (*STEPS, "refinement")
     """Parameters that only ``fit`` reads (the unfitted steps): ``predict`` and ``simulate``
     read what they fitted."""
 
@@ -212,6 +212,12 @@ class PWARX(ARXModelBase):
         error; never worse there than the best linear ARX model it also fits (which it then
         returns, and says so in ``structure_search_``).
 
+        The clustered candidate runs the default's steps with at most 3 re-assignment
+        sweeps of the sub-models and no search for missed modes (``submodels__n_refine``,
+        ``submodels__n_search``): on the robot's per-joint regressors the default's 20
+        sweeps and 3 searches cost minutes of SVM fits, and on the tuning machines they
+        gave the same held-out error.
+
         Parameters
         ----------
         na, nb : int, default 2
@@ -219,12 +225,6 @@ class PWARX(ARXModelBase):
         **search
             Parameters of :class:`~.structure_search.StructureSearch` (e.g.
             ``max_seconds=60``).
-
-        The clustered candidate runs the default's steps with at most 3 re-assignment
-        sweeps of the sub-models and no search for missed modes (``submodels__n_refine``,
-        ``submodels__n_search``): on the robot's per-joint regressors the default's 20
-        sweeps and 3 searches cost minutes of SVM fits, and on the tuning machines they
-        gave the same held-out error.
         """
         return cls(na=na, nb=nb, affine=True,
                    submodels=RefinedSubModels(n_refine=3, n_search=0),
