@@ -1,5 +1,6 @@
 """Caches in the store: local models, step 5, baselines, scores and figures, reused across
-the hyper-parameter sets of a sweep.
+the hyper-parameter sets of a sweep, in a folder or at an fsspec URL beside the assets (so
+that workers on other machines share them).
 
 Each entry is a signed pickle (:mod:`.signed_pickles`) keyed by a hash of its inputs and of
 the numerical core's source (:func:`core_fingerprint`), so an entry computed by other code
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import joblib
 import numpy as np
+from upath import UPath
 
 from .._arrays import array_digest
 from .files import inside
@@ -31,7 +33,7 @@ def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:
     return h.hexdigest()[:24]
 
 
-def load_or_compute(path: Path, root: Path, compute: Callable[[], object],
+def load_or_compute(path: UPath, root: UPath, compute: Callable[[], object],
                     warn: Callable[[str], object], what: str = "cache entry",
                     use: bool = True) -> tuple[object, bool]:
     """The object signed at ``path`` in the store ``root`` and True; else ``compute()``,
@@ -72,7 +74,8 @@ def core_fingerprint() -> str:
 class SignedMemory:
     """The ``joblib.Memory`` interface over this store's signed pickles, for
     ``RefinedSubModels(memory=...)``: ``cache(func)`` returns ``func`` whose result is kept at
-    ``<root>/<folder>/<key>.pkl``, the key a hash of the function, the numerical core's source
+    ``<root>/<folder>/<key>.pkl`` (``root`` a folder or an fsspec URL, see
+    :func:`.files.store_root`), the key a hash of the function, the numerical core's source
     (:func:`core_fingerprint`), ``salt`` (e.g. the source fingerprint of other code the
     function calls) and the arguments (``joblib.hash``) but those named in ``ignore``, as
     joblib's. An entry without a valid
@@ -80,9 +83,9 @@ class SignedMemory:
     ``hits`` and ``misses`` count the calls answered from the cache and computed. A handle on
     the store: copies (``clone`` of the step holding it) are this object."""
 
-    def __init__(self, root: Path, folder: str, warn=logging.getLogger(__name__).warning,
+    def __init__(self, root: UPath, folder: str, warn=logging.getLogger(__name__).warning,
                  salt: str = ""):
-        self.root, self.folder, self.warn, self.salt = Path(root), folder, warn, salt
+        self.root, self.folder, self.warn, self.salt = UPath(root), folder, warn, salt
         self.hits = self.misses = 0
 
     def __deepcopy__(self, memo: dict) -> "SignedMemory":

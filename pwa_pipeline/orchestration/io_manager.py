@@ -1,22 +1,24 @@
-"""The asset store: each asset partition a file under one folder.
+"""The asset store: each asset partition a file under one folder, local or an fsspec URL.
 
 A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step objects and
 estimators, the core's frozen dataclasses) as a signed pickle (:mod:`.signed_pickles`).
 Files live at ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}`` (an unpartitioned
-asset: ``<base_dir>/<asset>.{parquet,pkl}``); the names are checked against
-:data:`pwa_pipeline._validation.NAME_PATTERN` and every path is resolved and checked to stay
-inside the store. Every write goes to a temporary file in the same folder and is moved into
-place, so a failed or killed run never leaves a half-written file; temporary files a killed
-run left behind are removed once they are an hour old.
+asset: ``<base_dir>/<asset>.{parquet,pkl}``), where ``base_dir`` is a folder or any fsspec
+URL (``s3://bucket/pwa``, ``file:///shared/pwa``): workers on other machines read and write
+the same files. The names are checked against
+:data:`pwa_pipeline._validation.NAME_PATTERN` and every path is checked to stay inside the
+store. Every write goes to a temporary file and is moved into place
+(:func:`.files.atomic_write`), so a failed or killed run never leaves a half-written file
+under a name that is read; temporary files a killed run left behind are removed once they
+are an hour old.
 """
-
-from pathlib import Path
 
 import dagster as dg
 import pandas as pd
+from upath import UPath
 
 from .._validation import check_name
-from .files import atomic_write, inside, sweep_stale_tmp
+from .files import atomic_write, inside, store_root, sweep_stale_tmp
 from .partitions import split_key
 from .paths import default_storage_dir
 from .signed_pickles import load_object, save_object, signing_key
@@ -28,16 +30,17 @@ ALL_PARTITIONS = "all_partitions"
 class PartitionedFileIOManager(dg.ConfigurableIOManager):
     """Stores each asset partition as Parquet (tables) or a signed pickle (everything else).
 
-    ``base_dir`` empty means ``<project>/storage``. See the module doc for the layout.
+    ``base_dir`` is a folder or an fsspec URL; empty means ``$PWA_STORAGE`` or
+    ``<project>/storage``. See the module doc for the layout.
     """
 
     base_dir: str = ""
 
-    def root(self) -> Path:
-        """The store's folder."""
-        return Path(self.base_dir).resolve() if self.base_dir else default_storage_dir()
+    def root(self) -> UPath:
+        """The store's folder (a local path or an fsspec URL)."""
+        return store_root(self.base_dir) if self.base_dir else default_storage_dir()
 
-    def _paths(self, asset_key: dg.AssetKey, partition_key: str | None) -> dict[str, Path]:
+    def _paths(self, asset_key: dg.AssetKey, partition_key: str | None) -> dict[str, UPath]:
         """The two files one asset partition (or an unpartitioned asset) may be stored as, by
         format."""
         asset = [check_name(part, "asset") for part in asset_key.path]
@@ -74,7 +77,8 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         never materialised."""
         paths = self._paths(asset_key, partition_key)
         if paths["parquet"].is_file():
-            return pd.read_parquet(paths["parquet"])
+            with paths["parquet"].open("rb") as fh:  # any fsspec store, with its options
+                return pd.read_parquet(fh)
         if not paths["pkl"].is_file():
             raise FileNotFoundError(
                 f"{'/'.join(asset_key.path)}"

@@ -1,7 +1,16 @@
-"""Where the pipeline keeps its files by default: absolute paths under the project."""
+"""Where the pipeline keeps its files by default: absolute paths under the project, or the
+asset store at ``$PWA_STORAGE`` (a folder or an fsspec URL shared by every machine)."""
 
 import os
 from pathlib import Path
+
+from upath import UPath
+
+from .files import store_root
+
+#: Environment variable naming the asset store: a folder, or an fsspec URL such as
+#: ``s3://bucket/pwa`` that every process running steps can reach.
+STORAGE_ENV = "PWA_STORAGE"
 
 
 def project_dir() -> Path:
@@ -35,16 +44,19 @@ def default_mlflow_ui_url() -> str:
     return (os.environ.get("PWA_MLFLOW_UI_URL") or "http://127.0.0.1:5000").rstrip("/")
 
 
-def default_storage_dir() -> Path:
-    """``<project>/storage``: materialised assets and the local-model cache."""
-    return project_dir() / "storage"
+def default_storage_dir() -> UPath:
+    """``$PWA_STORAGE`` (a folder or an fsspec URL), else ``<project>/storage``: materialised
+    assets, the caches and the exports (see :func:`.files.store_root`)."""
+    return store_root(os.environ.get(STORAGE_ENV) or project_dir() / "storage")
 
 
 def default_datasets_path() -> Path:
     """``$PWA_DATASETS``, else ``<project>/storage/datasets.json``: the user's registered data
-    sets (:class:`~pwa_pipeline.datasets.user.DatasetRegistry`)."""
+    sets (:class:`~pwa_pipeline.datasets.user.DatasetRegistry`). A local file whatever
+    ``$PWA_STORAGE`` says, as the files it registers are: on several machines, point
+    ``$PWA_DATASETS`` at a file they share."""
     env = os.environ.get("PWA_DATASETS")
-    return Path(env).resolve() if env else default_storage_dir() / "datasets.json"
+    return Path(env).resolve() if env else project_dir() / "storage" / "datasets.json"
 
 
 def dagster_home() -> Path:

@@ -1,13 +1,14 @@
 """The ``settings`` resource: where the pipeline reads its inputs and keeps its caches."""
 
 import os
-from pathlib import Path
 
 import dagster as dg
+from upath import UPath
 
 from ..config import Configuration, HParamsFile
 from ..datasets import Dataset, load_dataset
 from ..datasets.user import DatasetRegistry
+from .files import store_root
 from .paths import default_datasets_path, default_storage_dir
 
 
@@ -28,8 +29,9 @@ class PipelineSettings(dg.ConfigurableResource):
         ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
         ``<project>/storage/datasets.json``.
     cache_dir : str
-        Cache of local models, of step 5, of the baselines and of scores and figures; empty:
-        ``<project>/storage/cache``.
+        Cache of local models, of step 5, of the baselines and of scores and figures, a
+        folder or an fsspec URL; empty: ``cache`` in the asset store (``$PWA_STORAGE`` or
+        ``<project>/storage``).
     cache_local_models : bool
         Reuse local models across hyper-parameter sets that differ only in later steps.
     cache_sub_models : bool
@@ -86,11 +88,12 @@ class PipelineSettings(dg.ConfigurableResource):
         orders = registry.get(dataset).orders() if dataset in registry.names() else None
         return self.hparams().configuration(hparams, dataset, orders)
 
-    def cache_root(self) -> Path:
-        """The cache folder (local models, step 5, baselines, scores and figures)."""
-        return Path(self.cache_dir).resolve() if self.cache_dir else default_storage_dir() / "cache"
+    def cache_root(self) -> UPath:
+        """The cache folder (local models, step 5, baselines, scores and figures): a folder or
+        an fsspec URL, like the asset store's."""
+        return store_root(self.cache_dir) if self.cache_dir else default_storage_dir() / "cache"
 
-    def exports_root(self) -> Path:
+    def exports_root(self) -> UPath:
         """Where files made for use outside the tool are written (the state-space models'
         JSON and MPT3 scripts): ``exports`` beside the cache folder, so
         ``<project>/storage/exports`` by default."""

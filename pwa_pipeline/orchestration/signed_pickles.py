@@ -3,8 +3,9 @@
 A pickle can run code when loaded, so only files carrying a valid signature are unpickled:
 ones this store wrote. Each file is a header, an HMAC-SHA256 of the payload under the store's
 key, then the pickle (protocol 5), written atomically (:func:`.files.atomic_write`). The key
-is ``<store>/.signing-key``, created on first use, readable by its owner only; whoever can
-write that key can make the store load code, so keep the store private. A file without a
+is ``<store>/.signing-key``, created on first use, readable by its owner only in a local
+folder (in a bucket, by whoever the bucket's policy lets read it); whoever can write that
+key can make the store load code, so keep the store private. A file without a
 valid signature (planted, copied from another store, truncated) is refused with its path.
 """
 
@@ -12,7 +13,8 @@ import hashlib
 import hmac
 import pickle
 import secrets
-from pathlib import Path
+
+from upath import UPath
 
 from .files import atomic_write, create_new
 
@@ -24,7 +26,7 @@ class UnsignedFileError(ValueError):
     """A pickle whose signature is missing or wrong: not written by this store, or damaged."""
 
 
-def signing_key(root: Path) -> bytes:
+def signing_key(root: UPath) -> bytes:
     """The store's HMAC key (``<root>/.signing-key``), created on first use (mode 0600)."""
     path = root / KEY_FILE
     if not path.is_file():
@@ -33,14 +35,14 @@ def signing_key(root: Path) -> bytes:
     return path.read_bytes()
 
 
-def save_object(path: Path, obj, key: bytes) -> None:
+def save_object(path: UPath, obj, key: bytes) -> None:
     """Pickle ``obj`` to ``path`` atomically, signed with ``key``."""
     payload = pickle.dumps(obj, protocol=5)
     digest = hmac.new(key, payload, hashlib.sha256).digest()
     atomic_write(path, lambda tmp: tmp.write_bytes(MAGIC + digest + payload))
 
 
-def load_object(path: Path, key: bytes):
+def load_object(path: UPath, key: bytes):
     """Unpickle a file written by :func:`save_object` with the same key.
 
     Raises
