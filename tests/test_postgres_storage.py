@@ -1,62 +1,35 @@
 """Dagster's supported PostgreSQL storage, as the docs configure it for several processes:
 a throw-away PostgreSQL server on a loopback port, a ``dagster.yaml`` with ``storage:
-postgres:``, and the command line's runs recorded in the database."""
+postgres:`` (written by hand, or generated from ``$PWA_DAGSTER_POSTGRES_URL``), the command
+line's runs recorded in the database, and bad URLs refused with a clear message."""
 
-import glob
 import os
 import shutil
 import subprocess
 import sys
-import tempfile
+import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
+from benchmarks._cluster import postgres_missing, postgres_server
 from benchmarks._ui import free_port
-from pwa_pipeline.orchestration.instance import DAGSTER_YAML
-
-
-def _postgres_bin() -> Path | None:
-    """The folder of PostgreSQL's server programs (Debian keeps them off the PATH)."""
-    found = next(iter(sorted(glob.glob("/usr/lib/postgresql/*/bin/pg_ctl"))), None) \
-        or shutil.which("pg_ctl")
-    return Path(found).resolve().parent if found else None
-
-
-def _as_server_user(command: list[str]) -> list[str]:
-    """PostgreSQL refuses to run as root: as root, run ``command`` as the user ``postgres``."""
-    return ["runuser", "-u", "postgres", "--", *command] if os.geteuid() == 0 else command
+from pwa_pipeline.orchestration.instance import (
+    DAGSTER_YAML,
+    POSTGRES_ENV,
+    POSTGRES_YAML,
+    check_postgres_url,
+    prepare_instance,
+)
 
 
 @pytest.fixture(scope="module")
 def postgres_url(system_package) -> Iterator[str]:
     """A fresh PostgreSQL cluster with a database ``dagster``, on a free loopback port; its
     URL. Stopped and deleted at the end."""
-    bin_dir = _postgres_bin()
-    missing = None if bin_dir else ("no PostgreSQL server programs (pg_ctl) found; install "
-                                    "Debian's postgresql")
-    if bin_dir and os.geteuid() == 0 and shutil.which("runuser") is None:
-        missing = "running as root without runuser"
-    system_package("the PostgreSQL storage test needs a PostgreSQL server", missing)
-    folder = Path(tempfile.mkdtemp(prefix="pwa-postgres-"))
-    if os.geteuid() == 0:
-        shutil.chown(folder, "postgres", "postgres")
-    data, port = folder / "data", free_port()
-    subprocess.run(_as_server_user([str(bin_dir / "initdb"), "-D", str(data), "-U", "postgres",
-                                    "--auth=trust"]), check=True, capture_output=True)
-    subprocess.run(_as_server_user([
-        str(bin_dir / "pg_ctl"), "-D", str(data), "-l", str(folder / "server.log"), "-w",
-        "-o", f"-p {port} -k {folder} -c listen_addresses=127.0.0.1", "start"]),
-        check=True, capture_output=True)
-    try:
-        subprocess.run([str(bin_dir / "createdb"), "-h", "127.0.0.1", "-p", str(port),
-                        "-U", "postgres", "dagster"], check=True, capture_output=True)
-        yield f"postgresql+psycopg2://postgres@127.0.0.1:{port}/dagster"
-    finally:
-        subprocess.run(_as_server_user([str(bin_dir / "pg_ctl"), "-D", str(data), "-m", "fast",
-                                        "-w", "stop"]), capture_output=True)
-        shutil.rmtree(folder, ignore_errors=True)
+    system_package("the PostgreSQL storage test needs a PostgreSQL server", postgres_missing())
+    with postgres_server(("dagster",)) as server:
+        yield f"{server}/dagster"
 
 
 def test_the_documented_postgres_storage_records_the_command_lines_runs(
@@ -97,3 +70,66 @@ def test_the_documented_postgres_storage_records_the_command_lines_runs(
         cursor.execute("SELECT count(*) FROM event_logs WHERE dagster_event_type = "
                        "'ASSET_MATERIALIZATION'")
         assert cursor.fetchone()[0] >= 15  # every asset of the partition, and the board
+
+
+def test_the_generated_instance_follows_the_url_variable(postgres_url, tmp_path, monkeypatch):
+    import psycopg2
+
+    home = tmp_path / "home"
+    monkeypatch.setenv("DAGSTER_HOME", str(home))
+    monkeypatch.delenv(POSTGRES_ENV, raising=False)
+    prepare_instance().dispose()
+    assert (home / "dagster.yaml").read_text() == DAGSTER_YAML
+    monkeypatch.setenv(POSTGRES_ENV, postgres_url)
+    instance = prepare_instance()
+    try:
+        # the file names the variable, never the URL: no password on disk
+        assert (home / "dagster.yaml").read_text() == POSTGRES_YAML
+        assert postgres_url not in POSTGRES_YAML
+        assert type(instance.run_storage).__name__ == "PostgresRunStorage"
+        assert type(instance.event_log_storage).__name__ == "PostgresEventLogStorage"
+    finally:
+        instance.dispose()
+    with psycopg2.connect(postgres_url.replace("+psycopg2", "")) as conn, \
+            conn.cursor() as cursor:
+        cursor.execute("SELECT count(*) FROM information_schema.tables WHERE table_name = "
+                       "'runs'")
+        assert cursor.fetchone() == (1,)
+    monkeypatch.delenv(POSTGRES_ENV)
+    prepare_instance().dispose()  # generated, so it follows the variable back
+    assert (home / "dagster.yaml").read_text() == DAGSTER_YAML
+
+
+@pytest.mark.parametrize("url, problem", [
+    ("mysql://u:secret@127.0.0.1/dagster", "is not a PostgreSQL URL"),
+    ("postgresql+psycopg2://u:secret@127.0.0.1:5432", "names no database"),
+    ("postgresql+psycopg2://u:secret@127.0.0.1:5432/", "names no database"),
+    ("postgresql+nodriver://u:secret@127.0.0.1:5432/dagster", "its driver cannot be loaded"),
+])
+def test_a_bad_postgres_url_is_refused_naming_the_problem_and_masking_the_password(url,
+                                                                                   problem):
+    with pytest.raises(ValueError, match=problem) as caught:
+        check_postgres_url(url)
+    assert "secret" not in str(caught.value) and "u:***@127.0.0.1" in str(caught.value)
+    check_postgres_url("postgresql+psycopg2://u:secret@127.0.0.1:5432/dagster")
+
+
+def test_a_database_that_does_not_answer_fails_within_seconds_naming_it(tmp_path,
+                                                                        monkeypatch):
+    """Refused at once, with the server's reason, rather than after Dagster's retries."""
+    from pwa_pipeline.orchestration.cli import main
+
+    port = free_port()  # nothing listens there
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv(POSTGRES_ENV, f"postgresql+psycopg2://dagster:secret@127.0.0.1:{port}/db")
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError) as caught:
+        prepare_instance()
+    assert time.perf_counter() - t0 < 5
+    message = str(caught.value)
+    assert message.startswith(f"Dagster's PostgreSQL storage (postgresql+psycopg2://dagster:***@"
+                              f"127.0.0.1:{port}/db) cannot be used: connection to server at "
+                              f"\"127.0.0.1\", port {port} failed: Connection refused. ")
+    assert "secret" not in message and "nothing was run" in message
+    assert not (tmp_path / "home").exists()  # refused before the home was made
+    assert main(["doctor"]) == 2  # the command line says it in one line, exit status 2

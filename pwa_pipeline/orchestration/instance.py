@@ -1,19 +1,27 @@
 """The Dagster instance of the command line: ``$DAGSTER_HOME`` with its ``dagster.yaml``.
 
-The file sets only the UI's and the run queue's settings: storage and compute logs are
-Dagster's defaults for a home folder (sqlite files under ``history/`` and ``schedules/``, logs
-under ``storage/``), which the UI's live run page follows. For several processes or people on
-one instance, add Dagster's supported ``storage: postgres:`` section (``dagster-postgres``,
-the ``postgres`` extra) by hand: a ``dagster.yaml`` edited by hand is kept as it is.
+The generated file sets the UI's and the run queue's settings and, when
+``$PWA_DAGSTER_POSTGRES_URL`` is set, Dagster's supported PostgreSQL storage
+(``dagster-postgres``, the ``cluster`` extra: ``storage: postgres:`` reading the URL from
+that variable, so that the file holds no password and every machine sharing it reads its
+own environment). Unset, storage and compute logs are Dagster's defaults for a home folder
+(sqlite files under ``history/`` and ``schedules/``, logs under ``storage/``), which the UI's
+live run page follows. A file this module generated follows the variable; a ``dagster.yaml``
+edited by hand is kept as it is.
 """
 
 import os
+import urllib.parse
 
 import dagster as dg
 from filelock import FileLock
 
+from .credentials import mask_credentials
 from .paths import dagster_home
 
+#: Environment variable holding the URL of the Dagster instance's PostgreSQL database,
+#: ``postgresql+psycopg2://user:password@host:5432/dagster``.
+POSTGRES_ENV = "PWA_DAGSTER_POSTGRES_URL"
 DAGSTER_YAML = """telemetry:
   enabled: false
 nux:
@@ -27,27 +35,115 @@ run_queue:
       value: "dask"
       limit: 1
 """
+#: :data:`DAGSTER_YAML` with Dagster's PostgreSQL storage (runs, event logs, schedules).
+POSTGRES_YAML = DAGSTER_YAML + f"""storage:
+  postgres:
+    postgres_url:
+      env: {POSTGRES_ENV}
+"""
 #: What earlier versions of this module wrote beside :data:`DAGSTER_YAML`: storage classes of
 #: this package that no longer exist. A file naming one is replaced.
 _EARLIER_MODULES = ("pwa_pipeline.orchestration.event_log",
                     "pwa_pipeline.orchestration.compute_logs")
+#: Seconds to wait for a PostgreSQL server before giving up (libpq's default: for ever).
+CONNECT_TIMEOUT = 10
+
+
+def check_postgres_url(url: str) -> None:
+    """Raise a ValueError saying what is wrong with a PostgreSQL URL for Dagster's storage
+    (password masked): not PostgreSQL, no database named, or a driver not installed
+    (SQLAlchemy 2.1 reads ``postgresql://`` as psycopg 3; ``dagster-postgres`` installs
+    psycopg2, named by ``postgresql+psycopg2://``)."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    shown = mask_credentials(url)
+    parts = urllib.parse.urlsplit(url)
+    if not parts.scheme.startswith("postgresql"):
+        raise ValueError(f"${POSTGRES_ENV} {shown} is not a PostgreSQL URL (expected "
+                         f"postgresql+psycopg2://user:password@host:5432/database)")
+    if not parts.path.strip("/"):
+        raise ValueError(f"${POSTGRES_ENV} {shown} names no database (expected "
+                         f"postgresql+psycopg2://user:password@host:5432/database)")
+    try:
+        make_url(url).get_dialect().import_dbapi()
+    except (ImportError, NoSuchModuleError, ArgumentError) as exc:
+        raise ValueError(f"${POSTGRES_ENV} {shown}: its driver cannot be loaded ({exc}); "
+                         f"name psycopg2, which dagster-postgres installs: "
+                         f"postgresql+psycopg2://…") from None
+
+
+def probe_postgres(url: str) -> None:
+    """Connect once to the database at ``url`` (within :data:`CONNECT_TIMEOUT` seconds) and
+    raise a ValueError with the server's own reason if that fails: Dagster's storages retry
+    for about 12 s and then report only that they retried."""
+    from sqlalchemy import create_engine, text
+    from sqlalchemy.exc import SQLAlchemyError
+    from sqlalchemy.pool import NullPool
+
+    engine = create_engine(url, poolclass=NullPool,
+                           connect_args={"connect_timeout": CONNECT_TIMEOUT})
+    try:
+        with engine.connect() as connection:
+            connection.execute(text("SELECT 1"))
+    except SQLAlchemyError as exc:
+        reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
+        password = urllib.parse.urlsplit(url).password
+        if password:  # psycopg2 names host, port, user and database, never the password
+            reason = reason.replace(password, "***")
+        raise ValueError(f"Dagster's PostgreSQL storage ({mask_credentials(url)}) cannot be "
+                         f"used: {reason}. Start the server, or fix the URL in "
+                         f"${POSTGRES_ENV}; nothing was run") from None
+    finally:
+        engine.dispose()
+
+
+def instance_yaml() -> str:
+    """The ``dagster.yaml`` this module generates: :data:`POSTGRES_YAML` when
+    ``$PWA_DAGSTER_POSTGRES_URL`` is set (checked by :func:`check_postgres_url`, its server
+    by :func:`probe_postgres`), else :data:`DAGSTER_YAML`."""
+    url = os.environ.get(POSTGRES_ENV, "")
+    if not url:
+        return DAGSTER_YAML
+    check_postgres_url(url)
+    probe_postgres(url)
+    return POSTGRES_YAML
 
 
 def prepare_instance() -> dg.DagsterInstance:
     """``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) with its ``dagster.yaml``
-    (:data:`DAGSTER_YAML`, written when missing or when an earlier version of this module
-    wrote it) and its schema created; sets ``DAGSTER_HOME`` and returns the instance.
+    (:func:`instance_yaml`, written when missing, when this module generated it, or when an
+    earlier version of this module wrote it) and its schema created; sets ``DAGSTER_HOME``
+    and returns the instance.
 
     The first use of a new home creates its sqlite schema; two processes doing that at once
-    can leave it unusable, so the first use holds ``<home>/.init.lock``.
+    can leave it unusable, so the first use holds ``<home>/.init.lock``. A PostgreSQL server
+    that does not answer within :data:`CONNECT_TIMEOUT` seconds, or refuses the
+    credentials, raises a ValueError naming the URL (password masked) and the reason.
     """
+    wanted = instance_yaml()
     home = dagster_home()
     home.mkdir(parents=True, exist_ok=True)
     os.environ["DAGSTER_HOME"] = str(home)
     with FileLock(home / ".init.lock"):
         config = home / "dagster.yaml"
-        if not config.exists() or any(m in config.read_text() for m in _EARLIER_MODULES):
-            config.write_text(DAGSTER_YAML)
-        instance = dg.DagsterInstance.get()
-        instance.get_runs(limit=1)  # the first query creates and migrates the schema
+        if not config.exists() or config.read_text() in (DAGSTER_YAML, POSTGRES_YAML) \
+                or any(m in config.read_text() for m in _EARLIER_MODULES):
+            config.write_text(wanted)
+        try:
+            instance = dg.DagsterInstance.get()
+            instance.get_runs(limit=1)  # the first query creates and migrates the schema
+        except Exception as exc:
+            url = os.environ.get(POSTGRES_ENV, "")
+            if "postgres" not in config.read_text():
+                raise
+            # psycopg2's message names host and port, never the password; masked all the same
+            message = str(exc).split("\n")[0]
+            password = urllib.parse.urlsplit(url).password
+            if password:
+                message = message.replace(password, "***")
+            raise ValueError(
+                f"Dagster's PostgreSQL storage ({mask_credentials(url) or config}) cannot be "
+                f"used: {message}. Start the server, or fix the URL in ${POSTGRES_ENV}; "
+                f"nothing was run") from None
     return instance
