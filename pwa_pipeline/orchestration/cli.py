@@ -8,6 +8,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 """
 
 import argparse
+import os
 import sys
 import time
 
@@ -15,6 +16,7 @@ from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials
 from .files import check_writable
 from .instance import prepare_instance
+from .jobs import SCHEDULER_ENV
 from .partition_runs import LOCATION, cli_definitions, run_tags, was_interrupted
 from .paths import (
     dagster_home,
@@ -22,6 +24,7 @@ from .paths import (
     default_storage_dir,
     default_tracking_uri,
 )
+from .signed_pickles import signing_key
 
 
 def run(args: argparse.Namespace) -> int:
@@ -29,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
     import dagster as dg
 
     from ..scoring.comparison import mean_scores
+    from .dask_sweep import step_failures
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
     from .partitions import DEFAULT_SETS, check_keys, runnable_keys, split_key
@@ -53,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         resources["mlflow"].check_reachable()
     except dg.Failure as exc:  # said in one line, before any run
         raise ValueError(exc.description) from None
+    for store in (resources["io_manager"].root(), resources["settings"].cache_root()):
+        signing_key(store)  # made here, once, before workers on other machines read the store
     instance = prepare_instance()
     home = instance.root_directory
     uri = mask_credentials(resources["mlflow"].uri())
@@ -66,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
                 failed.append(key)
                 stopped = was_interrupted(result)
                 summaries.append(f"{key}: {'INTERRUPTED' if stopped else 'FAILED'} after "
-                                 f"{seconds:.1f} s (run {result.run_id} in the Dagster UI)")
+                                 f"{seconds:.1f} s (run {result.run_id} in the Dagster UI)"
+                                 + "".join(f"\n    {reason}" for reason in
+                                           step_failures(instance, result.run_id)[:3]))
                 print(summaries[-1])
                 if stopped and not interrupted:
                     print("interrupted: no further partition starts; the runs in flight end",
@@ -102,12 +110,16 @@ def run(args: argparse.Namespace) -> int:
     serve = "" if server else (f"  mlflow ui --backend-store-uri {uri} --workers 1          "
                                f"# serves {tracker.ui_base()}\n")
     datasets = dict.fromkeys(split_key(key)[0] for key in keys)
-    links = "".join(f"     {dataset}: {url}\n" for dataset in datasets
-                    if (url := tracker.experiment_url(dataset)) is not None)
+    try:
+        tracker.check_reachable()  # at once, where a gone server's requests would retry
+        links = "".join(f"     {dataset}: {url}\n" for dataset in datasets
+                        if (url := tracker.experiment_url(dataset)) is not None)
+    except dg.Failure as exc:  # a tracking server gone since the start: the runs say so
+        links = f"     (none: {exc.description})\n"
     print(f"""
 Stores
   Dagster instance : {home}
-  assets           : {default_storage_dir()}
+  assets           : {mask_credentials(str(resources["io_manager"].root()))}
   control models   : {resources["settings"].exports_root()} (JSON, MPT3 scripts)
   MLflow tracking  : {uri}
 Open the UIs on the same stores:
@@ -138,12 +150,13 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
             if was_interrupted(result):
                 return
         return
-    from .dask_sweep import dask_scheduler, sweep_on_dask
+    from .dask_sweep import dask_scheduler, sweep_on_dask, worker_run_config
 
-    if args.tracking_uri:  # the workers build their resources from run configuration
-        run_config = {**run_config,
-                      "resources": {"mlflow": {"config": {"tracking_uri": args.tracking_uri}}}}
-    with dask_scheduler(args.scheduler, n_workers=args.workers) as address:
+    # the workers build their resources from run configuration: this process's stores
+    run_config = {**run_config, **worker_run_config(defs.resources)}
+    stores = [str(defs.resources["io_manager"].root()),
+              str(defs.resources["settings"].cache_root())]
+    with dask_scheduler(args.scheduler, n_workers=args.workers, stores=stores) as address:
         print(f"dask scheduler {address}" + ("" if args.scheduler else
               f" (a LocalCluster of {args.workers} worker processes; dashboard on port "
               f"8787 if it was free)"), flush=True)
@@ -275,21 +288,28 @@ def main(argv: list[str] | None = None) -> int:
                     "comparison (PWA vs linear ARX vs subspace, one-step and free-run)")
     p_run.add_argument("--partition", action="append", metavar="DATASET|HPARAMS",
                        help="a partition key such as 'kuka_robot|paper' (repeatable); "
-                            "default: hure_vasak and kuka_robot (if its data are present) "
-                            "with the 'paper' and 'default' sets")
+                            "default: every data set whose data are present (built-in and "
+                            "registered) with the 'paper', 'default' and 'auto' sets")
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
     p_run.add_argument("--executor", choices=("in-process", "dask"), default="in-process",
                        help="in-process (default): each partition one run, every step in "
                             "this process; dask: each partition one run of the sweep_dask job "
-                            "whose steps are tasks on a dask cluster (a LocalCluster started "
-                            "here, or --scheduler). Partitions run one after the other; to run "
-                            "several at once, launch a backfill in the Dagster UI")
+                            "whose steps are tasks on a dask cluster (--scheduler, else "
+                            "$PWA_DASK_SCHEDULER, else a LocalCluster started here). "
+                            "Partitions run one after the other (on a shared scheduler, the "
+                            "runs of several clients take turns); to run several at once on "
+                            "one machine, launch a backfill in the Dagster UI")
     p_run.add_argument("--scheduler", default="", metavar="ADDRESS",
-                       help="address of a running dask scheduler, e.g. tcp://10.0.0.5:8786 "
-                            "(implies --executor dask; its workers need pwa-pipeline installed "
-                            "and the same stores)")
+                       help=f"address of a running dask scheduler (`dask scheduler`), e.g. "
+                            f"tcp://10.0.0.5:8786 (implies --executor dask; default with "
+                            f"--executor dask: ${SCHEDULER_ENV}, else a LocalCluster). Its "
+                            f"workers (`dask worker ADDRESS`) need pwa-pipeline installed and "
+                            f"the same stores: $PWA_STORAGE, a folder or fsspec URL such as "
+                            f"s3://bucket/pwa, the Dagster instance on PostgreSQL "
+                            f"($PWA_DAGSTER_POSTGRES_URL) and an MLflow tracking server")
     p_run.add_argument("--workers", type=int, default=2, metavar="N",
-                       help="worker processes of the LocalCluster (default 2)")
+                       help="worker processes of the LocalCluster, when no scheduler is given "
+                            "(default 2)")
     p_run.add_argument("--tracking-uri", default="",
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")
@@ -344,6 +364,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "run" and args.scheduler:
         args.executor = "dask"
+    if args.command == "run" and args.executor == "dask" and not args.scheduler:
+        args.scheduler = os.environ.get(SCHEDULER_ENV, "")
     commands = {"doctor": doctor, "add-dataset": add_dataset, "list-datasets": list_datasets,
                 "remove-dataset": remove_dataset, "run": run, "partitions": partitions}
     try:

@@ -4,15 +4,19 @@
 ``sweep`` (in :mod:`.schedules`) runs every step of a partition in one process: a partition
 launched from the UI costs one process start-up, not one per step. ``sweep_dask`` hands
 each step to a dask cluster through ``dagster_dask.dask_executor``: a scheduler at
-``$PWA_DASK_SCHEDULER`` (``tcp://host:8786``) when set, else a ``LocalCluster`` that the run
-starts for itself (two single-threaded worker processes; Dagster steps are not
+``$PWA_DASK_SCHEDULER`` (``tcp://host:8786``, started on its own with ``dask scheduler``,
+its workers with ``dask worker tcp://host:8786``) when set, else a ``LocalCluster`` that the
+run starts for itself (two single-threaded worker processes; Dagster steps are not
 thread-safe). The launchpad shows that configuration and lets it be changed per run.
 
 One limit of ``dagster-dask`` 0.29: it names each dask task ``<job>.<step>``, so two runs of
-``sweep_dask`` in flight on the same scheduler share task keys and dask merges them. Runs
-on a shared scheduler must therefore go one at a time: the command line does so, and the
-runs of this job carry the tag :data:`EXECUTOR_TAG` that the instance's run queue limits
-to one at a time (see :mod:`.instance`).
+``sweep_dask`` in flight on the same scheduler would share task keys, and dask would hand
+one run the other's results. Runs on a shared scheduler therefore take turns, each with
+every worker: the command line's runs hold the scheduler's lock :data:`RUN_LOCK` (a
+``distributed.Lock``, a lease that dask frees when the holding process dies) while they
+run, so that any number of clients may sweep at once (:mod:`.dask_sweep`), and the runs
+launched from the UI carry the tag :data:`EXECUTOR_TAG` that the instance's run queue admits
+one at a time (see :mod:`.instance`).
 """
 
 import os
@@ -31,6 +35,9 @@ SCHEDULER_ENV = "PWA_DASK_SCHEDULER"
 LOCAL_CLUSTER = {"n_workers": 2, "threads_per_worker": 1}
 #: Tag of the ``sweep_dask`` runs, which the run queue admits one at a time.
 EXECUTOR_TAG = ("pwa/executor", "dask")
+#: The ``distributed.Lock`` on a shared scheduler that the command line's ``sweep_dask`` runs
+#: hold while they run (see the module doc).
+RUN_LOCK = "pwa-pipeline/sweep_dask"
 
 
 def dask_cluster(address: str | None = None) -> dict:
