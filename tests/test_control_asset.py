@@ -79,3 +79,34 @@ def test_the_partition_figure_draws_each_region_where_the_model_places_it():
         # (a point within a hair of a boundary may be on either side)
         assert np.mean(inside[mode] == (modes == mode)) > 0.99
     assert "hure_vasak | set paper | PWA" in fig.get_suptitle()
+
+
+def test_the_partition_figure_takes_a_region_bound_on_a_coordinate_off_the_slice():
+    """A region's row on a coordinate the slice fixes, the slice lying on that bound (as on
+    the robot, where the structure search puts thresholds at a median and the slice fixes
+    the other coordinates at theirs), is left out of qhull, not passed as a degenerate
+    halfspace."""
+    import copy
+
+    from pwa_pipeline.orchestration.figures import partition_figure
+
+    data = load_dataset("hure_vasak")
+    model = PipelineSettings().configuration("paper", "hure_vasak").pwa.fit(data.u_train,
+                                                                          data.y_train)
+    ss = copy.deepcopy(model.to_state_space())
+    lower, upper = ss.envelope
+    fixed = (lower + upper) / 2
+    names = [*ss.state_names, *ss.input_names]
+    axes = partition_figure(ss, fixed, "").axes[0]
+    shown = [names.index(axes.get_xlabel()), names.index(axes.get_ylabel())]
+    off = ss.n_states  # the first input u1(k): no region of this model reads it
+    unit = np.eye(len(names))
+    for mode, (H, h) in enumerate(ss.regions):
+        # loose bounds on the shown coordinates keep them the slice's axes
+        rows, bounds = [unit[k] for k in shown * 2], [upper[k] + 1 for k in shown * 2]
+        if mode == 0:  # and mode 1 bounded on u1(k), the slice on that bound itself
+            rows, bounds = rows + [unit[off]], bounds + [fixed[off]]
+        ss.regions[mode] = (np.vstack([H, *rows]), np.append(h, bounds))
+    fig = partition_figure(ss, fixed, "hure_vasak | set paper | PWA")
+    assert names[off] not in (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel())
+    assert sorted(p.get_label() for p in fig.axes[0].patches) == ["mode 1", "mode 2"]

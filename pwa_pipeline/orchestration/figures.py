@@ -968,7 +968,10 @@ def partition_figure(ss, fixed: np.ndarray, title: str, labels: list[str] | None
         if lp.status != 0 or lp.x[2] <= 1e-9 * max(half[i], half[j]):
             empty.append(mode + 1)
             continue
-        hull = HalfspaceIntersection(np.column_stack([A2, -b2]), lp.x[:2])
+        # rows on the other coordinates only are 0 ≤ b here, met (the LP found a point):
+        # qhull takes none of them
+        keep = norms > 1e-12 * norms.max()
+        hull = HalfspaceIntersection(np.column_stack([A2[keep], -b2[keep]]), lp.x[:2])
         vertices = hull.intersections
         centre = vertices.mean(axis=0)
         order = np.argsort(np.arctan2(*(vertices - centre).T[::-1]))
