@@ -135,6 +135,7 @@ def cluster(system_package, tmp_path_factory, mlflow_template) -> Iterator[Clust
     the end."""
     system_package("the distributed tests need a PostgreSQL server", postgres_missing())
     folder = tmp_path_factory.mktemp("cluster")
+    (folder / "client-home").mkdir()  # the clients' DAGSTER_HOME, whichever test runs first
     files = _data_files(folder)
     reference = folder / "reference"
     reference.mkdir()
@@ -241,18 +242,18 @@ def test_a_sweep_across_the_cluster_equals_the_in_process_run(cluster):
 @pytest.mark.xdist_group("distributed")
 def test_two_clients_sweeping_at_once_both_complete(cluster):
     first, second = ["m1|default"], ["m3|paper"]
+    with cluster.instance() as instance:  # the first test's, when it ran before this one
+        earlier = {r.run_id for r in _runs_of(instance, first + second)}
     clients = [cluster.sweep(first), cluster.sweep(second)]
     outputs = [c.communicate(timeout=600)[0] for c in clients]
     for client, out in zip(clients, outputs, strict=True):
         assert client.returncode == 0, out[-4000:]
         assert "FAILED" not in out
     with cluster.instance() as instance:
-        runs = _runs_of(instance, first + second)
-        assert len(runs) == 4  # the first test's and these
-        assert {r.status for r in runs} == {dg.DagsterRunStatus.SUCCESS}
+        latest = [r for r in _runs_of(instance, first + second) if r.run_id not in earlier]
+        assert len(latest) == 2
+        assert {r.status for r in latest} == {dg.DagsterRunStatus.SUCCESS}
         # the two clients' runs were launched at once but ran one after the other
-        latest = sorted(runs, key=lambda r: instance.get_run_record_by_id(
-            r.run_id).create_timestamp)[-2:]
         spans = sorted((instance.get_run_record_by_id(r.run_id).start_time,
                         instance.get_run_record_by_id(r.run_id).end_time) for r in latest)
     assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:], strict=False))
@@ -302,7 +303,11 @@ def test_a_worker_killed_mid_sweep_leaves_a_complete_sweep_and_no_orphan(cluster
 def test_the_tracking_server_stopped_mid_run_fails_clearly_and_a_rerun_completes(cluster):
     key = "m1|paper"
     comparison = cluster.store().root() / "comparison" / "m1" / "paper.parquet"
-    kept = comparison.read_bytes()  # stored by the first test
+    if not comparison.exists():  # stored by the first test, when it ran before this one
+        first = cluster.sweep([key])
+        out = first.communicate(timeout=600)[0]
+        assert first.returncode == 0, out[-4000:]
+    kept = comparison.read_bytes()
     sweep = cluster.sweep([key])
     with cluster.instance() as instance:
         deadline = time.time() + 300
@@ -330,7 +335,7 @@ def test_the_tracking_server_stopped_mid_run_fails_clearly_and_a_rerun_completes
     assert {"pwa_chain", "control_model", "linear_arx_model", "subspace_model"} <= stored
     assert comparison.read_bytes() == kept
     _assert_results_equal_the_reference(cluster, [key])
-    assert _every_stored_file_loads(cluster.folder / "shared") > 6 * 10
+    assert _every_stored_file_loads(cluster.folder / "shared") > 10
     # the server back on the same database: the rerun completes
     cluster.start_mlflow()
     again = cluster.sweep([key])
