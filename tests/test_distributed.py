@@ -260,6 +260,9 @@ def test_two_clients_sweeping_at_once_both_complete(cluster):
     _assert_results_equal_the_reference(cluster, first + second)
 
 
+# slow (outside the normal suite) until it is deterministic: run alone, the sweep can end
+# before the poll sees pwa_chain begin, and no worker is killed
+@pytest.mark.slow
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
 def test_a_worker_killed_mid_sweep_leaves_a_complete_sweep_and_no_orphan(cluster):
