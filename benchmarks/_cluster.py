@@ -21,6 +21,17 @@ from pathlib import Path
 
 from benchmarks._ui import free_port
 
+#: The hyper-parameter sets of the distributed tests and benchmark: the default and a small
+#: paper setting for every registered data set.
+HPARAMS = """[default."*"]
+preset = "default"
+
+[paper."*"]
+preset = "paper"
+local_models.n_rho = 12
+clustering.eps = 0.3
+clustering.min_pts = 8
+"""
 
 def postgres_bin() -> Path | None:
     """The folder of PostgreSQL's server programs (Debian keeps them off the PATH, in

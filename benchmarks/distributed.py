@@ -35,6 +35,7 @@ from pathlib import Path
 import pandas as pd
 
 from benchmarks._cluster import (
+    HPARAMS,
     dask_cluster,
     mlflow_server,
     postgres_missing,
@@ -47,15 +48,6 @@ from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
 
 N_DATASETS, N_SAMPLES = 12, 1000
 SETS = ("default", "paper")
-HPARAMS = """[default."*"]
-preset = "default"
-
-[paper."*"]
-preset = "paper"
-local_models.n_rho = 12
-clustering.eps = 0.3
-clustering.min_pts = 8
-"""
 ARMS = ("in-process, local stores", "in-process, shared services", "dask, 1 worker",
         "dask, 2 workers")
 #: A partition's summary line of ``run``: ``  <key>: … (<seconds> s)``.

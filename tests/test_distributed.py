@@ -25,6 +25,7 @@ import pandas as pd
 import pytest
 
 from benchmarks._cluster import (
+    HPARAMS,
     DaskCluster,
     dask_cluster,
     mlflow_server,
@@ -41,15 +42,6 @@ from pwa_pipeline.orchestration.signed_pickles import KEY_FILE, load_object, sig
 DATASETS = ("m1", "m2", "m3")
 SETS = ("default", "paper")
 KEYS = [f"{d}|{s}" for d in DATASETS for s in SETS]
-HPARAMS = """[default."*"]
-preset = "default"
-
-[paper."*"]
-preset = "paper"
-local_models.n_rho = 12
-clustering.eps = 0.3
-clustering.min_pts = 8
-"""
 #: Dagster run states that mean a run is still going (an orphan once its process is gone).
 IN_FLIGHT = {dg.DagsterRunStatus.STARTED, dg.DagsterRunStatus.STARTING,
              dg.DagsterRunStatus.QUEUED, dg.DagsterRunStatus.NOT_STARTED,
