@@ -29,7 +29,14 @@ from ..scoring.evaluation import WARMUP
 from .output_error import VALIDATION_FRACTION, OutputFreeRuns, held_out, refine_outputs
 from .regressors import Regressors, build_regressors
 from .scheduling import SignRegions
-from .structures import OutputModel, StructuredModel, output_lags, output_regressors, phi_names
+from .structures import (
+    OutputModel,
+    StructuredModel,
+    assign_params,
+    output_lags,
+    output_regressors,
+    phi_names,
+)
 
 
 class ProjectedRegions:
@@ -176,9 +183,7 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                     if len(kinds) == 1:
                         raise
                     continue  # a candidate whose least-squares free run diverges
-                offsets = np.cumsum([0] + [models[j].n_params for j in group])
-                for jj, j in enumerate(group):
-                    models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+                assign_params(models, group, res.thetas)
                 cost = res.validation_cost
                 info = {"outputs": group, "structure": kind, "seconds": res.seconds,
                         "n_iter": res.n_iter, "stop": res.stop, "cost_start": res.cost_start,

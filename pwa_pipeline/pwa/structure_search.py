@@ -54,12 +54,20 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D
 from ..scoring.evaluation import WARMUP
-from .output_error import OutputErrorRefinement, refine_outputs
+from .output_error import OutputErrorRefinement, held_out, refine_outputs
 from .output_error.simulator import FreeRuns
 from .regressors import Regressors, build_regressors
 from .scheduling import SignRegions
 from .structure_fit import ProjectedRegions, StructureFit
-from .structures import FORMS, OutputModel, StructuredModel, output_regressors, phi_names
+from .structures import (
+    COUPLINGS,
+    FORMS,
+    OutputModel,
+    StructuredModel,
+    assign_params,
+    output_regressors,
+    phi_names,
+)
 
 #: Which parameters differ between scheduled regions (see :class:`~.structures.OutputModel`).
 SWITCHES = ("offset", "all")
@@ -188,7 +196,7 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
     """
     n = len(experiments)
     if n >= 2:
-        n_val = min(max(1, round(fraction * n)), n - 1)
+        n_val = held_out(n, fraction)
         return (experiments[:n - n_val], experiments[n - n_val:],
                 f"experiments {n - n_val + 1}–{n} of {n} held out")
     u, y = experiments[0]
@@ -289,7 +297,7 @@ class StructureSearch(BaseEstimator):
         "max_seconds": [Interval(Real, 0, None, closed="neither")],
     }
 
-    def __init__(self, forms=FORMS, couplings=("joint", "decoupled"), max_variables: int = 2,
+    def __init__(self, forms=FORMS, couplings=COUPLINGS, max_variables: int = 2,
                  switches=SWITCHES, min_gain: float = 0.02, clustering: bool = True,
                  refinement: BaseEstimator | str | None = None,
                  validation_fraction: float = 0.2, refit: bool = False,
@@ -307,7 +315,7 @@ class StructureSearch(BaseEstimator):
 
     def _check(self) -> None:
         self._validate_params()
-        for name, allowed in (("forms", FORMS), ("couplings", ("joint", "decoupled")),
+        for name, allowed in (("forms", FORMS), ("couplings", COUPLINGS),
                               ("switches", SWITCHES)):
             values = list(getattr(self, name))
             bad = [v for v in values if v not in allowed]
@@ -664,10 +672,8 @@ class _Search:
         except ValueError as exc:
             self.record("refined", group, specs, cost0, f"not refined: {exc}", models)
             return cost0, models, {}
-        offsets = np.cumsum([0] + [models[j].n_params for j in group])
         start = {j: models[j].p for j in group}
-        for jj, j in enumerate(group):
-            models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+        assign_params(models, group, res.thetas)
         cost = self.cost(models, group)
         if not cost <= cost0:  # the refinement's own choice is on J_w; keep the start if better
             for j in group:
@@ -708,9 +714,7 @@ class _Search:
                                                  f"experiments: {exc}",
                                       "seconds": round(time.perf_counter() - self.t0, 3)})
                     continue
-                offsets = np.cumsum([0] + [models[j].n_params for j in group])
-                for jj, j in enumerate(group):
-                    models[j].p = res.thetas[offsets[jj]:offsets[jj + 1]]
+                assign_params(models, group, res.thetas)
             out.update(models)
         return out
 

@@ -177,6 +177,14 @@ class OutputModel:
         return self
 
 
+def assign_params(models: dict[int, "OutputModel"], group: list[int], p: np.ndarray) -> None:
+    """Give each output j of ``group`` its p_j out of their concatenation ``p`` (the order
+    of :func:`~.output_error.refine_outputs`' parameters)."""
+    offsets = np.cumsum([0] + [models[j].n_params for j in group])
+    for jj, j in enumerate(group):
+        models[j].p = p[offsets[jj]:offsets[jj + 1]]
+
+
 @dataclass
 class StructuredModel:
     """One :class:`OutputModel` per output over a common φ.
