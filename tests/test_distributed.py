@@ -36,6 +36,7 @@ from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
 from pwa_pipeline.methods import METHODS
+from pwa_pipeline.orchestration.instance import prepare_instance
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.signed_pickles import KEY_FILE, load_object, signing_key
 
@@ -87,12 +88,13 @@ class Cluster:
         return PartitionedFileIOManager(base_dir=(self.folder / name).as_uri())
 
     def instance(self) -> dg.DagsterInstance:
-        """The clients' Dagster instance, on PostgreSQL."""
+        """The clients' Dagster instance, on PostgreSQL, its home prepared as the command
+        line prepares it (whichever comes first)."""
         variables = {"DAGSTER_HOME": str(self.folder / "client-home"),
                      "PWA_DAGSTER_POSTGRES_URL": self.files["PWA_DAGSTER_POSTGRES_URL"]}
         os.environ.update(variables)
         try:
-            return dg.DagsterInstance.get()
+            return prepare_instance()
         finally:
             for name in variables:
                 del os.environ[name]
@@ -183,6 +185,14 @@ def _runs_of(instance: dg.DagsterInstance, keys: list[str]) -> list[dg.DagsterRu
             if r.tags.get("dagster/partition") in keys]
 
 
+def _step_span(instance: dg.DagsterInstance, run_id: str) -> tuple[float, float]:
+    """When a run's first step began and its last step ended (its run may have begun
+    earlier, waiting for the scheduler)."""
+    times = [e.timestamp for e in instance.all_logs(run_id) if e.is_dagster_event
+             and e.dagster_event.event_type_value in ("STEP_START", "STEP_SUCCESS")]
+    return min(times), max(times)
+
+
 def _every_stored_file_loads(root: Path) -> int:
     """Load every file of a store that a reader could be served (not the temporary ones);
     returns how many."""
@@ -230,31 +240,55 @@ def test_a_sweep_across_the_cluster_equals_the_in_process_run(cluster):
     assert _every_stored_file_loads(cluster.folder / "shared") > 6 * 10
 
 
+#: A run launched as the UI's run worker launches it: ``sweep_dask`` with the launchpad's
+#: configuration (the cluster, the stores), in a process of its own, outside the command line.
+UI_RUN = """
+import sys
+
+import dagster as dg
+
+from pwa_pipeline.definitions import defs
+from pwa_pipeline.orchestration.dask_sweep import sweep_dask_job, worker_run_config
+from pwa_pipeline.orchestration.definitions import partitions_of
+from pwa_pipeline.orchestration.instance import prepare_instance
+from pwa_pipeline.orchestration.jobs import dask_run_config
+
+key, address = sys.argv[1:]
+config = {**worker_run_config(defs.resources), **dask_run_config(address)}
+with dg.execute_job(dg.reconstructable(sweep_dask_job), prepare_instance(), run_config=config,
+                    tags=partitions_of(defs).get_tags_for_partition_key(key)) as result:
+    sys.exit(0 if result.success else 1)
+"""
+
+
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
-def test_two_clients_sweeping_at_once_both_complete(cluster):
-    first, second = ["m1|default"], ["m3|paper"]
-    with cluster.instance() as instance:  # the first test's, when it ran before this one
-        earlier = {r.run_id for r in _runs_of(instance, first + second)}
-    clients = [cluster.sweep(first), cluster.sweep(second)]
+def test_two_clients_and_a_ui_run_at_once_take_turns_and_all_complete(cluster):
+    first, second, ui = ["m1|default"], ["m3|paper"], ["m2|paper"]
+    keys = first + second + ui
+    with cluster.instance() as instance:  # earlier tests', when they ran before this one
+        earlier = {r.run_id for r in _runs_of(instance, keys)}
+    clients = [cluster.sweep(first), cluster.sweep(second), subprocess.Popen(
+        [sys.executable, "-c", UI_RUN, ui[0], cluster.dask.address], env=cluster.env(),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
     outputs = [c.communicate(timeout=600)[0] for c in clients]
     for client, out in zip(clients, outputs, strict=True):
         assert client.returncode == 0, out[-4000:]
         assert "FAILED" not in out
     with cluster.instance() as instance:
-        latest = [r for r in _runs_of(instance, first + second) if r.run_id not in earlier]
-        assert len(latest) == 2
+        latest = [r for r in _runs_of(instance, keys) if r.run_id not in earlier]
+        assert sorted(r.tags["dagster/partition"] for r in latest) == sorted(keys)
         assert {r.status for r in latest} == {dg.DagsterRunStatus.SUCCESS}
-        # the two clients' runs were launched at once but ran one after the other
-        spans = sorted((instance.get_run_record_by_id(r.run_id).start_time,
-                        instance.get_run_record_by_id(r.run_id).end_time) for r in latest)
-    assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:], strict=False))
-    _assert_results_equal_the_reference(cluster, first + second)
+        # the three runs were launched at once but their steps ran one run after the other,
+        # the later runs saying that they waited
+        spans = sorted(_step_span(instance, r.run_id) for r in latest)
+        waited = [r for r in latest if any("Waiting for the dask scheduler" in e.user_message
+                                           for e in instance.all_logs(r.run_id))]
+    assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:], strict=False)), spans
+    assert waited
+    _assert_results_equal_the_reference(cluster, keys)
 
 
-# slow (outside the normal suite) until it is deterministic: run alone, the sweep can end
-# before the poll sees pwa_chain begin, and no worker is killed
-@pytest.mark.slow
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
 def test_a_worker_killed_mid_sweep_leaves_a_complete_sweep_and_no_orphan(cluster):

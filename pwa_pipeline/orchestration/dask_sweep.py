@@ -21,7 +21,7 @@ import dagster as dg
 from .credentials import mask_credentials
 from .files import store_root
 from .io_manager import PartitionedFileIOManager
-from .jobs import RUN_LOCK, dask_run_config
+from .jobs import dask_run_config
 from .partition_runs import run_tags
 from .signed_pickles import KEY_FILE
 
@@ -176,23 +176,20 @@ def sweep_on_dask(keys: list[str], instance: dg.DagsterInstance, address: str,
     loggers); ``before(key)`` is called as each run starts; ``io_manager`` is the store the
     runs write to (default: the code location's), which the outputs are read from.
     ``instance`` must be persistent (the workers open it from its reference). Each run
-    holds the scheduler's :data:`~.jobs.RUN_LOCK`, so that other clients' runs on the same
-    scheduler wait for it rather than share its task names (see :mod:`.jobs`).
+    holds the scheduler's :data:`~.jobs.RUN_LOCK` (its executor takes it), so that other
+    runs on the same scheduler wait for it rather than share its task names (see
+    :mod:`.jobs`).
     """
-    from dask.distributed import Client, Lock
-
     from .definitions import defs, partitions_of
 
     partitions_def = partitions_of(defs)
     io_manager = io_manager or defs.resources["io_manager"]
     job = dg.reconstructable(sweep_dask_job)
     config = {**(run_config or {}), **dask_run_config(address)}
-    with Client(address, timeout=CONNECT_TIMEOUT) as client:
-        for key in keys:
-            if before is not None:
-                before(key)
-            tags = {**run_tags(), **partitions_def.get_tags_for_partition_key(key)}
-            with Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop), \
-                    dg.execute_job(job, instance, run_config=config, tags=tags) as result:
-                success, run_id = result.success, result.run_id
-            yield key, PartitionRun(key, success, run_id, io_manager)
+    for key in keys:
+        if before is not None:
+            before(key)
+        tags = {**run_tags(), **partitions_def.get_tags_for_partition_key(key)}
+        with dg.execute_job(job, instance, run_config=config, tags=tags) as result:
+            success, run_id = result.success, result.run_id
+        yield key, PartitionRun(key, success, run_id, io_manager)

@@ -12,14 +12,17 @@ thread-safe). The launchpad shows that configuration and lets it be changed per 
 One limit of ``dagster-dask`` 0.29: it names each dask task ``<job>.<step>``, so two runs of
 ``sweep_dask`` in flight on the same scheduler would share task keys, and dask would hand
 one run the other's results. Runs on a shared scheduler therefore take turns, each with
-every worker: the command line's runs hold the scheduler's lock :data:`RUN_LOCK` (a
-``distributed.Lock``, a lease that dask frees when the holding process dies) while they
-run, so that any number of clients may sweep at once (:mod:`.dask_sweep`), and the runs
-launched from the UI carry the tag :data:`EXECUTOR_TAG` that the instance's run queue admits
-one at a time (see :mod:`.instance`).
+every worker: the executor (:func:`dask_executor`) holds the scheduler's lock
+:data:`RUN_LOCK` (a ``distributed.Lock``, a lease that dask frees when the holding process
+dies) for as long as it runs, whoever launched the run: the command line, the UI, a
+schedule. The runs launched from the UI also carry the tag :data:`EXECUTOR_TAG`, which the
+instance's run queue admits one at a time (see :mod:`.instance`), so that the UI never
+starts more than one LocalCluster. An option of ``dagster-dask`` to name tasks by run would
+let runs share a scheduler at once.
 """
 
 import os
+from collections.abc import Callable
 
 import dagster as dg
 
@@ -35,9 +38,11 @@ SCHEDULER_ENV = "PWA_DASK_SCHEDULER"
 LOCAL_CLUSTER = {"n_workers": 2, "threads_per_worker": 1}
 #: Tag of the ``sweep_dask`` runs, which the run queue admits one at a time.
 EXECUTOR_TAG = ("pwa/executor", "dask")
-#: The ``distributed.Lock`` on a shared scheduler that the command line's ``sweep_dask`` runs
-#: hold while they run (see the module doc).
+#: The ``distributed.Lock`` on a shared scheduler that every ``sweep_dask`` run holds while
+#: it runs (see the module doc).
 RUN_LOCK = "pwa-pipeline/sweep_dask"
+#: Seconds between a waiting run's checks for an interrupt (the UI's "terminate").
+LOCK_POLL = 1.0
 
 
 def dask_cluster(address: str | None = None) -> dict:
@@ -65,13 +70,46 @@ def dask_run_config(address: str | None = None) -> dict:
     requirements=dg.multiple_process_executor_requirements(),
 )
 def dask_executor(init_context):
-    """``dagster_dask.dask_executor``, imported when a run uses it: importing dask's
+    """``dagster_dask.dask_executor`` on the configured cluster, taking turns on a shared
+    scheduler (:func:`taking_turns`). It is imported when a run uses it: importing dask's
     distributed takes about 2 s, which every process loading the code location (each run of
     ``sweep`` included) would otherwise pay. Its configuration is the ``existing`` and
-    ``local`` clusters of ``dagster_dask``'s."""
+    ``local`` clusters of ``dagster_dask``'s.
+
+    ``dagster_dask`` checks that the run's executor is its own, so the lock wraps the
+    ``execute`` method of the executor it returns rather than the executor."""
     from dagster_dask import dask_executor as executor
 
-    return executor.executor_creation_fn(init_context)
+    created = executor.executor_creation_fn(init_context)
+    existing = init_context.executor_config["cluster"].get("existing")
+    if existing:
+        created.execute = taking_turns(created.execute, existing["address"])
+    return created
+
+
+def taking_turns(execute: Callable, address: str) -> Callable:
+    """``execute`` (an executor's :meth:`dagster.Executor.execute`) run while holding the
+    lock :data:`RUN_LOCK` of the dask scheduler at ``address``, so that runs on one
+    scheduler never share task keys (see the module doc). A run that has to wait says so in
+    its log, and checks for an interrupt (the UI's "terminate") every :data:`LOCK_POLL`
+    seconds."""
+
+    def locked(plan_context, execution_plan):
+        from dask.distributed import Client, Lock
+
+        with Client(address, timeout=10, set_as_default=False) as client:
+            lock = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
+            if not lock.acquire(timeout=0):
+                plan_context.log.info(f"Waiting for the dask scheduler {address}: another "
+                                      f"sweep_dask run holds it.")
+                while not lock.acquire(timeout=LOCK_POLL):
+                    pass
+            try:
+                yield from execute(plan_context, execution_plan)
+            finally:
+                lock.release()
+
+    return locked
 
 
 #: The automation sensor that refreshes the leaderboard after sweep runs, on by default so
