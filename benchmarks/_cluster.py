@@ -7,6 +7,7 @@ all, when its context ends. Used by the distributed tests and ``benchmarks/distr
 
 import glob
 import os
+import secrets
 import shutil
 import signal
 import subprocess
@@ -71,16 +72,21 @@ def _stop(process: subprocess.Popen, timeout: float = 20) -> None:
 
 @contextmanager
 def postgres_server(databases: tuple[str, ...] = ("dagster",)) -> Iterator[str]:
-    """A fresh PostgreSQL cluster on a free loopback port with ``databases`` created; yields
-    its URL without a database (``postgresql+psycopg2://postgres@127.0.0.1:<port>``; append
-    ``/<name>``). Stopped and deleted at the end."""
+    """A fresh PostgreSQL cluster on a free loopback port with ``databases`` created, which
+    asks for a password over TCP as a team's server does; yields its URL without a database
+    (``postgresql+psycopg2://postgres:<password>@127.0.0.1:<port>``; append ``/<name>``).
+    Stopped and deleted at the end."""
     bin_dir = postgres_bin()
     folder = Path(tempfile.mkdtemp(prefix="pwa-postgres-"))
+    data, port, password = folder / "data", free_port(), secrets.token_hex(8)
+    (folder / "password").write_text(password)
     if os.geteuid() == 0:
-        shutil.chown(folder, "postgres", "postgres")
-    data, port = folder / "data", free_port()
+        for path in (folder, folder / "password"):
+            shutil.chown(path, "postgres", "postgres")
     subprocess.run(as_server_user([str(bin_dir / "initdb"), "-D", str(data), "-U", "postgres",
-                                   "--auth=trust"]), check=True, capture_output=True)
+                                   "--auth-local=trust", "--auth-host=scram-sha-256",
+                                   f"--pwfile={folder / 'password'}"]),
+                   check=True, capture_output=True)
     subprocess.run(as_server_user([
         str(bin_dir / "pg_ctl"), "-D", str(data), "-l", str(folder / "server.log"), "-w",
         "-o", f"-p {port} -k {folder} -c listen_addresses=127.0.0.1", "start"]),
@@ -88,8 +94,9 @@ def postgres_server(databases: tuple[str, ...] = ("dagster",)) -> Iterator[str]:
     try:
         for name in databases:
             subprocess.run([str(bin_dir / "createdb"), "-h", "127.0.0.1", "-p", str(port),
-                            "-U", "postgres", name], check=True, capture_output=True)
-        yield f"postgresql+psycopg2://postgres@127.0.0.1:{port}"
+                            "-U", "postgres", name], check=True, capture_output=True,
+                           env={**os.environ, "PGPASSWORD": password})
+        yield f"postgresql+psycopg2://postgres:{password}@127.0.0.1:{port}"
     finally:
         subprocess.run(as_server_user([str(bin_dir / "pg_ctl"), "-D", str(data), "-m", "fast",
                                        "-w", "stop"]), capture_output=True)

@@ -133,3 +133,26 @@ def test_a_database_that_does_not_answer_fails_within_seconds_naming_it(tmp_path
     assert "secret" not in message and "nothing was run" in message
     assert not (tmp_path / "home").exists()  # refused before the home was made
     assert main(["doctor"]) == 2  # the command line says it in one line, exit status 2
+
+
+def test_wrong_credentials_fail_within_seconds_naming_the_server_and_masking_them(
+        postgres_url, tmp_path, monkeypatch):
+    """The server asks for a password: a wrong one is refused with the server's reason, the
+    URL shown with its password masked, before the home is made."""
+    from pwa_pipeline.orchestration.cli import main
+
+    user, rest = postgres_url.split("//", 1)[1].split("@", 1)
+    wrong = postgres_url.replace(user, "postgres:guess3d")
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv(POSTGRES_ENV, wrong)
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError) as caught:
+        prepare_instance()
+    assert time.perf_counter() - t0 < 30
+    message = str(caught.value)
+    assert message.startswith(f"Dagster's PostgreSQL storage (postgresql+psycopg2://postgres:"
+                              f"***@{rest}) cannot be used: connection to server at")
+    assert 'password authentication failed for user "postgres"' in message
+    assert "guess3d" not in message and user.split(":")[1] not in message
+    assert not (tmp_path / "home").exists()
+    assert main(["doctor"]) == 2
