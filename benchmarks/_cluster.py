@@ -56,7 +56,7 @@ def as_server_user(command: list[str]) -> list[str]:
     return ["runuser", "-u", "postgres", "--", *command] if os.geteuid() == 0 else command
 
 
-def _stop(process: subprocess.Popen, timeout: float = 20) -> None:
+def stop_group(process: subprocess.Popen, timeout: float = 20) -> None:
     """End ``process`` and its process group: SIGTERM, then SIGKILL after ``timeout`` s."""
     for sig, wait in ((signal.SIGTERM, timeout), (signal.SIGKILL, None)):
         try:
@@ -103,7 +103,7 @@ def postgres_server(databases: tuple[str, ...] = ("dagster",)) -> Iterator[str]:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _wait_for(url: str, process: subprocess.Popen, log: Path, timeout: float = 120) -> None:
+def wait_for_url(url: str, process: subprocess.Popen, log: Path, timeout: float = 120) -> None:
     """Return once ``url`` answers 200; raise with the end of ``log`` if ``process`` ends
     first or ``timeout`` s pass."""
     deadline = time.time() + timeout
@@ -135,10 +135,10 @@ def mlflow_server(backend_uri: str, artifacts: Path, port: int, log: Path) -> It
             start_new_session=True)
     url = f"http://127.0.0.1:{port}"
     try:
-        _wait_for(f"{url}/health", server, log)
+        wait_for_url(f"{url}/health", server, log)
         yield url
     finally:
-        _stop(server)
+        stop_group(server)
 
 
 @dataclass
@@ -177,4 +177,4 @@ def dask_cluster(n_workers: int, env: dict[str, str], log: Path) -> Iterator[Das
             yield cluster
         finally:
             for process in [*cluster.workers, cluster.scheduler]:
-                _stop(process)
+                stop_group(process)

@@ -240,53 +240,25 @@ def test_a_sweep_across_the_cluster_equals_the_in_process_run(cluster):
     assert _every_stored_file_loads(cluster.folder / "shared") > 6 * 10
 
 
-#: A run launched as the UI's run worker launches it: ``sweep_dask`` with the launchpad's
-#: configuration (the cluster, the stores), in a process of its own, outside the command line.
-UI_RUN = """
-import sys
-
-import dagster as dg
-
-from pwa_pipeline.definitions import defs
-from pwa_pipeline.orchestration.dask_sweep import sweep_dask_job, worker_run_config
-from pwa_pipeline.orchestration.definitions import partitions_of
-from pwa_pipeline.orchestration.instance import prepare_instance
-from pwa_pipeline.orchestration.jobs import dask_run_config
-
-key, address = sys.argv[1:]
-config = {**worker_run_config(defs.resources), **dask_run_config(address)}
-with dg.execute_job(dg.reconstructable(sweep_dask_job), prepare_instance(), run_config=config,
-                    tags=partitions_of(defs).get_tags_for_partition_key(key)) as result:
-    sys.exit(0 if result.success else 1)
-"""
-
-
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
-def test_two_clients_and_a_ui_run_at_once_take_turns_and_all_complete(cluster):
-    first, second, ui = ["m1|default"], ["m3|paper"], ["m2|paper"]
-    keys = first + second + ui
+def test_two_clients_sweeping_at_once_take_turns_and_both_complete(cluster):
+    first, second = ["m1|default"], ["m3|paper"]
     with cluster.instance() as instance:  # earlier tests', when they ran before this one
-        earlier = {r.run_id for r in _runs_of(instance, keys)}
-    clients = [cluster.sweep(first), cluster.sweep(second), subprocess.Popen(
-        [sys.executable, "-c", UI_RUN, ui[0], cluster.dask.address], env=cluster.env(),
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)]
+        earlier = {r.run_id for r in _runs_of(instance, first + second)}
+    clients = [cluster.sweep(first), cluster.sweep(second)]
     outputs = [c.communicate(timeout=600)[0] for c in clients]
     for client, out in zip(clients, outputs, strict=True):
         assert client.returncode == 0, out[-4000:]
         assert "FAILED" not in out
     with cluster.instance() as instance:
-        latest = [r for r in _runs_of(instance, keys) if r.run_id not in earlier]
-        assert sorted(r.tags["dagster/partition"] for r in latest) == sorted(keys)
+        latest = [r for r in _runs_of(instance, first + second) if r.run_id not in earlier]
+        assert len(latest) == 2
         assert {r.status for r in latest} == {dg.DagsterRunStatus.SUCCESS}
-        # the three runs were launched at once but their steps ran one run after the other,
-        # the later runs saying that they waited
+        # the two runs were launched at once but their steps ran one run after the other
         spans = sorted(_step_span(instance, r.run_id) for r in latest)
-        waited = [r for r in latest if any("Waiting for the dask scheduler" in e.user_message
-                                           for e in instance.all_logs(r.run_id))]
-    assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:], strict=False)), spans
-    assert waited
-    _assert_results_equal_the_reference(cluster, keys)
+    assert spans[0][1] <= spans[1][0], spans
+    _assert_results_equal_the_reference(cluster, first + second)
 
 
 @pytest.mark.distributed

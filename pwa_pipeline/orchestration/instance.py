@@ -2,7 +2,7 @@
 
 The generated file sets the UI's and the run queue's settings and, when
 ``$PWA_DAGSTER_POSTGRES_URL`` is set, Dagster's supported PostgreSQL storage
-(``dagster-postgres``, the ``cluster`` extra: ``storage: postgres:`` reading the URL from
+(``dagster-postgres``, the ``postgres`` extra: ``storage: postgres:`` reading the URL from
 that variable, so that the file holds no password and every machine sharing it reads its
 own environment). Unset, storage and compute logs are Dagster's defaults for a home folder
 (sqlite files under ``history/`` and ``schedules/``, logs under ``storage/``), which the UI's
