@@ -114,45 +114,41 @@ def test_a_bad_postgres_url_is_refused_naming_the_problem_and_masking_the_passwo
     check_postgres_url("postgresql+psycopg2://u:secret@127.0.0.1:5432/dagster")
 
 
-def test_a_database_that_does_not_answer_fails_within_seconds_naming_it(tmp_path,
-                                                                        monkeypatch):
-    """Refused at once, with the server's reason, rather than after Dagster's retries."""
+def _refused(url: str, tmp_path, monkeypatch) -> str:
+    """The message with which the command line refuses the PostgreSQL URL ``url``: within
+    30 s, before the Dagster home is made, in one line with exit status 2."""
     from pwa_pipeline.orchestration.cli import main
 
-    port = free_port()  # nothing listens there
     monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
-    monkeypatch.setenv(POSTGRES_ENV, f"postgresql+psycopg2://dagster:secret@127.0.0.1:{port}/db")
-    t0 = time.perf_counter()
-    with pytest.raises(ValueError) as caught:
-        prepare_instance()
-    assert time.perf_counter() - t0 < 5
-    message = str(caught.value)
-    assert message.startswith(f"Dagster's PostgreSQL storage (postgresql+psycopg2://dagster:***@"
-                              f"127.0.0.1:{port}/db) cannot be used: connection to server at "
-                              f"\"127.0.0.1\", port {port} failed: Connection refused. ")
-    assert "secret" not in message and "nothing was run" in message
-    assert not (tmp_path / "home").exists()  # refused before the home was made
-    assert main(["doctor"]) == 2  # the command line says it in one line, exit status 2
-
-
-def test_wrong_credentials_fail_within_seconds_naming_the_server_and_masking_them(
-        postgres_url, tmp_path, monkeypatch):
-    """The server asks for a password: a wrong one is refused with the server's reason, the
-    URL shown with its password masked, before the home is made."""
-    from pwa_pipeline.orchestration.cli import main
-
-    user, rest = postgres_url.split("//", 1)[1].split("@", 1)
-    wrong = postgres_url.replace(user, "postgres:guess3d")
-    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
-    monkeypatch.setenv(POSTGRES_ENV, wrong)
+    monkeypatch.setenv(POSTGRES_ENV, url)
     t0 = time.perf_counter()
     with pytest.raises(ValueError) as caught:
         prepare_instance()
     assert time.perf_counter() - t0 < 30
-    message = str(caught.value)
+    assert not (tmp_path / "home").exists()
+    assert main(["doctor"]) == 2
+    return str(caught.value)
+
+
+def test_a_database_that_does_not_answer_fails_within_seconds_naming_it(tmp_path,
+                                                                        monkeypatch):
+    """Refused at once, with the server's reason, rather than after Dagster's retries."""
+    port = free_port()  # nothing listens there
+    message = _refused(f"postgresql+psycopg2://dagster:secret@127.0.0.1:{port}/db", tmp_path,
+                       monkeypatch)
+    assert message.startswith(f"Dagster's PostgreSQL storage (postgresql+psycopg2://dagster:***@"
+                              f"127.0.0.1:{port}/db) cannot be used: connection to server at "
+                              f"\"127.0.0.1\", port {port} failed: Connection refused. ")
+    assert "secret" not in message and "nothing was run" in message
+
+
+def test_wrong_credentials_fail_within_seconds_naming_the_server_and_masking_them(
+        postgres_url, tmp_path, monkeypatch):
+    """The server asks for a password: a wrong one is refused with the server's reason and
+    the URL, its password masked."""
+    user, rest = postgres_url.split("//", 1)[1].split("@", 1)
+    message = _refused(postgres_url.replace(user, "postgres:guess3d"), tmp_path, monkeypatch)
     assert message.startswith(f"Dagster's PostgreSQL storage (postgresql+psycopg2://postgres:"
                               f"***@{rest}) cannot be used: connection to server at")
     assert 'password authentication failed for user "postgres"' in message
     assert "guess3d" not in message and user.split(":")[1] not in message
-    assert not (tmp_path / "home").exists()
-    assert main(["doctor"]) == 2
