@@ -9,6 +9,7 @@ launched by the daemon) and one from the command line, at once, on the shared sc
 import os
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -124,12 +125,38 @@ def _instance(env: dict[str, str]) -> dg.DagsterInstance:
             del os.environ[name]
 
 
-def _waiting(instance: dg.DagsterInstance) -> dict[str, bool]:
-    """Each ``sweep_dask`` run's partition, and whether it has said that it waits for the
-    scheduler."""
+def _waiting(instance: dg.DagsterInstance, keys: tuple[str, ...]) -> dict[str, bool]:
+    """The partition of each ``sweep_dask`` run of ``keys``, and whether that run has said
+    that it waits for the scheduler."""
+    runs = instance.get_runs(dg.RunsFilter(job_name="sweep_dask",
+                                           tags={"dagster/partition": list(keys)}))
     return {run.tags["dagster/partition"]: any(
         "Waiting for the dask scheduler" in e.user_message for e in instance.all_logs(run.run_id))
-        for run in instance.get_runs(dg.RunsFilter(job_name="sweep_dask"))}
+        for run in runs}
+
+
+def _launchpad(env: dict[str, str]) -> dict:
+    """The run configuration the UI's launchpad shows for ``sweep_dask``: the compose
+    scheduler."""
+    return {"execution": {"config": {"cluster": {"existing": {
+        "address": env["PWA_DASK_SCHEDULER"]}}}}}
+
+
+def _cli_sweep(env: dict[str, str], *keys: str) -> subprocess.Popen:
+    """The compose file's documented command from a shell in a container, over ``keys``
+    (its runs do not pass through the run queue)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "pwa_pipeline", "run", "--executor", "dask",
+         *[a for key in keys for a in ("--partition", key)]], cwd=ROOT, env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _until(condition, timeout: float, what) -> None:
+    """Return once ``condition()`` holds; fail with ``what()`` after ``timeout`` s."""
+    deadline = time.time() + timeout
+    while not condition():
+        assert time.time() < deadline, what()
+        time.sleep(0.5)
 
 
 @pytest.mark.distributed
@@ -147,34 +174,23 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
         # the scheduler is busy (this test holds its lock) when both runs arrive
         busy = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
         assert busy.acquire(timeout=5)
-        # from the UI: the configuration its launchpad shows (the compose scheduler), queued
-        # for the daemon, which launches it
-        launchpad = {"execution": {"config": {"cluster": {"existing": {
-            "address": env["PWA_DASK_SCHEDULER"]}}}}}
+        # from the UI, queued for the daemon, which launches it
         run_id = DagsterGraphQLClient("127.0.0.1", port_number=services["web"]) \
-            .submit_job_execution("sweep_dask", run_config=launchpad,
+            .submit_job_execution("sweep_dask", run_config=_launchpad(env),
                                   tags={"dagster/partition": ui_key})
-        deadline = time.time() + 120
-        while _waiting(instance) != {ui_key: True}:
-            assert time.time() < deadline, _waiting(instance)
-            time.sleep(0.5)
-        # from a shell in a container: the compose file's documented command, one partition
-        # (its run does not pass through the queue, which would hold it behind the UI's)
-        sweep = subprocess.Popen(
-            [sys.executable, "-m", "pwa_pipeline", "run", "--executor", "dask",
-             "--partition", cli_key], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True)
-        while _waiting(instance) != {ui_key: True, cli_key: True}:
-            assert time.time() < deadline and sweep.poll() is None, _waiting(instance)
-            time.sleep(0.5)
+        keys = (ui_key, cli_key)
+        _until(lambda: _waiting(instance, keys) == {ui_key: True}, 120,
+               lambda: _waiting(instance, keys))
+        sweep = _cli_sweep(env, cli_key)
+        _until(lambda: _waiting(instance, keys) == {ui_key: True, cli_key: True}, 120,
+               lambda: (_waiting(instance, keys), sweep.poll()))
         busy.release()
         out = sweep.communicate(timeout=600)[0]
         assert sweep.returncode == 0, out[-4000:]
-        while instance.get_run_by_id(run_id).status not in (
-                dg.DagsterRunStatus.SUCCESS, dg.DagsterRunStatus.FAILURE):
-            assert time.time() < deadline + 300
-            time.sleep(0.5)
-        runs = instance.get_runs(dg.RunsFilter(job_name="sweep_dask"))
+        _until(lambda: instance.get_run_by_id(run_id).is_finished, 300,
+               lambda: instance.get_run_by_id(run_id).status)
+        runs = instance.get_runs(dg.RunsFilter(job_name="sweep_dask",
+                                               tags={"dagster/partition": list(keys)}))
         assert {r.tags["dagster/partition"]: r.status for r in runs} == {
             ui_key: dg.DagsterRunStatus.SUCCESS, cli_key: dg.DagsterRunStatus.SUCCESS}
         # every step on a compose worker, the two runs' steps one run after the other
@@ -197,3 +213,46 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
         experiment = client.get_experiment_by_name(f"pwa-pipeline/{dataset}")
         assert experiment.artifact_location.startswith("mlflow-artifacts:")
         assert client.search_runs([experiment.experiment_id])
+
+
+@pytest.mark.distributed
+@pytest.mark.xdist_group("distributed")
+@pytest.mark.filterwarnings("ignore::DeprecationWarning:gql.*")
+def test_runs_waiting_for_a_busy_scheduler_stop_when_terminated_or_interrupted(services):
+    """Terminated from the UI, a run waiting for the scheduler is cancelled; Ctrl-C stops
+    the command line's, which says so and starts no further partition."""
+    from dagster_graphql import DagsterGraphQLClient
+    from dask.distributed import Client, Lock
+
+    from pwa_pipeline.orchestration.jobs import RUN_LOCK
+
+    env, ui_key, cli_key = services["env"], "m1|output_error", "m2|output_error"
+    keys = (ui_key, cli_key)
+    ui = DagsterGraphQLClient("127.0.0.1", port_number=services["web"])
+    with Client(env["PWA_DASK_SCHEDULER"], timeout=10) as client, _instance(env) as instance:
+        busy = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
+        assert busy.acquire(timeout=5)
+        try:
+            run_id = ui.submit_job_execution("sweep_dask", run_config=_launchpad(env),
+                                             tags={"dagster/partition": ui_key})
+            sweep = _cli_sweep(env, cli_key, "m2|default")
+            _until(lambda: _waiting(instance, keys) == {ui_key: True, cli_key: True}, 120,
+                   lambda: (_waiting(instance, keys), sweep.poll() is None
+                            or sweep.communicate()[0][-3000:]))
+            t0 = time.time()
+            ui.terminate_run(run_id)
+            sweep.send_signal(signal.SIGINT)
+            out = sweep.communicate(timeout=60)[0]
+            _until(lambda: instance.get_run_by_id(run_id).is_finished, 60,
+                   lambda: instance.get_run_by_id(run_id).status)
+            stopped = time.time() - t0
+        finally:
+            busy.release()
+        runs = {r.tags["dagster/partition"]: r.status for r in instance.get_runs(
+            dg.RunsFilter(job_name="sweep_dask", tags={"dagster/partition": list(keys)}))}
+    assert runs[ui_key] == dg.DagsterRunStatus.CANCELED
+    assert runs[cli_key] == dg.DagsterRunStatus.FAILURE  # no termination was requested
+    assert stopped < 20
+    assert sweep.returncode == 130, out[-4000:]
+    assert f"{cli_key}: INTERRUPTED after" in out
+    assert "materialising m2|default" not in out and "not run to the end: m2|default" in out

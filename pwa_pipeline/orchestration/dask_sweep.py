@@ -22,7 +22,7 @@ from .credentials import mask_credentials
 from .files import store_root
 from .io_manager import PartitionedFileIOManager
 from .jobs import dask_run_config
-from .partition_runs import run_tags
+from .partition_runs import run_tags, was_interrupted
 from .signed_pickles import KEY_FILE
 
 #: Schemes of dask's communication layers an address may name.
@@ -191,5 +191,6 @@ def sweep_on_dask(keys: list[str], instance: dg.DagsterInstance, address: str,
             before(key)
         tags = {**run_tags(), **partitions_def.get_tags_for_partition_key(key)}
         with dg.execute_job(job, instance, run_config=config, tags=tags) as result:
-            success, run_id = result.success, result.run_id
-        yield key, PartitionRun(key, success, run_id, io_manager)
+            run = PartitionRun(key, result.success, result.run_id, io_manager,
+                               was_interrupted(result))
+        yield key, run

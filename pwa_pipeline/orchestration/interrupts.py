@@ -5,7 +5,8 @@ handler, in whatever the main thread is running at that moment. A handler that r
 code which catches and drops the error (a finaliser, a library's clean-up, MLflow's logging)
 leaves the run going to its end.
 :func:`interrupts_redelivered` notices every SIGINT at the C level, where no handler can
-lose it, and sends it again while the run goes on.
+lose it, and sends it again while the run goes on. :func:`interruptible` makes a run that
+waits before its steps (for a busy dask scheduler) stop at once.
 """
 
 import os
@@ -14,6 +15,8 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+import dagster as dg
 
 #: Seconds a run may take to end after a SIGINT before the signal is sent again (a step in
 #: flight may need a few seconds to stop), and how often it is sent again at most.
@@ -59,3 +62,31 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iter
         signal.set_wakeup_fd(previous)
         os.close(read)
         os.close(write)
+
+
+@contextmanager
+def interruptible() -> Iterator[None]:
+    """While the block runs, SIGINT (Ctrl-C, the UI's "terminate") and a SIGTERM that
+    Dagster handles as SIGINT raise ``DagsterExecutionInterruptedError`` at once, which
+    Dagster records as the run's cancellation. Dagster itself only notes them during a run,
+    and raises them where an executor waits for its steps, which a run waiting for the
+    scheduler has not reached. In a thread other than the main thread (where no handler
+    can be set) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise dg.DagsterExecutionInterruptedError(
+            f"interrupted ({signal.Signals(signum).name})")
+
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    handled = [signal.SIGINT] + ([signal.SIGTERM] if previous[signal.SIGTERM]
+                                 == previous[signal.SIGINT] else [])
+    for sig in handled:
+        signal.signal(sig, stop)
+    try:
+        yield
+    finally:
+        for sig in handled:
+            signal.signal(sig, previous[sig])

@@ -26,6 +26,8 @@ from collections.abc import Callable
 
 import dagster as dg
 
+from .interrupts import interruptible
+
 #: The one asset that is not partitioned: it reads every partition of the scores.
 LEADERBOARD = "leaderboard"
 #: The job of every asset of one partition (built in :mod:`.schedules`), and the leaderboard's.
@@ -41,7 +43,7 @@ EXECUTOR_TAG = ("pwa/executor", "dask")
 #: The ``distributed.Lock`` on a shared scheduler that every ``sweep_dask`` run holds while
 #: it runs (see the module doc).
 RUN_LOCK = "pwa-pipeline/sweep_dask"
-#: Seconds between a waiting run's checks for an interrupt (the UI's "terminate").
+#: Seconds of each wait for the scheduler's lock, which a waiting run repeats.
 LOCK_POLL = 1.0
 
 
@@ -91,8 +93,7 @@ def taking_turns(execute: Callable, address: str) -> Callable:
     """``execute`` (an executor's :meth:`dagster.Executor.execute`) run while holding the
     lock :data:`RUN_LOCK` of the dask scheduler at ``address``, so that runs on one
     scheduler never share task keys (see the module doc). A run that has to wait says so in
-    its log, and checks for an interrupt (the UI's "terminate") every :data:`LOCK_POLL`
-    seconds."""
+    its log and can be stopped while it waits (:func:`.interrupts.interruptible`)."""
 
     def locked(plan_context, execution_plan):
         from dask.distributed import Client, Lock
@@ -102,8 +103,9 @@ def taking_turns(execute: Callable, address: str) -> Callable:
             if not lock.acquire(timeout=0):
                 plan_context.log.info(f"Waiting for the dask scheduler {address}: another "
                                       f"sweep_dask run holds it.")
-                while not lock.acquire(timeout=LOCK_POLL):
-                    pass
+                with interruptible():
+                    while not lock.acquire(timeout=LOCK_POLL):
+                        pass
             try:
                 yield from execute(plan_context, execution_plan)
             finally:

@@ -30,13 +30,22 @@ def run_tags() -> dict[str, str]:
     return {**LOCATION_TAGS, HOST_TAG: socket.gethostname()}
 
 
+#: What Dagster records of an interrupt: the failure of the step it came in (in process), or
+#: of the run while its executor waited (for a busy dask scheduler, or for its tasks).
+INTERRUPTS = ("DagsterExecutionInterruptedError", "KeyboardInterrupt")
+
+
 def was_interrupted(result) -> bool:
     """Whether a partition's run ended by an interrupt (Ctrl-C, SIGINT): Dagster then fails
-    the step it was in with ``DagsterExecutionInterruptedError`` and returns."""
+    the step it was in, or the run, with ``DagsterExecutionInterruptedError`` (a run that
+    was asked to stop from the UI is cancelled instead)."""
     if hasattr(result, "interrupted"):
         return result.interrupted
-    return any(e.event_type_value == "STEP_FAILURE" and e.event_specific_data.error is not None
-               and e.event_specific_data.error.cls_name == "DagsterExecutionInterruptedError"
+    failures = (dg.DagsterEventType.STEP_FAILURE.value, dg.DagsterEventType.RUN_FAILURE.value)
+    return any(e.event_type_value == dg.DagsterEventType.RUN_CANCELED.value
+               or e.event_type_value in failures
+               and getattr(e.event_specific_data, "error", None) is not None
+               and e.event_specific_data.error.cls_name in INTERRUPTS
                for e in result.all_events)
 
 
