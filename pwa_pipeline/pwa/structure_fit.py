@@ -88,6 +88,26 @@ def _candidates(scheduling: BaseEstimator | None, cluster: Callable | None, affi
     return ["linear"] + (["offset"] if affine else []) + ["all"]
 
 
+def clustered_models(group: list[int], reg: Regressors, parts: dict[int, tuple],
+                     cluster: Callable) -> dict[int, OutputModel]:
+    """The paper's steps 2–6 (``cluster``, see :func:`fit_structure`) on a group's
+    regressors ψ = M φ: one model per output of ``group``, every parameter switching between
+    the clusters' regions, which the outputs share.
+
+    ``parts[j]`` is output j's ``(M, c, names)`` from :func:`.structures.output_regressors`
+    (the same M for every output of the group); the clusters are fitted to y_j − c φ.
+    """
+    M = parts[group[0]][0]
+    target = reg.target[:, group] - reg.phi @ np.array([parts[j][1] for j in group]).T
+    thetas, regions, s = cluster(Regressors(phi=reg.phi @ M.T, target=target,
+                                            experiment=reg.experiment, time=reg.time,
+                                            n_inputs=reg.n_inputs))
+    return {j: OutputModel(M, parts[j][1], np.ones(M.shape[0], bool), s,
+                           ProjectedRegions(M, regions), "clustered", parts[j][2],
+                           p=thetas[:, :, jj].ravel())
+            for jj, j in enumerate(group)}
+
+
 def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str,
            coupling: str, scheduling, cluster) -> dict[int, OutputModel]:
     m, r, na, nb, affine = shape
@@ -95,15 +115,7 @@ def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str
     names = phi_names(m, r, lags, nb, affine)
     parts = {j: output_regressors(j, m, r, na, nb, affine, form, coupling) for j in group}
     if kind == "clustered":
-        M = parts[group[0]][0]  # the same ψ for every output of the group
-        target = reg.target[:, group] - reg.phi @ np.array([parts[j][1] for j in group]).T
-        thetas, regions, s = cluster(Regressors(phi=reg.phi @ M.T, target=target,
-                                                experiment=reg.experiment, time=reg.time,
-                                                n_inputs=reg.n_inputs))
-        return {j: OutputModel(M, parts[j][1], np.ones(M.shape[0], bool), s,
-                               ProjectedRegions(M, regions), kind, parts[j][2],
-                               p=thetas[:, :, jj].ravel())
-                for jj, j in enumerate(group)}
+        return clustered_models(group, reg, parts, cluster)
     out = {}
     for j in group:
         M, c, psi_names = parts[j]

@@ -56,9 +56,9 @@ from .._typing import Float2D
 from ..scoring.evaluation import WARMUP
 from .output_error import OutputErrorRefinement, held_out, refine_outputs
 from .output_error.simulator import FreeRuns
-from .regressors import Regressors, build_regressors
+from .regressors import build_regressors
 from .scheduling import SignRegions
-from .structure_fit import ProjectedRegions, StructureFit
+from .structure_fit import StructureFit, clustered_models
 from .structures import (
     COUPLINGS,
     FORMS,
@@ -628,24 +628,16 @@ class _Search:
             return []
         base = specs[group[0]]
         spec = OutputSpec(base.form, base.na, base.nb, switch="clustered")
-        parts = [output_regressors(j, self.m, self.r, spec.na, spec.nb, True, spec.form,
-                                   coupling, phi_lags=self.lags, phi_nb=self.nb)
-                 for j in group]
-        M, names = parts[0][0], parts[0][2]  # the same ψ for every output of the group
-        cs = np.array([c for _, c, _ in parts])
+        parts = {j: output_regressors(j, self.m, self.r, spec.na, spec.nb, True, spec.form,
+                                      coupling, phi_lags=self.lags, phi_nb=self.nb)
+                 for j in group}
         tried = dict.fromkeys(group, spec)
         try:
-            thetas, regions, s = self.cluster(Regressors(
-                phi=self.reg.phi @ M.T, target=self.reg.target[:, group] - self.reg.phi @ cs.T,
-                experiment=self.reg.experiment, time=self.reg.time,
-                n_inputs=self.reg.n_inputs))
+            trial = clustered_models(group, self.reg, parts, self.cluster)
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.record("clustered", group, tried, np.nan, f"skipped: {exc}")
             return []
-        trial = {j: OutputModel(M, cs[jj], np.ones(M.shape[0], bool), s,
-                                ProjectedRegions(M, regions), "clustered", names,
-                                p=thetas[:, :, jj].ravel())
-                 for jj, j in enumerate(group)}
+        s = trial[group[0]].n_regions
         cost = self.cost(trial, group)
         useful = bool(np.isfinite(cost)) and s > 1
         self.record("clustered", group, tried, cost,
