@@ -367,22 +367,6 @@ def test_the_pipeline_writes_and_reads_its_assets_and_caches_at_an_fsspec_url(mo
     assert files == ["paper.pkl"]  # no temporary file left beside it
 
 
-def test_a_failed_write_to_an_fsspec_store_keeps_the_old_file_and_no_temporary_one():
-    from pwa_pipeline.orchestration.files import atomic_write, store_root
-
-    path = store_root("memory://pwa-atomic/a") / "x" / "f.parquet"
-    atomic_write(path, lambda p: p.write_text("old"))
-
-    def broken(p):
-        p.write_text("half")
-        raise RuntimeError("connection lost")
-
-    with pytest.raises(RuntimeError, match="connection lost"):
-        atomic_write(path, broken)
-    assert path.read_text() == "old"
-    assert [p.name for p in path.parent.iterdir()] == ["f.parquet"]
-
-
 def test_bad_store_urls_are_refused_naming_them(tmp_path):
     from pwa_pipeline.orchestration.files import check_writable, store_root
 

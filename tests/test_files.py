@@ -6,7 +6,7 @@ import time
 import pytest
 
 from pwa_pipeline.orchestration import files
-from pwa_pipeline.orchestration.files import atomic_write, sweep_stale_tmp
+from pwa_pipeline.orchestration.files import atomic_write, store_root, sweep_stale_tmp
 
 
 def test_create_new_never_replaces_a_file_and_leaves_no_temporary_one(tmp_path):
@@ -29,15 +29,18 @@ def test_stale_temporary_files_are_swept_fresh_ones_kept(tmp_path):
 
 
 
-def test_atomic_write_keeps_the_old_file_when_a_write_fails(tmp_path):
-    path = tmp_path / "a.parquet"
+@pytest.mark.parametrize("store", ["folder", "fsspec"])
+def test_atomic_write_keeps_the_old_file_when_a_write_fails(store, tmp_path):
+    """On a file system (a rename) and an fsspec store (the object written whole)."""
+    root = tmp_path if store == "folder" else store_root(f"memory://pwa-atomic/{tmp_path.name}")
+    path = root / "x" / "a.parquet"
     atomic_write(path, lambda p: p.write_text("old"))
 
     def broken(p):
         p.write_text("half")
-        raise RuntimeError("disk full")
+        raise RuntimeError("connection lost")
 
-    with pytest.raises(RuntimeError, match="disk full"):
+    with pytest.raises(RuntimeError, match="connection lost"):
         atomic_write(path, broken)
     assert path.read_text() == "old"
-    assert [f.name for f in tmp_path.iterdir()] == ["a.parquet"]
+    assert [f.name for f in path.parent.iterdir()] == ["a.parquet"]
