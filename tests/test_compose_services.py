@@ -7,6 +7,7 @@ launched by the daemon) and one from the command line, at once, on the shared sc
 """
 
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -68,10 +69,10 @@ def services(system_package, tmp_path_factory) -> Iterator[dict]:
             ("/store", str(folder / "store")),
         ]
 
-        def mapped(text: str) -> str:
-            for old, new in mapping:
-                text = text.replace(old, new)
-            return text
+        pattern = re.compile("|".join(re.escape(old) for old, _ in mapping))
+
+        def mapped(text: str) -> str:  # one pass: a replacement is never replaced again
+            return pattern.sub(lambda match: dict(mapping)[match[0]], text)
 
         (folder / "home").mkdir()  # the volume of dagster.yaml
         shutil.copy(ROOT / "deploy" / "dagster.yaml", folder / "home" / "dagster.yaml")
@@ -164,7 +165,7 @@ def _until(condition, timeout: float, what) -> None:
 @pytest.mark.filterwarnings("ignore::DeprecationWarning:gql.*")
 def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(services):
     from dagster_graphql import DagsterGraphQLClient
-    from dask.distributed import Client, Lock
+    from dask.distributed import Client, Lock, Variable
     from mlflow.tracking import MlflowClient
 
     from pwa_pipeline.orchestration.jobs import RUN_LOCK
@@ -174,6 +175,7 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
         # the scheduler is busy (this test holds its lock) when both runs arrive
         busy = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
         assert busy.acquire(timeout=5)
+        Variable(f"{RUN_LOCK}/holder", client=client).set("the test's client")
         # from the UI, queued for the daemon, which launches it
         run_id = DagsterGraphQLClient("127.0.0.1", port_number=services["web"]) \
             .submit_job_execution("sweep_dask", run_config=_launchpad(env),
@@ -184,6 +186,7 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
         sweep = _cli_sweep(env, cli_key)
         _until(lambda: _waiting(instance, keys) == {ui_key: True, cli_key: True}, 120,
                lambda: (_waiting(instance, keys), sweep.poll()))
+        Variable(f"{RUN_LOCK}/holder", client=client).delete()
         busy.release()
         out = sweep.communicate(timeout=600)[0]
         assert sweep.returncode == 0, out[-4000:]
@@ -193,9 +196,18 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
                                                tags={"dagster/partition": list(keys)}))
         assert {r.tags["dagster/partition"]: r.status for r in runs} == {
             ui_key: dg.DagsterRunStatus.SUCCESS, cli_key: dg.DagsterRunStatus.SUCCESS}
-        # every step on a compose worker, the two runs' steps one run after the other
+        # every step on a compose worker, the two runs' steps one run after the other, each
+        # run saying which run it waited for and when its steps could start
         spans, pids = [], set()
         for run in runs:
+            said = [e.user_message for e in instance.all_logs(run.run_id)
+                    if e.user_message.startswith(("Waiting for", "The dask scheduler"))]
+            assert said == [
+                f"Waiting for the dask scheduler {env['PWA_DASK_SCHEDULER']}: the test's "
+                f"client holds it. This run's steps start when it ends; terminate this run "
+                f"to give up.",
+                f"The dask scheduler {env['PWA_DASK_SCHEDULER']} is free: this run's steps "
+                f"start."], said
             steps = [e for e in instance.all_logs(run.run_id) if e.is_dagster_event
                      and e.dagster_event.event_type_value in ("STEP_START", "STEP_SUCCESS")]
             spans.append((min(e.timestamp for e in steps), max(e.timestamp for e in steps)))
@@ -246,11 +258,14 @@ def test_runs_waiting_for_a_busy_scheduler_stop_when_terminated_or_interrupted(s
             _until(lambda: instance.get_run_by_id(run_id).is_finished, 60,
                    lambda: instance.get_run_by_id(run_id).status)
             stopped = time.time() - t0
+            cancelled = instance.all_logs(run_id, of_type=dg.DagsterEventType.RUN_CANCELED)
         finally:
             busy.release()
         runs = {r.tags["dagster/partition"]: r.status for r in instance.get_runs(
             dg.RunsFilter(job_name="sweep_dask", tags={"dagster/partition": list(keys)}))}
     assert runs[ui_key] == dg.DagsterRunStatus.CANCELED
+    assert "stopped while waiting for the dask scheduler" in \
+        cancelled[0].dagster_event.event_specific_data.error.message
     assert runs[cli_key] == dg.DagsterRunStatus.FAILURE  # no termination was requested
     assert stopped < 20
     assert sweep.returncode == 130, out[-4000:]

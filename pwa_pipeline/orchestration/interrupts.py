@@ -65,20 +65,21 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iter
 
 
 @contextmanager
-def interruptible() -> Iterator[None]:
+def interruptible(what: str) -> Iterator[None]:
     """While the block runs, SIGINT (Ctrl-C, the UI's "terminate") and a SIGTERM that
     Dagster handles as SIGINT raise ``DagsterExecutionInterruptedError`` at once, which
     Dagster records as the run's cancellation. Dagster itself only notes them during a run,
     and raises them where an executor waits for its steps, which a run waiting for the
-    scheduler has not reached. In a thread other than the main thread (where no handler
-    can be set) the block runs as it is."""
+    scheduler has not reached. ``what`` says what the block does, for the error's message.
+    In a thread other than the main thread (where no handler can be set) the block runs as
+    it is."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def stop(signum, frame):
         raise dg.DagsterExecutionInterruptedError(
-            f"interrupted ({signal.Signals(signum).name})")
+            f"stopped while {what} ({signal.Signals(signum).name})")
 
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     handled = [signal.SIGINT] + ([signal.SIGTERM] if previous[signal.SIGTERM]

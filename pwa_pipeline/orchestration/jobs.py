@@ -96,22 +96,39 @@ def taking_turns(execute: Callable, address: str) -> Callable:
     its log and can be stopped while it waits (:func:`.interrupts.interruptible`)."""
 
     def locked(plan_context, execution_plan):
-        from dask.distributed import Client, Lock
+        from dask.distributed import Client, Lock, Variable
 
         with Client(address, timeout=10, set_as_default=False) as client:
             lock = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
+            holder = Variable(f"{RUN_LOCK}/holder", client=client)
             if not lock.acquire(timeout=0):
-                plan_context.log.info(f"Waiting for the dask scheduler {address}: another "
-                                      f"sweep_dask run holds it.")
-                with interruptible():
+                plan_context.log.info(
+                    f"Waiting for the dask scheduler {address}: {_holder(holder)} holds it. "
+                    f"This run's steps start when it ends; terminate this run to give up.")
+                with interruptible("waiting for the dask scheduler"):
                     while not lock.acquire(timeout=LOCK_POLL):
                         pass
+                plan_context.log.info(f"The dask scheduler {address} is free: this run's "
+                                      f"steps start.")
+            run = plan_context.dagster_run
+            holder.set(f"the sweep_dask run {run.run_id} (partition "
+                       f"{run.tags.get('dagster/partition', '-')})")
             try:
                 yield from execute(plan_context, execution_plan)
             finally:
+                holder.delete()
                 lock.release()
 
     return locked
+
+
+def _holder(holder) -> str:
+    """Which run holds the scheduler, as the holder wrote it in the dask ``Variable``
+    ``holder`` (from when it takes the lock until it releases it)."""
+    try:
+        return holder.get(timeout=2)
+    except TimeoutError:
+        return "another sweep_dask run"
 
 
 #: The automation sensor that refreshes the leaderboard after sweep runs, on by default so
