@@ -111,13 +111,16 @@ def taking_turns(execute: Callable, address: str) -> Callable:
                 plan_context.log.info(f"The dask scheduler {address} is free: this run's "
                                       f"steps start.")
             run = plan_context.dagster_run
-            holder.set(f"the sweep_dask run {run.run_id} (partition "
-                       f"{run.tags.get('dagster/partition', '-')})")
             try:
+                holder.set(f"the sweep_dask run {run.run_id} (partition "
+                           f"{run.tags.get('dagster/partition', '-')})")
                 yield from execute(plan_context, execution_plan)
             finally:
-                holder.delete()
-                lock.release()
+                try:
+                    holder.delete()
+                    lock.release()
+                except OSError:  # the scheduler is gone, and the lease with it
+                    pass
 
     return locked
 
