@@ -161,7 +161,7 @@ def _until(condition, timeout: float, what) -> None:
 
 
 @pytest.mark.distributed
-@pytest.mark.xdist_group("distributed")
+@pytest.mark.xdist_group("compose")
 @pytest.mark.filterwarnings("ignore::DeprecationWarning:gql.*")
 def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(services):
     from dagster_graphql import DagsterGraphQLClient
@@ -228,7 +228,7 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
 
 
 @pytest.mark.distributed
-@pytest.mark.xdist_group("distributed")
+@pytest.mark.xdist_group("compose")
 @pytest.mark.filterwarnings("ignore::DeprecationWarning:gql.*")
 def test_runs_waiting_for_a_busy_scheduler_stop_when_terminated_or_interrupted(services):
     """Terminated from the UI, a run waiting for the scheduler is cancelled; Ctrl-C stops
