@@ -1,0 +1,40 @@
+"""The structure search's ``refit`` option on the simulated machines' tuning seeds.
+
+``PWARX.auto(na=2, nb=2)`` with ``refit`` off (the default) and on, for each machine of
+``MACHINES`` and tuning seeds 0–2 (the reporting seeds, from 1000, are not read), trained and
+scored as ``benchmarks.machines`` does: 40 training experiments, the free-run NRMSE on 10
+held-out experiments of the same seed, 10-sample warm-up, averaged over the outputs. Beside
+``benchmarks.robot_auto_tuning`` (the robot's training experiments), this is what decides the
+option's default. Writes results/auto_refit_tuning.{csv,md}.
+
+Usage: python -m benchmarks.auto_refit_tuning
+"""
+
+import pandas as pd
+
+from benchmarks._common import write_table
+from benchmarks.machines import fitted, free_run
+from pwa_pipeline import PWARX
+from pwa_pipeline.datasets.machines import MACHINES, make_machine
+
+SEEDS = range(3)
+
+
+def main() -> None:
+    rows = []
+    for machine in MACHINES:
+        for seed in SEEDS:
+            train = make_machine(machine, 40, 600, seed)
+            test = make_machine(machine, 10, 600, seed, held_out=True)
+            for refit in (False, True):
+                model, seconds = fitted(PWARX.auto(na=2, nb=2, refit=refit), train.u,
+                                        train.y)
+                rows.append({"machine": machine, "seed": seed, "refit": refit,
+                             "free_run_nrmse": free_run(model, test.u, test.y),
+                             "fit_seconds": seconds})
+                print(rows[-1], flush=True)
+    write_table(pd.DataFrame(rows), "auto_refit_tuning")
+
+
+if __name__ == "__main__":
+    main()
