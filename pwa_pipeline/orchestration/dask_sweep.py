@@ -21,14 +21,12 @@ import dagster as dg
 from .credentials import mask_credentials
 from .files import store_root
 from .io_manager import PartitionedFileIOManager
-from .jobs import dask_run_config
+from .jobs import CONNECT_TIMEOUT, dask_run_config
 from .partition_runs import run_tags, was_interrupted
 from .signed_pickles import KEY_FILE
 
 #: Schemes of dask's communication layers an address may name.
 SCHEMES = ("tcp", "tls", "ucx", "inproc", "ws", "wss")
-#: Seconds to wait for a scheduler to answer before giving up.
-CONNECT_TIMEOUT = 10
 #: Seconds to wait for a first worker to join a scheduler before giving up.
 WORKER_TIMEOUT = 30
 

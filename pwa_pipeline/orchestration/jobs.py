@@ -45,6 +45,8 @@ EXECUTOR_TAG = ("pwa/executor", "dask")
 RUN_LOCK = "pwa-pipeline/sweep_dask"
 #: Seconds of each wait for the scheduler's lock, which a waiting run repeats.
 LOCK_POLL = 1.0
+#: Seconds to wait for a dask scheduler to answer before giving up.
+CONNECT_TIMEOUT = 10
 
 
 def dask_cluster(address: str | None = None) -> dict:
@@ -98,7 +100,7 @@ def taking_turns(execute: Callable, address: str) -> Callable:
     def locked(plan_context, execution_plan):
         from dask.distributed import Client, Lock, Variable
 
-        with Client(address, timeout=10, set_as_default=False) as client:
+        with Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False) as client:
             lock = Lock(RUN_LOCK, scheduler_rpc=client.scheduler, loop=client.loop)
             holder = Variable(f"{RUN_LOCK}/holder", client=client)
             if not lock.acquire(timeout=0):

@@ -43,9 +43,9 @@ def was_interrupted(result) -> bool:
         return result.interrupted
     failures = (dg.DagsterEventType.STEP_FAILURE.value, dg.DagsterEventType.RUN_FAILURE.value)
     return any(e.event_type_value == dg.DagsterEventType.RUN_CANCELED.value
-               or e.event_type_value in failures
-               and getattr(e.event_specific_data, "error", None) is not None
-               and e.event_specific_data.error.cls_name in INTERRUPTS
+               or (e.event_type_value in failures
+                   and getattr(e.event_specific_data, "error", None) is not None
+                   and e.event_specific_data.error.cls_name in INTERRUPTS)
                for e in result.all_events)
 
 
