@@ -34,6 +34,7 @@ clustering.eps = 0.3
 clustering.min_pts = 8
 """
 
+
 def postgres_bin() -> Path | None:
     """The folder of PostgreSQL's server programs (Debian keeps them off the PATH, in
     ``/usr/lib/postgresql/<version>/bin``)."""
@@ -178,3 +179,31 @@ def dask_cluster(n_workers: int, env: dict[str, str], log: Path) -> Iterator[Das
         finally:
             for process in [*cluster.workers, cluster.scheduler]:
                 stop_group(process)
+
+
+def client_instance(dagster_home: str, postgres_url: str):
+    """The Dagster instance a client of the shared services opens (``$DAGSTER_HOME`` and
+    ``$PWA_DAGSTER_POSTGRES_URL`` as given), its home prepared as the command line prepares
+    it, whichever comes first; this process's environment is left as it was."""
+    from pwa_pipeline.orchestration.instance import POSTGRES_ENV, prepare_instance
+
+    variables = {"DAGSTER_HOME": dagster_home, POSTGRES_ENV: postgres_url}
+    os.environ.update(variables)
+    try:
+        return prepare_instance()
+    finally:
+        for name in variables:
+            del os.environ[name]
+
+
+def step_events(instance, run_id: str) -> list:
+    """A run's step starts and successes (its run may have begun earlier, waiting for the
+    scheduler), each with the pid of the process that ran the step."""
+    return [e for e in instance.all_logs(run_id) if e.is_dagster_event
+            and e.dagster_event.event_type_value in ("STEP_START", "STEP_SUCCESS")]
+
+
+def step_span(instance, run_id: str) -> tuple[float, float]:
+    """When a run's first step began and its last step ended."""
+    times = [e.timestamp for e in step_events(instance, run_id)]
+    return min(times), max(times)

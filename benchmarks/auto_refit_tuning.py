@@ -2,8 +2,8 @@
 
 ``PWARX.auto(na=2, nb=2)`` with ``refit`` off (the default) and on, for each machine of
 ``MACHINES`` and tuning seeds 0–2 (the reporting seeds, from 1000, are not read), trained and
-scored as ``benchmarks.machines`` does: 40 training experiments, the free-run NRMSE on 10
-held-out experiments of the same seed, 10-sample warm-up, averaged over the outputs. Beside
+scored as ``benchmarks.machines`` does by default: 40 training experiments, the free-run NRMSE
+on 10 held-out experiments of the same seed, 10-sample warm-up, averaged over the outputs. Beside
 ``benchmarks.robot_auto_tuning`` (the robot's training experiments), this is what decides the
 option's default. Writes results/auto_refit_tuning.{csv,md}.
 
@@ -13,7 +13,7 @@ Usage: python -m benchmarks.auto_refit_tuning
 import pandas as pd
 
 from benchmarks._common import write_table
-from benchmarks.machines import fitted, free_run
+from benchmarks.machines import N_SAMPLES, N_TEST, N_TRAIN, fitted, free_run
 from pwa_pipeline import PWARX
 from pwa_pipeline.datasets.machines import MACHINES, make_machine
 
@@ -24,8 +24,8 @@ def main() -> None:
     rows = []
     for machine in MACHINES:
         for seed in SEEDS:
-            train = make_machine(machine, 40, 600, seed)
-            test = make_machine(machine, 10, 600, seed, held_out=True)
+            train = make_machine(machine, N_TRAIN, N_SAMPLES, seed)
+            test = make_machine(machine, N_TEST, N_SAMPLES, seed, held_out=True)
             for refit in (False, True):
                 model, seconds = fitted(PWARX.auto(na=2, nb=2, refit=refit), train.u,
                                         train.y)

@@ -38,6 +38,8 @@ DIVERGENCE = 10.0
 ORDERS = range(1, 7)
 STATES = (2, 4, 6, 8, 12)
 SUBSPACE = {"horizon": 10, "refit": "simulation"}
+#: Training and held-out experiments per seed, and samples per experiment (the defaults).
+N_TRAIN, N_TEST, N_SAMPLES = 40, 10, 600
 
 
 def free_run(model, u, y) -> float:
@@ -123,9 +125,9 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--first-seed", type=int, default=REPORTING_FIRST_SEED,
                         help="first seed (default: %(default)s; 0-999 are tuning seeds)")
-    parser.add_argument("--train", type=int, default=40, help="training experiments")
-    parser.add_argument("--test", type=int, default=10, help="held-out experiments")
-    parser.add_argument("--samples", type=int, default=600, help="samples per experiment")
+    parser.add_argument("--train", type=int, default=N_TRAIN, help="training experiments")
+    parser.add_argument("--test", type=int, default=N_TEST, help="held-out experiments")
+    parser.add_argument("--samples", type=int, default=N_SAMPLES, help="samples per experiment")
     args = parser.parse_args(argv)
     if args.first_seed < REPORTING_FIRST_SEED:
         print(f"warning: seeds below {REPORTING_FIRST_SEED} are tuning seeds, not for reporting")

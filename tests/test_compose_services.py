@@ -23,11 +23,18 @@ import pandas as pd
 import pytest
 import yaml
 
-from benchmarks._cluster import postgres_missing, postgres_server, stop_group, wait_for_url
+from benchmarks._cluster import (
+    client_instance,
+    postgres_missing,
+    postgres_server,
+    step_events,
+    step_span,
+    stop_group,
+    wait_for_url,
+)
 from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
-from pwa_pipeline.orchestration.instance import prepare_instance
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -117,13 +124,7 @@ def services(system_package, tmp_path_factory) -> Iterator[dict]:
 
 def _instance(env: dict[str, str]) -> dg.DagsterInstance:
     """The compose services' Dagster instance, as a process in the network opens it."""
-    names = ("DAGSTER_HOME", "PWA_DAGSTER_POSTGRES_URL")
-    os.environ.update({name: env[name] for name in names})
-    try:
-        return prepare_instance()
-    finally:
-        for name in names:
-            del os.environ[name]
+    return client_instance(env["DAGSTER_HOME"], env["PWA_DAGSTER_POSTGRES_URL"])
 
 
 def _waiting(instance: dg.DagsterInstance, keys: tuple[str, ...]) -> dict[str, bool]:
@@ -208,10 +209,8 @@ def test_the_compose_services_run_a_ui_run_and_a_command_line_run_in_turn(servic
                 f"to give up.",
                 f"The dask scheduler {env['PWA_DASK_SCHEDULER']} is free: this run's steps "
                 f"start."], said
-            steps = [e for e in instance.all_logs(run.run_id) if e.is_dagster_event
-                     and e.dagster_event.event_type_value in ("STEP_START", "STEP_SUCCESS")]
-            spans.append((min(e.timestamp for e in steps), max(e.timestamp for e in steps)))
-            pids |= {e.dagster_event.pid for e in steps}
+            spans.append(step_span(instance, run.run_id))
+            pids |= {e.dagster_event.pid for e in step_events(instance, run.run_id)}
     spans.sort()
     assert spans[0][1] <= spans[1][0], spans
     assert pids == services["workers"]

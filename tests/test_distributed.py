@@ -27,16 +27,17 @@ import pytest
 from benchmarks._cluster import (
     HPARAMS,
     DaskCluster,
+    client_instance,
     dask_cluster,
     mlflow_server,
     postgres_missing,
     postgres_server,
+    step_span,
 )
 from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
 from pwa_pipeline.methods import METHODS
-from pwa_pipeline.orchestration.instance import prepare_instance
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.signed_pickles import KEY_FILE, load_object, signing_key
 
@@ -88,16 +89,9 @@ class Cluster:
         return PartitionedFileIOManager(base_dir=(self.folder / name).as_uri())
 
     def instance(self) -> dg.DagsterInstance:
-        """The clients' Dagster instance, on PostgreSQL, its home prepared as the command
-        line prepares it (whichever comes first)."""
-        variables = {"DAGSTER_HOME": str(self.folder / "client-home"),
-                     "PWA_DAGSTER_POSTGRES_URL": self.files["PWA_DAGSTER_POSTGRES_URL"]}
-        os.environ.update(variables)
-        try:
-            return prepare_instance()
-        finally:
-            for name in variables:
-                del os.environ[name]
+        """The clients' Dagster instance, on PostgreSQL."""
+        return client_instance(str(self.folder / "client-home"),
+                               self.files["PWA_DAGSTER_POSTGRES_URL"])
 
     def start_mlflow(self) -> None:
         """``mlflow server`` at :attr:`mlflow_url` on the database ``mlflow``; stopped by
@@ -185,14 +179,6 @@ def _runs_of(instance: dg.DagsterInstance, keys: list[str]) -> list[dg.DagsterRu
             if r.tags.get("dagster/partition") in keys]
 
 
-def _step_span(instance: dg.DagsterInstance, run_id: str) -> tuple[float, float]:
-    """When a run's first step began and its last step ended (its run may have begun
-    earlier, waiting for the scheduler)."""
-    times = [e.timestamp for e in instance.all_logs(run_id) if e.is_dagster_event
-             and e.dagster_event.event_type_value in ("STEP_START", "STEP_SUCCESS")]
-    return min(times), max(times)
-
-
 def _every_stored_file_loads(root: Path) -> int:
     """Load every file of a store that a reader could be served (not the temporary ones);
     returns how many."""
@@ -256,7 +242,7 @@ def test_two_clients_sweeping_at_once_take_turns_and_both_complete(cluster):
         assert len(latest) == 2
         assert {r.status for r in latest} == {dg.DagsterRunStatus.SUCCESS}
         # the two runs were launched at once but their steps ran one run after the other
-        spans = sorted(_step_span(instance, r.run_id) for r in latest)
+        spans = sorted(step_span(instance, r.run_id) for r in latest)
     assert spans[0][1] <= spans[1][0], spans
     _assert_results_equal_the_reference(cluster, first + second)
 
