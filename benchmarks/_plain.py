@@ -13,9 +13,9 @@ from sklearn.neighbors import NearestNeighbors
 
 from pwa_pipeline._arrays import column_rms, relabel_by_size
 from pwa_pipeline._validation import as_experiments
-from pwa_pipeline.pwa.clustering import confident_models, k_distances
-from pwa_pipeline.pwa.embedding import exact_embedding
-from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.pwa.steps.clustering import confident_models, k_distances
+from pwa_pipeline.pwa.steps.embedding import exact_embedding
+from pwa_pipeline.regressors import build_regressors
 
 
 def plain_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:

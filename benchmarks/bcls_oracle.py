@@ -4,7 +4,7 @@ estimation of the modes).
 
 For each case and seed, the training record of ``benchmarks.robustness`` is split by its true
 modes, and the sub-models are fitted by least squares and by
-:func:`~pwa_pipeline.pwa.submodels.bias_compensated_refit` (one-hot weights); reported per case:
+:func:`~pwa_pipeline.pwa.steps.submodels.bias_compensated_refit` (one-hot weights); reported per case:
 the median and worst largest absolute parameter error of each, and on how many seeds the
 compensation was the smaller. ``--set tune`` (the default here) uses the tuning seeds 100…,
 so that a decision taken from it is not taken on the evaluation seeds.
@@ -27,8 +27,8 @@ from benchmarks.robustness import CASES, FIRST_SEED, paper_system, random_system
 
 def one_seed(name: str, seed: int) -> dict:
     """The largest parameter error of least squares and of BCLS on the true modes' rows."""
-    from pwa_pipeline.pwa.regressors import build_regressors
-    from pwa_pipeline.pwa.submodels import bias_compensated_refit, output_lag_columns, refit
+    from pwa_pipeline.pwa.steps.submodels import bias_compensated_refit, output_lag_columns, refit
+    from pwa_pipeline.regressors import build_regressors
 
     case = CASES[name]
     system = (paper_system() if case.system is None

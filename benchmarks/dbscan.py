@@ -1,4 +1,4 @@
-"""DBSCAN on the robot's local models: pwa_pipeline.pwa.dbscan against scikit-learn.
+"""DBSCAN on the robot's local models: pwa_pipeline.pwa.steps.dbscan against scikit-learn.
 
 The embedding is the paper setting's (KUKA training record, na = nb = 2, n_rho = 61, exact
 embedding of the local parameter matrices: 39,856 points in 144 dimensions, eps = 8,
@@ -8,11 +8,11 @@ resident memory, VmHWM of /proc/self/status (Linux), with its value just before 
 (Python, numpy, scikit-learn and the embedding) as the baseline. Not ru_maxrss: on Linux a
 child's ru_maxrss, and so the parent's RUSAGE_CHILDREN, starts from the parent's resident
 memory when it was spawned (here the ~550 MB of building the embedding). One more fit of
-pwa_pipeline.pwa.dbscan in this process gives the peak of its numpy allocations (tracemalloc)
+pwa_pipeline.pwa.steps.dbscan in this process gives the peak of its numpy allocations (tracemalloc)
 and, under cProfile, the share of the float32 distance blocks. The labels are compared: same
 core points, same partition of the core points, same noise, and how many border points got
 the same cluster (scikit-learn gives a border point to the first cluster that reaches it,
-pwa_pipeline.pwa.dbscan to its nearest core point's cluster).
+pwa_pipeline.pwa.steps.dbscan to its nearest core point's cluster).
 
 Writes results/dbscan.json and results/dbscan.md.
 Usage: python -m benchmarks.dbscan [--repeats 3]
@@ -41,8 +41,8 @@ def embedding() -> tuple[np.ndarray, float, int, float]:
     from pwa_pipeline import load_kuka
     from pwa_pipeline._validation import as_experiments
     from pwa_pipeline.config import HParamsFile
-    from pwa_pipeline.pwa.embedding import exact_embedding
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.pwa.steps.embedding import exact_embedding
+    from pwa_pipeline.regressors import build_regressors
 
     robot = load_kuka()
     pwa = HParamsFile().configuration("paper", "kuka_robot").pwa
@@ -64,7 +64,7 @@ def worker(method: str, data: Path, out: Path, eps: float, min_pts: int) -> None
     """One fit in this (fresh) process; labels, core mask, seconds and memory to ``out``."""
     from sklearn.cluster import DBSCAN
 
-    from pwa_pipeline.pwa.dbscan import _dbscan
+    from pwa_pipeline.pwa.steps.dbscan import _dbscan
 
     emb = np.load(data)
     before = peak_rss_mb()
@@ -106,7 +106,7 @@ def agreement(ours: dict, theirs: dict, emb: np.ndarray, eps: float) -> dict:
 
 def profile_ours(emb: np.ndarray, eps: float, min_pts: int) -> dict:
     """Peak of one fit's numpy allocations; seconds of one under cProfile, and in the blocks."""
-    from pwa_pipeline.pwa.dbscan import dbscan
+    from pwa_pipeline.pwa.steps.dbscan import dbscan
 
     tracemalloc.start()
     dbscan(emb, eps, min_pts)
@@ -189,7 +189,7 @@ def main() -> None:
         "",
         f"One profiled fit: {prof['profiled_seconds']:.2f} s, of which "
         f"{prof['distance_blocks_seconds']:.2f} s in the float32 distance blocks "
-        f"(pwa_pipeline.pwa.dbscan._Geometry.near). The local models of the same fit took "
+        f"(pwa_pipeline.pwa.steps.dbscan._Geometry.near). The local models of the same fit took "
         f"{local_seconds:.1f} s."]
     (RESULTS / "dbscan.md").write_text("\n".join(lines) + "\n")
 

@@ -22,7 +22,7 @@ from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import load_kuka
 from pwa_pipeline.orchestration.figures import parameter_clusters_figure, to_png
-from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.regressors import build_regressors
 
 
 def rendering_seconds(setting: str, repeats: int) -> dict:

@@ -57,8 +57,8 @@ def main(argv=None) -> None:
     from pwa_pipeline import load_kuka
     from pwa_pipeline._arrays import column_rms
     from pwa_pipeline._validation import as_experiments
-    from pwa_pipeline.pwa import local_models
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.pwa.steps import local_models
+    from pwa_pipeline.regressors import build_regressors
 
     load_start = os.getloadavg()[0]
     robot = load_kuka()

@@ -7,7 +7,7 @@ seed's ``--train`` training experiments and score the free run on ``--test`` hel
 experiments of the same seed (an independent random stream), 10-sample warm-up, NRMSE
 averaged over outputs (``pwa_pipeline.evaluate``):
 
-- ``PWARX.auto(2, 2)``: the structure search (``pwa_pipeline.pwa.structure_search``), with
+- ``PWARX.auto(2, 2)``: the structure search (``pwa_pipeline.pwa.search.search``), with
   its own held-out training experiments; the structure it chose is in the JSON;
 - ``default``: the library default ``PWARX(na=2, nb=2)``;
 - ``best linear ARX``: least-squares ``LinearARX(na, nb, affine=True)`` with the orders

@@ -34,8 +34,8 @@ def worker(k: str, out: str) -> None:
     of the neighbours to ``out``."""
     from pwa_pipeline import load_kuka
     from pwa_pipeline._validation import as_experiments
-    from pwa_pipeline.pwa.neighbours import nearest_neighbours
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.pwa.steps.neighbours import nearest_neighbours
+    from pwa_pipeline.regressors import build_regressors
 
     robot = load_kuka()
     phi = build_regressors(as_experiments(robot.u_train, robot.y_train), 2, 2, True).phi

@@ -1,10 +1,10 @@
 """What bounds step 6's region accuracy: the gate with the true sub-models and modes.
 
 On the records of :mod:`benchmarks.robustness` (tuning seeds 100…), the gate of
-:func:`~pwa_pipeline.pwa.boundaries.refine_boundaries` is started from the SVM on the true
+:func:`~pwa_pipeline.pwa.steps.boundaries.refine_boundaries` is started from the SVM on the true
 modes and given the true θ_i, so neither the sub-models nor the labels limit it; it is
 fitted on the measured φ (ridge 1e-5, the old default, and 1e-7), on φ with its output lags
-denoised once (:func:`~pwa_pipeline.pwa.boundaries.denoised_regressors` with the true modes
+denoised once (:func:`~pwa_pipeline.pwa.steps.boundaries.denoised_regressors` with the true modes
 and noise variances) and on the noise-free φ (the limit without errors in the variables).
 Per case: median region accuracy on a fresh noise-free record, and beside it the default's.
 
@@ -22,10 +22,10 @@ import pandas as pd
 from benchmarks._common import RESULTS, write_table
 from benchmarks.robustness import CASES, FIRST_SEED, paper_system, random_system
 from pwa_pipeline import PWARX
-from pwa_pipeline.pwa.boundaries import denoised_regressors, previous_rows, refine_boundaries
-from pwa_pipeline.pwa.regions import SVMRegions
-from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.submodels import output_lag_columns
+from pwa_pipeline.pwa.steps.boundaries import denoised_regressors, previous_rows, refine_boundaries
+from pwa_pipeline.pwa.steps.regions import SVMRegions
+from pwa_pipeline.pwa.steps.submodels import output_lag_columns
+from pwa_pipeline.regressors import build_regressors
 from pwa_pipeline.scoring.truth import ground_truth_scores
 
 

@@ -28,10 +28,10 @@ largest absolute parameter error after pairing sub-models with the true modes
 (:func:`~pwa_pipeline.scoring.metrics.match_submodels`; only when the count is exact), and
 beside it that of least squares on the true modes' rows (the oracle: what the record allows
 a least-squares fit that knows the modes, errors in the variables included) and of
-bias-compensated least squares on them (:func:`~pwa_pipeline.pwa.submodels.bias_compensated_refit`,
+bias-compensated least squares on them (:func:`~pwa_pipeline.pwa.steps.submodels.bias_compensated_refit`,
 what the default's final refit aims at); how many of the default's EM refits the
 compensation's guard left at least squares (``n_uncompensated_`` of
-:class:`~pwa_pipeline.pwa.boundaries.ResidualRegions`, summed over the seeds);
+:class:`~pwa_pipeline.pwa.steps.boundaries.ResidualRegions`, summed over the seeds);
 region accuracy on a fresh noise-free record (:func:`~pwa_pipeline.scoring.truth.ground_truth_scores`);
 free-run NRMSE on a fresh noisy record of the PWARX, of linear ARX and of the true system
 (true θ and true regions); fit seconds.
@@ -67,8 +67,8 @@ from benchmarks._common import RESULTS, write_json
 from pwa_pipeline import PWARX, LinearARX, evaluate
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, add_output_noise, hure_vasak_mode
 from pwa_pipeline.pwa.arx import ARXModelBase
-from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.submodels import refit
+from pwa_pipeline.pwa.steps.submodels import refit
+from pwa_pipeline.regressors import build_regressors
 from pwa_pipeline.scoring.metrics import match_submodels
 from pwa_pipeline.scoring.truth import ground_truth_scores
 
@@ -308,7 +308,7 @@ def one_run(name: str, seed: int, params: dict | None = None, n: int | None = No
     oracle = refit(reg.phi, reg.target, modes, s)
     # imported here: benchmarks.robustness_time imports this module's generators beside the
     # packages of commits that predate these functions
-    from pwa_pipeline.pwa.submodels import bias_compensated_refit, output_lag_columns
+    from pwa_pipeline.pwa.steps.submodels import bias_compensated_refit, output_lag_columns
 
     lags = output_lag_columns(reg.n_outputs, system.na, reg.phi.shape[1])
     oracle_bc = bias_compensated_refit(reg.phi, reg.target, np.eye(s)[modes], lags)[0]

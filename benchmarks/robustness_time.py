@@ -63,7 +63,7 @@ def worker(fit: str, *rest: str) -> None:
     result["second_seconds"] = time.perf_counter() - t0
     if rest[:-1] == ("parts",):
         from pwa_pipeline.pwa import SVMRegions
-        from pwa_pipeline.pwa.submodels import RefinedSubModels
+        from pwa_pipeline.pwa.steps.submodels import RefinedSubModels
 
         for name, variant in (("svm_regions", {"regions": SVMRegions()}),
                               ("no_split", {"submodels": RefinedSubModels(split_tol=None)})):

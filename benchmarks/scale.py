@@ -5,7 +5,7 @@ na = nb = 1, d = 4, m = 2) at N = 4,000, 40,000 and 400,000 samples, and the KUK
 record (39,988 samples in 66 experiments, na = nb = 2, d = 24, m = 6) once and tiled ten
 times (its 66 experiments repeated: 399,880 samples whose regressor rows each occur ten
 times). Repeated (φ, y) rows count once in steps 2–4
-(:class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`): the tiled record has the
+(:class:`~pwa_pipeline.pwa.steps.local_models.LocalLeastSquares`): the tiled record has the
 local models and clusters of the record once, and steps 5–6 fit on all 398,560 rows.
 
 Each case runs in a fresh subprocess with the data set's ``default`` hyper-parameter set;
@@ -59,7 +59,7 @@ def worker(case: str, size: int, out: str) -> None:
     from pwa_pipeline.config import HParamsFile
     from pwa_pipeline.pwa.estimator import STEPS
     from pwa_pipeline.pwa.memory import fit_memory
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.regressors import build_regressors
 
     if case == "simulated":
         data = make_hure_vasak(n_samples=size, snr_db=30.0, seed=0)

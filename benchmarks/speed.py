@@ -151,7 +151,7 @@ def crammer_singer_objective(svm: "CrammerSinger", z: np.ndarray, labels: np.nda
 
 
 class CrammerSinger:
-    """LinearSVC as :class:`pwa_pipeline.pwa.regions.SVMRegions` calls it (z-scored rows),
+    """LinearSVC as :class:`pwa_pipeline.pwa.steps.regions.SVMRegions` calls it (z-scored rows),
     keeping the z-scored hyperplanes and whether the solver converged."""
 
     def __init__(self, C: float, tol: float, max_iter: int):
@@ -183,7 +183,7 @@ def svm_tolerance() -> list[dict]:
     region is the reference's (training rows, held-out test rows)."""
     from pwa_pipeline import load_kuka
     from pwa_pipeline._validation import as_experiments
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.regressors import build_regressors
 
     robot = load_kuka()
     est = estimator("paper")

@@ -39,7 +39,7 @@ FITS = ("paper-20dB:5000,paper-20dB:5001,paper-20dB:5002,paper-20dB:100,paper-25
         "siso:5000,robot")
 
 
-#: The sweep-stopping parameters of :class:`~pwa_pipeline.pwa.submodels.RefinedSubModels` and
+#: The sweep-stopping parameters of :class:`~pwa_pipeline.pwa.steps.submodels.RefinedSubModels` and
 #: their values that turn them off.
 RULES_OFF = {"split_sweep_tol": 0.0, "settle_tol": 0.0}
 
@@ -49,7 +49,7 @@ def worker(fit: str, rules: str, out: str) -> None:
     as the default has them (``default``); θ_i, labels and regions to ``out``."""
     from sklearn.base import clone
 
-    from pwa_pipeline.pwa.submodels import RefinedSubModels
+    from pwa_pipeline.pwa.steps.submodels import RefinedSubModels
 
     est, u, y = default_fit(fit)
     subs = est.submodels if est.submodels is not None else RefinedSubModels()

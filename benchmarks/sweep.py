@@ -38,7 +38,7 @@ from pwa_pipeline import load_kuka
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.orchestration.caches import SignedMemory
-from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.regressors import build_regressors
 
 EPS = (15.0, 20.0, 25.0, 30.0)
 MIN_PTS = (36, 48, 60)

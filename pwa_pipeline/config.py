@@ -3,7 +3,7 @@
 The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys configure
 :class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"``, ``"paper"`` or
 ``"auto"``, the classmethod that builds its step objects; ``"auto"`` is the structure search
-of :mod:`~pwa_pipeline.pwa.structure_search`, ``na`` and ``nb`` its largest orders, a
+of :mod:`~pwa_pipeline.pwa.search.search`, ``na`` and ``nb`` its largest orders, a
 sub-table ``search`` its parameters, e.g. ``search.max_seconds = 60``), ``na``, ``nb``,
 ``affine``, and each step's parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
@@ -36,7 +36,7 @@ from .methods import METHODS
 from .pwa.estimator import PWARX
 from .pwa.output_error import OutputErrorRefinement
 from .pwa.scheduling import SignScheduling
-from .pwa.structure_search import StructureSearch
+from .pwa.search.search import StructureSearch
 from .scoring.evaluation import WARMUP
 
 BUNDLED_HPARAMS = Path(__file__).resolve().parents[1] / "data" / "hparams.toml"

@@ -5,8 +5,8 @@ import pytest
 
 from pwa_pipeline import PWARX, make_hure_vasak
 from pwa_pipeline.pwa import ResidualRegions, SVMRegions
-from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.submodels import bias_compensated_refit, output_lag_columns, refit
+from pwa_pipeline.pwa.steps.submodels import bias_compensated_refit, output_lag_columns, refit
+from pwa_pipeline.regressors import build_regressors
 
 #: y0(k) = a_i y0(k−1) + b_i u(k−1), mode 1 where u(k−1) > 0; y = y0 + e
 THETAS = np.array([[[0.8], [1.0]], [[0.4], [-0.5]]])

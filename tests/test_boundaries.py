@@ -7,9 +7,9 @@ import pytest
 from pwa_pipeline import PWARX
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, make_hure_vasak
 from pwa_pipeline.pwa import ResidualRegions, SVMRegions
-from pwa_pipeline.pwa.boundaries import denoised_regressors, mixture_of_experts, previous_rows
-from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.submodels import output_lag_columns
+from pwa_pipeline.pwa.steps.boundaries import denoised_regressors, mixture_of_experts, previous_rows
+from pwa_pipeline.pwa.steps.submodels import output_lag_columns
+from pwa_pipeline.regressors import build_regressors
 
 THETAS = np.array([[[1.0], [0.5]], [[-1.0], [0.5]]])  # y = ±x + 0.5·v, boundary at x = 0.3
 
@@ -91,7 +91,7 @@ def test_step_6_fits_its_gate_with_blas_on_one_thread(monkeypatch):
     """The gate's products are tall and thin; ResidualRegions runs them on one BLAS thread."""
     from threadpoolctl import threadpool_info
 
-    from pwa_pipeline.pwa import boundaries
+    from pwa_pipeline.pwa.steps import boundaries
 
     def blas_threads():
         return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}

@@ -5,8 +5,9 @@ from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import InvalidParameterError
 
 from pwa_pipeline._arrays import relabel_by_size
-from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, clustering
-from pwa_pipeline.pwa.clustering import (
+from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
+from pwa_pipeline.pwa.steps import clustering
+from pwa_pipeline.pwa.steps.clustering import (
     cluster_local_models,
     confident_models,
     dbscan_cluster_counts,

@@ -13,8 +13,8 @@ from pwa_pipeline.control import SCHEMA_VERSION, PWAStateSpace, to_state_space
 from pwa_pipeline.control.polyhedra import Box, chebyshev_ball, irredundant_rows
 from pwa_pipeline.control.stability import stability_report
 from pwa_pipeline.pwa.output_error import OutputErrorRefinement
-from pwa_pipeline.pwa.regions import SVMRegions
 from pwa_pipeline.pwa.scheduling import SignScheduling
+from pwa_pipeline.pwa.steps.regions import SVMRegions
 
 
 @pytest.fixture(scope="module")

@@ -1,11 +1,11 @@
-"""Blocked DBSCAN (pwa_pipeline.pwa.dbscan) against scikit-learn's DBSCAN."""
+"""Blocked DBSCAN (pwa_pipeline.pwa.steps.dbscan) against scikit-learn's DBSCAN."""
 
 import numpy as np
 import pytest
 from sklearn.cluster import DBSCAN
 from sklearn.neighbors import NearestNeighbors
 
-from pwa_pipeline.pwa.dbscan import _dbscan, dbscan
+from pwa_pipeline.pwa.steps.dbscan import _dbscan, dbscan
 
 
 def blobs_and_noise(seed: int, dims: int, n_blobs: int, n_noise: int, duplicates: int = 0,

@@ -1,8 +1,8 @@
 import numpy as np
 from scipy.spatial.distance import pdist
 
-from pwa_pipeline.pwa.clustering import cluster_local_models
-from pwa_pipeline.pwa.embedding import exact_embedding, literal_embedding
+from pwa_pipeline.pwa.steps.clustering import cluster_local_models
+from pwa_pipeline.pwa.steps.embedding import exact_embedding, literal_embedding
 
 
 def test_literal_layout_eq_9_10():

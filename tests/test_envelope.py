@@ -10,11 +10,11 @@ import pytest
 from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.envelope import PADDING, channel_bounds, regressor_bounds
 from pwa_pipeline.orchestration.figures import prediction_figure
 from pwa_pipeline.orchestration.reporting import score_metrics
 from pwa_pipeline.pwa.arx import training_range
-from pwa_pipeline.pwa.envelope import PADDING, channel_bounds, regressor_bounds
-from pwa_pipeline.pwa.regressors import build_regressors
+from pwa_pipeline.regressors import build_regressors
 from pwa_pipeline.scoring.evaluation import evaluate
 
 WARMUP = 10

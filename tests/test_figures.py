@@ -29,9 +29,9 @@ from pwa_pipeline.orchestration.figures import (
     to_markdown,
     to_png,
 )
-from pwa_pipeline.pwa.clustering import k_distances
-from pwa_pipeline.pwa.embedding import exact_embedding
-from pwa_pipeline.pwa.regressors import build_regressors, lagged_matrix, regressor_names
+from pwa_pipeline.pwa.steps.clustering import k_distances
+from pwa_pipeline.pwa.steps.embedding import exact_embedding
+from pwa_pipeline.regressors import build_regressors, lagged_matrix, regressor_names
 from pwa_pipeline.scoring.evaluation import Evaluation, evaluate
 from pwa_pipeline.scoring.metrics import match_submodels
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pwa_pipeline.pwa import LocalLeastSquares
-from pwa_pipeline.pwa.local_models import local_least_squares, local_sets
+from pwa_pipeline.pwa.steps.local_models import local_least_squares, local_sets
 
 
 def test_local_fits_recover_a_linear_map_exactly():
@@ -79,7 +79,7 @@ def test_same_local_models_as_a_plain_implementation(standardize, ridge):
     from sklearn.neighbors import NearestNeighbors
 
     from pwa_pipeline._arrays import column_rms
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.regressors import build_regressors
 
     rng = np.random.default_rng(11)
     u = rng.normal(size=(1500, 2)).cumsum(axis=0) * 0.1 + rng.normal(size=(1500, 2))
@@ -131,7 +131,7 @@ def test_ill_conditioned_local_sets_are_solved_to_their_conditioning():
     # Lagged outputs of a slow signal are nearly collinear (condition numbers up to 7e8 on
     # the robot): θ_k must agree with an SVD-based solve to about κ · rounding.
     from pwa_pipeline._arrays import column_rms
-    from pwa_pipeline.pwa.local_models import local_least_squares
+    from pwa_pipeline.pwa.steps.local_models import local_least_squares
 
     rng = np.random.default_rng(5)
     base = rng.normal(size=(400, 1))
@@ -154,7 +154,7 @@ def test_ill_conditioned_local_sets_are_solved_to_their_conditioning():
 def test_a_nearly_triangular_local_set_keeps_its_accuracy():
     # Columns nearly along the first unit vectors: a reflection of the wrong sign would
     # cancel (x − ‖x‖e₁ ≈ 0) and lose the digits that the stable choice keeps.
-    from pwa_pipeline.pwa.local_models import local_least_squares
+    from pwa_pipeline.pwa.steps.local_models import local_least_squares
 
     rng = np.random.default_rng(6)
     phi = np.vstack([np.triu(rng.uniform(1, 2, (4, 4))), 1e-6 * rng.normal(size=(26, 4))])

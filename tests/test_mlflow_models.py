@@ -102,7 +102,7 @@ def test_models_that_predict_alike_share_a_fingerprint_and_others_do_not(default
 
     from pwa_pipeline.orchestration.mlflow_models import predictor_fingerprint
     from pwa_pipeline.pwa import PWARX
-    from pwa_pipeline.pwa.clustering import DBSCANClustering
+    from pwa_pipeline.pwa.steps.clustering import DBSCANClustering
 
     model, names = default_30db, (sim_30db.u_names, sim_30db.y_names)
     other = copy.deepcopy(model).set_params(clustering=DBSCANClustering(eps=0.3),

@@ -1,4 +1,4 @@
-"""Blocked exact k nearest neighbours (pwa_pipeline.pwa.neighbours) against references."""
+"""Blocked exact k nearest neighbours (pwa_pipeline.pwa.steps.neighbours) against references."""
 
 import platform
 
@@ -7,9 +7,9 @@ import pytest
 from scipy.spatial import cKDTree
 from sklearn.neighbors import NearestNeighbors
 
-from pwa_pipeline.pwa import neighbours
-from pwa_pipeline.pwa._knn_kernels import sq_distance
-from pwa_pipeline.pwa.neighbours import nearest_neighbours
+from pwa_pipeline.pwa.steps import neighbours
+from pwa_pipeline.pwa.kernels.knn import sq_distance
+from pwa_pipeline.pwa.steps.neighbours import nearest_neighbours
 
 
 def reference(x: np.ndarray, k: int) -> np.ndarray:
@@ -122,7 +122,7 @@ def test_an_interrupted_map_drops_the_tasks_not_started():
     import time
     from concurrent.futures import ThreadPoolExecutor
 
-    from pwa_pipeline.pwa._threads import map_in_threads
+    from pwa_pipeline._threads import map_in_threads
 
     ran, lock = [], threading.Lock()
 

@@ -36,7 +36,7 @@ def _weighted_objective(route: str):
         errors = RefinementErrors(runs.simulate, runs.n_scored,
                                   OneStepError.of_outputs(u, y, 2, 1, True, outputs, [0, 1]))
     # the model's own one-step predictions on the measured regressors, for J1(θ0)
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.regressors import build_regressors
     reg = build_regressors(list(zip(u, y, strict=True)), 2, 1, route != "level")
     if route == "level":
         predicted = np.einsum("nd,ndm->nm", reg.phi, x0[model.regions_.predict(reg.phi)])

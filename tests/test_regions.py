@@ -92,7 +92,7 @@ def test_one_class_is_one_region_and_predict_needs_fit():
 
 
 def test_capped_rows_stand_for_their_class():
-    from pwa_pipeline.pwa.regions import _capped_per_class
+    from pwa_pipeline.pwa.steps.regions import _capped_per_class
 
     rows = np.arange(1000)
     labels = np.r_[np.zeros(900, int), np.ones(80, int), np.full(20, 2)]

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from pwa_pipeline._validation import as_experiments
-from pwa_pipeline.pwa.regressors import build_regressors, regressor_dim, regressor_names
+from pwa_pipeline.regressors import build_regressors, regressor_dim, regressor_names
 
 
 def test_order_follows_eq_2_3():

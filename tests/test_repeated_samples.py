@@ -6,7 +6,7 @@ import pytest
 
 from pwa_pipeline import PWARX, make_hure_vasak
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
-from pwa_pipeline.pwa.neighbours import distinct_rows
+from pwa_pipeline.pwa.steps.neighbours import distinct_rows
 
 
 def test_distinct_rows_in_order_of_first_occurrence():
@@ -52,7 +52,7 @@ def test_too_few_distinct_samples_is_a_clear_error():
 @pytest.mark.parametrize("step", [DBSCANClustering(),
                                   DBSCANClustering(eps=0.18, min_pts=8, max_clustered=None)])
 def test_a_tiled_record_is_clustered_as_the_record_once(sim_30db, step):
-    from pwa_pipeline.pwa.regressors import build_regressors
+    from pwa_pipeline.regressors import build_regressors
 
     reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
     once = LocalLeastSquares().fit(reg.phi, reg.target)
@@ -83,8 +83,8 @@ def test_a_record_given_ten_times_gives_the_sub_models_of_the_record_once():
 def test_the_missed_mode_search_sizes_its_local_sets_by_distinct_rows(sim_30db):
     """Step 5 re-runs steps 2–4 on rows no sub-model explains: a few distinct rows given ten
     times still get local sets (n_ρ from the distinct count, not the rows with copies)."""
-    from pwa_pipeline.pwa.regressors import build_regressors
-    from pwa_pipeline.pwa.submodels.refined import _missed_mode_clusters, _search_steps
+    from pwa_pipeline.pwa.steps.submodels.refined import _missed_mode_clusters, _search_steps
+    from pwa_pipeline.regressors import build_regressors
 
     reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
     local = LocalLeastSquares().fit(reg.phi, reg.target)

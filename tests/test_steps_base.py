@@ -12,8 +12,8 @@ from pwa_pipeline.pwa import (
     ResidualRegions,
     SVMRegions,
 )
-from pwa_pipeline.pwa.base import BaseClustering, BaseLocalModels, BaseRegions, BaseSubModels
-from pwa_pipeline.pwa.submodels import output_lag_columns
+from pwa_pipeline.pwa.steps.base import BaseClustering, BaseLocalModels, BaseRegions, BaseSubModels
+from pwa_pipeline.pwa.steps.submodels import output_lag_columns
 
 
 def test_the_library_steps_implement_their_kinds_interface():

@@ -9,9 +9,10 @@ import pytest
 
 from pwa_pipeline import PWARX, LinearARX
 from pwa_pipeline.config import build_pwarx
-from pwa_pipeline.pwa import SearchTimeLimit, StructureSearch, structure_search
-from pwa_pipeline.pwa.regressors import build_regressors
-from pwa_pipeline.pwa.structure_search import split_experiments
+from pwa_pipeline.pwa import SearchTimeLimit, StructureSearch
+from pwa_pipeline.pwa.search import search as structure_search
+from pwa_pipeline.pwa.search.search import split_experiments
+from pwa_pipeline.regressors import build_regressors
 
 FAST = {"clustering": False, "max_variables": 1, "forms": ["level"]}
 

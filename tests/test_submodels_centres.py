@@ -3,7 +3,7 @@
 import numpy as np
 
 from pwa_pipeline.config import HParamsFile
-from pwa_pipeline.pwa.submodels.centres import ClusterCentres, cluster_centres
+from pwa_pipeline.pwa.steps.submodels.centres import ClusterCentres, cluster_centres
 
 
 def test_paper_sub_models_are_the_cluster_means(sim_30db):

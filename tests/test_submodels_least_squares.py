@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from pwa_pipeline.pwa.submodels.least_squares import _normal_solves, least_squares, refit
+from pwa_pipeline.pwa.steps.submodels.least_squares import _normal_solves, least_squares, refit
 
 
 def test_least_squares_equals_lstsq_well_conditioned_or_not():

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from pwa_pipeline.pwa import SVMRegions
-from pwa_pipeline.pwa.submodels import merge
-from pwa_pipeline.pwa.submodels.merge import _prediction_gaps, merge_indistinguishable, separable
+from pwa_pipeline.pwa.steps.submodels import merge
+from pwa_pipeline.pwa.steps.submodels.merge import _prediction_gaps, merge_indistinguishable, separable
 
 from ._submodel_cases import _two_modes
 

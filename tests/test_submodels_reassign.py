@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from pwa_pipeline.pwa import SVMRegions
-from pwa_pipeline.pwa.submodels import reassign
-from pwa_pipeline.pwa.submodels.least_squares import refit
-from pwa_pipeline.pwa.submodels.reassign import refine, theta_shift
+from pwa_pipeline.pwa.steps.submodels import reassign
+from pwa_pipeline.pwa.steps.submodels.least_squares import refit
+from pwa_pipeline.pwa.steps.submodels.reassign import refine, theta_shift
 
 from ._submodel_cases import _two_modes
 

@@ -6,7 +6,7 @@ from sklearn.base import clone
 
 from pwa_pipeline import PWARX
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, RefinedSubModels, SVMRegions
-from pwa_pipeline.pwa.submodels import refined, split_search
+from pwa_pipeline.pwa.steps.submodels import refined, split_search
 
 from ._submodel_cases import _close_modes, _four_percent_mode, _InOrder
 

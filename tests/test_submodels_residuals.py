@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from pwa_pipeline.pwa.submodels.residuals import (
+from pwa_pipeline.pwa.steps.submodels.residuals import (
     _cost,
     margin_weights,
     robust_noise_var,

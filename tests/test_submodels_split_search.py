@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, RefinedSubModels, SVMRegions
-from pwa_pipeline.pwa.submodels import split_search
-from pwa_pipeline.pwa.submodels.least_squares import least_squares
-from pwa_pipeline.pwa.submodels.split_search import _axis_start, _kmeans_start, split_gain
+from pwa_pipeline.pwa.steps.submodels import split_search
+from pwa_pipeline.pwa.steps.submodels.least_squares import least_squares
+from pwa_pipeline.pwa.steps.submodels.split_search import _axis_start, _kmeans_start, split_gain
 
 from ._submodel_cases import SIGMA, _close_modes, _curved_mode, _two_modes, _wide
 

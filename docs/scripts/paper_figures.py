@@ -34,7 +34,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pwa_pipeline import PWARX, SubspaceSS, load_kuka, make_hure_vasak  # noqa: E402
-from pwa_pipeline.pwa.regressors import build_regressors  # noqa: E402
+from pwa_pipeline.regressors import build_regressors  # noqa: E402
 from pwa_pipeline.scoring import match_submodels  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "figures"

@@ -8,11 +8,11 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
+from ..envelope import PADDING
 from ..pwa.arx import ARXModelBase, training_range
-from ..pwa.envelope import PADDING
-from ..pwa.regressors import build_regressors
 from ..pwa.structure_fit import fit_structure
 from ..pwa.structures import COUPLINGS, FORMS
+from ..regressors import build_regressors
 
 
 class LinearARX(ARXModelBase):

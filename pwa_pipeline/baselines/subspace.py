@@ -18,6 +18,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from .._arrays import column_rms
+from .._blas import single_threaded_blas
 from .._typing import Float2D, Signals
 from .._validation import (
     _is_experiment_list,
@@ -26,7 +27,6 @@ from .._validation import (
     check_n_init,
     check_width,
 )
-from ..pwa._blas import single_threaded_blas
 
 
 def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:

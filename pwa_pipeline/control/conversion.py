@@ -9,8 +9,8 @@ those rows over x and over the constant, and A_i, B_i, f_i shift the lags
 
 **Regions.** Each output's regions are a partition of φ-space given by the fitted model:
 
-- the multi-class SVM of step 6 and the default's gate (:class:`~pwa_pipeline.pwa.regions.
-  SVMRegions`, :class:`~pwa_pipeline.pwa.boundaries.ResidualRegions`): φ ∈ H_i ⇔
+- the multi-class SVM of step 6 and the default's gate (:class:`~pwa_pipeline.pwa.steps.regions.
+  SVMRegions`, :class:`~pwa_pipeline.pwa.steps.boundaries.ResidualRegions`): φ ∈ H_i ⇔
   i = argmax_j (w_j·φ + b_j), so H_i = {φ : (w_j − w_i)·φ ≤ b_i − b_j for every j ≠ i}
   (regions whose b_i is −inf are never chosen and have no row);
 - the same on an output group's regressor ψ = Mφ (structured route): w_j·Mφ;
@@ -31,7 +31,7 @@ over the training experiments; all lags of a channel share it), widened on each 
 ``padding`` (default 5 %) of that span (of the channel's magnitude, at least 1, when the span
 is zero): over x, the box the fitted model's own
 :meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope` tests φ against
-(:mod:`pwa_pipeline.pwa.envelope`, the one place it is computed), and over u(k) the inputs'
+(:mod:`pwa_pipeline.envelope`, the one place it is computed), and over u(k) the inputs'
 padded ranges. A cell whose Chebyshev ball inside the envelope has radius at most
 :data:`~.polyhedra.EMPTY_RADIUS` half-widths is dropped and listed in ``dropped_modes``;
 redundant rows are removed by linear programs (:func:`~.polyhedra.irredundant_rows`).
@@ -51,7 +51,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
-from ..pwa.envelope import PADDING, channel_bounds, regressor_bounds
+from ..envelope import PADDING, channel_bounds, regressor_bounds
 from .polyhedra import EMPTY_RADIUS, Box, chebyshev_ball, irredundant_rows
 from .state_space import PWAStateSpace
 
@@ -96,7 +96,7 @@ def argmax_partition(coef: Float2D, intercept: np.ndarray, n_regions: int) -> Pa
         −inf marks a region that is never chosen (it gets no region).
     n_regions : int
         s; with one region, the whole space (as :meth:`SVMRegions.predict
-        <pwa_pipeline.pwa.regions.SVMRegions.predict>`).
+        <pwa_pipeline.pwa.steps.regions.SVMRegions.predict>`).
     """
     d = coef.shape[1]
     live = np.flatnonzero(np.isfinite(intercept))
@@ -123,7 +123,7 @@ def sign_partition(weights: Float2D) -> Partition:
 
 def _argmax_step(step, what: str) -> None:
     """NotImplementedError unless ``step`` predicts by SVMRegions' argmax."""
-    from ..pwa.regions import SVMRegions
+    from ..pwa.steps.regions import SVMRegions
 
     if not isinstance(step, SVMRegions) or type(step).predict is not SVMRegions.predict:
         raise NotImplementedError(
@@ -249,8 +249,8 @@ def mode_matrices(theta: Float2D, m: int, r: int, lags: int, nb: int, affine: bo
 def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
                  padding: float) -> Box:
     """The data envelope over z = [x; u] from each channel's training range: over x the
-    box of :func:`~pwa_pipeline.pwa.envelope.regressor_bounds` (φ without the constant),
-    over u(k) each input's :func:`~pwa_pipeline.pwa.envelope.channel_bounds`.
+    box of :func:`~pwa_pipeline.envelope.regressor_bounds` (φ without the constant),
+    over u(k) each input's :func:`~pwa_pipeline.envelope.channel_bounds`.
 
     Parameters
     ----------
@@ -291,7 +291,7 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     u, y : array-like or lists of them, optional
         Data whose range makes the envelope (the training data). None: the model's
         ``signal_range_``, the range of its training data recorded at fit.
-    padding : float, default :data:`~pwa_pipeline.pwa.envelope.PADDING` (0.05)
+    padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (0.05)
         Widening of the envelope beyond that range, a share of each channel's span.
     input_names, output_names : list of str, optional
         Names for the state's entries (default ``u1…``, ``y1…``).

@@ -25,8 +25,8 @@ import numpy as np
 
 from .._typing import Float2D, Signals
 from .._validation import _is_experiment_list, as_experiments, check_width, warmup_pairs
-from ..pwa.envelope import PADDING, outside_box
-from ..pwa.regressors import lagged_matrix, n_initial, regressor_names
+from ..envelope import PADDING, outside_box
+from ..regressors import lagged_matrix, n_initial, regressor_names
 
 #: Identifies the JSON document of :meth:`PWAStateSpace.to_json`.
 SCHEMA = "pwa-pipeline/pwa-state-space"

@@ -45,7 +45,7 @@ class GroundTruth:
 def with_unit(name: str, units: Mapping[str, str]) -> str:
     """``name [unit]`` for a channel or one of its lags, ``name`` alone without a unit.
 
-    The channel of a regressor name such as ``q1(k-2)`` (:func:`~pwa_pipeline.pwa.regressors.regressor_names`)
+    The channel of a regressor name such as ``q1(k-2)`` (:func:`~pwa_pipeline.regressors.regressor_names`)
     is the text before its ``(``; an empty unit counts as none.
 
     Examples

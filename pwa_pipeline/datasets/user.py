@@ -15,7 +15,7 @@ from pathlib import Path
 from filelock import FileLock
 
 from .._validation import check_name
-from ..pwa.regressors import n_initial, regressor_dim
+from ..regressors import n_initial, regressor_dim
 from ..scoring.evaluation import WARMUP
 from .registry import DATASETS, Dataset
 from .tables import Table, read_table

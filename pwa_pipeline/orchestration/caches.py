@@ -62,13 +62,12 @@ def source_fingerprint(paths: Sequence[Path]) -> str:
 
 @functools.cache
 def core_fingerprint() -> str:
-    """Hash of the numerical core's source (the packages ``pwa``, ``baselines`` and
-    ``scoring`` of ``pwa_pipeline``, and the modules they share): part of every cache key, so
-    that entries computed by other code are never loaded."""
+    """Hash of the library's source (every module of ``pwa_pipeline`` outside
+    ``orchestration``): part of every cache key, so that entries computed by other code are
+    never loaded."""
     package = Path(__file__).resolve().parents[1]
-    return source_fingerprint([*package.glob("_*.py"),
-                               *(p for sub in ("pwa", "baselines", "scoring")
-                                 for p in (package / sub).rglob("*.py"))])
+    return source_fingerprint([p for p in package.rglob("*.py")
+                               if "orchestration" not in p.relative_to(package).parts])
 
 
 class SignedMemory:

@@ -34,9 +34,9 @@ import numpy as np
 
 from .._arrays import column_rms
 from ..datasets.registry import with_unit
-from ..pwa.clustering import k_distances
-from ..pwa.embedding import EMBEDDINGS
-from ..pwa.regressors import lagged_matrix, n_initial, regressor_names
+from ..pwa.steps.clustering import k_distances
+from ..pwa.steps.embedding import EMBEDDINGS
+from ..regressors import lagged_matrix, n_initial, regressor_names
 from ..scoring.metrics import match_submodels
 from .caches import source_fingerprint
 
@@ -81,7 +81,7 @@ _Z_ONE_STEP, _Z_FREE, _Z_MEASURED = 2.0, 2.5, 3.0
 """Drawing order of the prediction figure's lines: the measured output on top."""
 _CURVE_POINTS = 1000
 """Points queried for the parameter-clusters figure's k-distance curve: its shape, at a
-fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.clustering.k_distances`)."""
+fifth of the cost of the 5,000 that choose ε (:func:`~pwa_pipeline.pwa.steps.clustering.k_distances`)."""
 
 
 @functools.cache
@@ -809,7 +809,7 @@ def draw_regions(sl: RegionSlice, names: list[str], context: str = "",
     ----------
     sl : RegionSlice
     names : list of str
-        The d regressor names (:func:`~pwa_pipeline.pwa.regressors.regressor_names`).
+        The d regressor names (:func:`~pwa_pipeline.regressors.regressor_names`).
     context : str, optional
         The title's first line (:func:`context_title`: data set, set, method).
     units : mapping of str to str, optional

@@ -3,14 +3,14 @@ the Vθ embedding (eq. 8–10), clustering (DBSCAN), sub-models (step 5), region
 the :class:`PWARX` estimator built from those step objects, and the structure search of
 :meth:`PWARX.auto`."""
 
-from .boundaries import ResidualRegions
-from .clustering import DBSCANClustering
 from .estimator import PWARX, STEPS
-from .local_models import LocalLeastSquares
 from .memory import FitMemoryError
-from .regions import SVMRegions
-from .structure_search import SearchReport, SearchTimeLimit, StructureSearch
-from .submodels import ClusterCentres, RefinedSubModels
+from .search.search import SearchReport, SearchTimeLimit, StructureSearch
+from .steps.boundaries import ResidualRegions
+from .steps.clustering import DBSCANClustering
+from .steps.local_models import LocalLeastSquares
+from .steps.regions import SVMRegions
+from .steps.submodels import ClusterCentres, RefinedSubModels
 
 __all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
            "LocalLeastSquares", "RefinedSubModels", "ResidualRegions", "SVMRegions",

@@ -13,9 +13,9 @@ from .._validation import (
     check_width,
     warmup_pairs,
 )
+from ..envelope import PADDING, outside_box, regressor_bounds
+from ..regressors import lagged_matrix, n_initial
 from ..scoring.metrics import r2_score
-from .envelope import PADDING, outside_box, regressor_bounds
-from .regressors import lagged_matrix, n_initial
 from .structures import output_lags
 
 

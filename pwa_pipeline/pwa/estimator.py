@@ -10,18 +10,18 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
+from ..envelope import PADDING
+from ..regressors import Regressors, build_regressors
 from .arx import ARXModelBase, training_range
-from .boundaries import ResidualRegions
-from .clustering import DBSCANClustering
-from .envelope import PADDING
-from .local_models import LocalLeastSquares
 from .memory import check_fit_memory
-from .regions import SVMRegions
-from .regressors import Regressors, build_regressors
+from .search.search import StructureSearch
+from .steps.boundaries import ResidualRegions
+from .steps.clustering import DBSCANClustering
+from .steps.local_models import LocalLeastSquares
+from .steps.regions import SVMRegions
+from .steps.submodels import ClusterCentres, RefinedSubModels, output_lag_columns
 from .structure_fit import fit_structure
-from .structure_search import StructureSearch
 from .structures import COUPLINGS, FORMS
-from .submodels import ClusterCentres, RefinedSubModels, output_lag_columns
 
 #: The step parameters of :class:`PWARX`, in the order the fit runs them.
 STEPS = ("local_models", "clustering", "submodels", "regions")
@@ -236,7 +236,7 @@ class PWARX(ARXModelBase):
         """The paper's setting: raw regressors in the neighbour search, a local model for
         every sample, DBSCAN on θ_k as it is with every local model, sub-models as cluster
         centres, the SVM trained on every clustered row (noise left out; solver tolerance
-        1e-2, see :class:`~pwa_pipeline.pwa.regions.SVMRegions`).
+        1e-2, see :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`).
 
         The paper gives n_ρ, ε and MinPts per data set and no rule, so they are required;
         its values are in ``data/hparams.toml`` (sets ``paper``).
@@ -377,7 +377,7 @@ class PWARX(ARXModelBase):
         ----------
         name : str
         reg : Regressors
-            From :func:`~pwa_pipeline.pwa.regressors.build_regressors` with this model's
+            From :func:`~pwa_pipeline.regressors.build_regressors` with this model's
             orders.
         **fitted
             The steps before ``name``, fitted, by name (``local_models=...`` for

@@ -8,9 +8,9 @@ the setting to change, instead of being killed by the operating system half-way.
 import os
 from pathlib import Path
 
-from .clustering import _DENSE
-from .local_models import _CHUNK
-from .neighbours import _BLOCK
+from .steps.clustering import _DENSE
+from .steps.local_models import _CHUNK
+from .steps.neighbours import _BLOCK
 
 _GiB = 2**30
 _SLACK = 2**28

@@ -25,9 +25,9 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from .._typing import Float2D
+from ..regressors import Regressors, build_regressors
 from ..scoring.evaluation import WARMUP
 from .output_error import VALIDATION_FRACTION, OutputFreeRuns, held_out, refine_outputs
-from .regressors import Regressors, build_regressors
 from .scheduling import SignRegions
 from .structures import (
     OutputModel,

@@ -3,7 +3,7 @@
 import numpy as np
 
 from .._validation import as_experiments
-from ..pwa.regressors import build_regressors, n_initial
+from ..regressors import build_regressors, n_initial
 from .metrics import match_submodels
 
 

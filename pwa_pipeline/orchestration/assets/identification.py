@@ -24,8 +24,8 @@ from ...datasets import Dataset
 from ...methods import METHODS
 from ...pwa import PWARX, STEPS
 from ...pwa.arx import training_range
-from ...pwa.regressors import build_regressors
-from ...pwa.structure_search import SEARCH_LOG
+from ...pwa.search.search import SEARCH_LOG
+from ...regressors import build_regressors
 from ..caches import SignedMemory, cache_key, load_or_compute
 from ..checks import (
     CLUSTER_CHECKS,

@@ -8,7 +8,7 @@ import dagster as dg
 from ...datasets import Dataset
 from ...datasets.registry import GroundTruth
 from ...pwa import PWARX
-from ...pwa.regressors import regressor_names
+from ...regressors import regressor_names
 from ...scoring.truth import ground_truth_scores
 from ..figures import context_title
 from ..mlflow_models import (

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..._typing import Float2D
-from ..regressors import build_regressors
+from ...regressors import build_regressors
 
 
 class OneStepError:

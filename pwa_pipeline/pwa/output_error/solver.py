@@ -7,8 +7,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..._blas import single_threaded_blas
 from ..._typing import Float2D
-from .._blas import single_threaded_blas
 from .objective import OneStepError, RefinementErrors
 from .simulator import FreeRuns, OutputFreeRuns
 

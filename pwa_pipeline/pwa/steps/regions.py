@@ -10,7 +10,7 @@ from sklearn.svm import LinearSVC
 from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
-from .._typing import Float2D
+from ..._typing import Float2D
 from .base import BaseRegions
 
 

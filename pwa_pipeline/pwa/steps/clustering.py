@@ -7,8 +7,8 @@ from sklearn.base import _fit_context
 from sklearn.neighbors import NearestNeighbors
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from .._arrays import column_rms, relabel_by_size
-from ._cluster_kernels import (
+from ..._arrays import column_rms, relabel_by_size
+from ..kernels.cluster import (
     core_distances,
     spanning_tree_edges,
     squared_distances,
@@ -56,7 +56,7 @@ def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     clusters at every candidate comes from one minimum spanning tree of the mutual
     reachability distances (:func:`dbscan_cluster_counts`), and the largest ε giving the
     most clusters wins. Over-splitting a mode is harmless where sub-models that predict
-    alike are merged afterwards (as :class:`pwa_pipeline.pwa.submodels.RefinedSubModels`
+    alike are merged afterwards (as :class:`pwa_pipeline.pwa.steps.submodels.RefinedSubModels`
     does); merging two modes is not repairable, and the classic knee of the curve does that
     when one mode is much larger than another.
     """
@@ -113,7 +113,7 @@ def cluster_local_models(
 ) -> tuple[np.ndarray, float]:
     """Cluster local parameter matrices with DBSCAN on the Vθ distance (eq. 8–10).
 
-    DBSCAN is :func:`pwa_pipeline.pwa.dbscan.dbscan` (scikit-learn's labels, border points
+    DBSCAN is :func:`pwa_pipeline.pwa.steps.dbscan.dbscan` (scikit-learn's labels, border points
     included, in bounded memory).
 
     Parameters
@@ -126,7 +126,7 @@ def cluster_local_models(
         DBSCAN MinPts (the point itself counts, as in scikit-learn's ``min_samples``).
     embedding : {"exact", "literal"}
         ``"literal"`` is Vθ of eq. (9); ``"exact"`` the d·m-dimensional map with the same
-        distances (:func:`pwa_pipeline.pwa.embedding.exact_embedding`).
+        distances (:func:`pwa_pipeline.pwa.steps.embedding.exact_embedding`).
     clustered : ndarray of bool, optional
         Which local models to cluster; the others are labelled noise.
 
@@ -238,7 +238,7 @@ class DBSCANClustering(BaseClustering):
 
         Parameters
         ----------
-        local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
+        local : fitted :class:`~pwa_pipeline.pwa.steps.local_models.LocalLeastSquares`
             Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_``,
             ``estimated_`` and ``original_`` are used; only estimated local models are
             clustered, degenerate ones never, and each distinct sample is clustered once

@@ -10,8 +10,8 @@ import numpy as np
 from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
-from .._arrays import sparse_nonzero
-from .._typing import Float2D
+from ..._arrays import sparse_nonzero
+from ..._typing import Float2D
 
 _PIVOTS = 64
 """Reference points whose distances to every point bound the others (triangle inequality)."""
@@ -38,7 +38,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     core point and a border point within ``eps`` of core points of several clusters goes to
     the cluster of lowest such number (the first to reach it). Ties at ``eps``: a pair within
     rounding of ``eps`` (as when ε is a k-distance, see
-    :func:`~pwa_pipeline.pwa.clustering.k_distance_eps`) is decided by
+    :func:`~pwa_pipeline.pwa.steps.clustering.k_distance_eps`) is decided by
     Σ_j (x_pj − x_qj)² ≤ ε² summed in feature order on the points as given, scikit-learn's
     k-d tree test bit for bit. The labels are then scikit-learn's, cluster numbers included,
     where it searches with its k-d tree (up to 15 dimensions; tested on ties in
@@ -62,7 +62,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     Parameters
     ----------
     x : ndarray of shape (n, d)
-        The points (e.g. :func:`pwa_pipeline.pwa.embedding.exact_embedding`).
+        The points (e.g. :func:`pwa_pipeline.pwa.steps.embedding.exact_embedding`).
     eps : float
         Neighbourhood radius ε > 0.
     min_pts : int

@@ -3,12 +3,12 @@
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from ..._typing import Float2D
+from ...._typing import Float2D
 
 
 def output_lag_columns(n_outputs: int, na: int, d: int) -> np.ndarray:
     """Output of each φ column in the order of eq. (3) (per output its na lags first, as
-    :func:`~pwa_pipeline.pwa.regressors.lagged_matrix` builds φ), −1 for input lags and the
+    :func:`~pwa_pipeline.regressors.lagged_matrix` builds φ), −1 for input lags and the
     constant."""
     return np.concatenate([np.repeat(np.arange(n_outputs), na),
                            np.full(d - n_outputs * na, -1)])

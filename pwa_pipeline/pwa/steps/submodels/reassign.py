@@ -3,8 +3,8 @@
 import numpy as np
 from sklearn.base import clone
 
-from ..._arrays import relabel_by_size
-from ..._typing import Float2D
+from ...._arrays import relabel_by_size
+from ...._typing import Float2D
 from .least_squares import refit
 from .residuals import _argmin_labels, _cost, _noise_var, _sq_residuals, margin_weights
 

@@ -5,8 +5,8 @@ from scipy.stats import chi2
 from sklearn.base import clone
 from sklearn.cluster import KMeans
 
-from ..._typing import Float2D
-from .._blas import _controller
+from ...._blas import _controller
+from ...._typing import Float2D
 from .least_squares import _normal_solves, refit
 from .reassign import refine
 from .residuals import _argmin_labels, _cost, _own_sq_residuals, _sq_residuals, robust_noise_var

@@ -4,8 +4,8 @@ normalised by."""
 import numpy as np
 from scipy.stats import chi2
 
-from ..._typing import Float2D
-from .._blas import single_threaded_blas
+from ...._blas import single_threaded_blas
+from ...._typing import Float2D
 
 
 def _sq_residuals(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Region boundaries placed where the sub-models' residuals switch (the default's step 6).
 
-The region SVM of :class:`~pwa_pipeline.pwa.regions.SVMRegions` learns from hard labels and
+The region SVM of :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions` learns from hard labels and
 a soft margin; near a boundary, where noise blurs which sub-model produced a row, its
 hyperplanes sit a little off (98.4–99.6 % of fresh samples right with the true θ_i on the
 section 5 system), and on switching systems that error dominates the free-run error.
@@ -27,15 +27,15 @@ from scipy.optimize import minimize
 from scipy.special import log_softmax, logsumexp
 from sklearn.utils._param_validation import Interval
 
-from .._typing import Float2D
-from ._blas import single_threaded_blas
+from ..._blas import single_threaded_blas
+from ..._typing import Float2D
 from .regions import SVMRegions
 from .submodels import bias_compensated_refit, robust_noise_var
 
 
 def _log_likelihood(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
     """−½ Σ_p r_ikp² / σ̂_p² of every row k under every sub-model i, shape (n, s); σ̂_p² is
-    :func:`~pwa_pipeline.pwa.submodels.robust_noise_var` of each row's best residual."""
+    :func:`~pwa_pipeline.pwa.steps.submodels.robust_noise_var` of each row's best residual."""
     sq = (target[None] - phi @ thetas) ** 2  # (s, n, m)
     sigma2 = robust_noise_var(sq[np.argmin(sq.sum(axis=2), axis=0), np.arange(phi.shape[0])])
     return -0.5 * (sq / sigma2).sum(axis=2).T
@@ -72,7 +72,7 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
 
     The regions are read as a gate p_i(φ) = softmax_i(w_i·φ + b_i) of a mixture of the
     sub-models, each with Gaussian residuals of the noise variance σ̂_p²
-    (:func:`~pwa_pipeline.pwa.submodels.robust_noise_var` of each row's best residual), and
+    (:func:`~pwa_pipeline.pwa.steps.submodels.robust_noise_var` of each row's best residual), and
     (w, b) maximise the likelihood Σ_k log Σ_i p_i(φ_k) exp(−½ Σ_p r_ikp² / σ̂_p²) (the
     gating of a mixture of experts), by L-BFGS from the given hyperplanes, on z-scored φ
     with a small ridge on the slopes. The softmax is sharpened only as far as the data
@@ -86,7 +86,7 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
     target : ndarray of shape (n, m)
     thetas : ndarray of shape (s, d, m)
     coef, intercept : ndarrays of shape (s, d) and (s,)
-        The starting hyperplanes, e.g. an :class:`~pwa_pipeline.pwa.regions.SVMRegions`'s.
+        The starting hyperplanes, e.g. an :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`'s.
     ridge : float, default 1e-7
         Penalty on the squared slopes in z-scored units.
     max_iter : int, default 200

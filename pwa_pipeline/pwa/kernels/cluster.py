@@ -14,7 +14,7 @@ else (‖p‖² − 2 p·q) + ‖q‖² clipped at 0; as a distance (square root
 import numpy as np
 from numba import njit
 
-from ._knn_kernels import kth_smallest
+from .knn import kth_smallest
 
 
 @njit(nogil=True, cache=True)

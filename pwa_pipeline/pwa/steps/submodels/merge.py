@@ -3,9 +3,9 @@
 import numpy as np
 from sklearn.base import clone
 
-from ..._arrays import relabel_by_size
-from ..._typing import Float2D
-from .._blas import single_threaded_blas
+from ...._arrays import relabel_by_size
+from ...._blas import single_threaded_blas
+from ...._typing import Float2D
 from .least_squares import _row_set_key, _rows_by_label, refit
 from .residuals import _cost, _sq_residuals, robust_noise_var
 
@@ -50,7 +50,7 @@ def merge_indistinguishable(
     predictions in units of the noise variance σ̂_p² (:func:`robust_noise_var`). A pair is
     mergeable when the statistic is below ``tol``, or below ``copy_tol`` while a linear
     classifier on φ (``regions``, an unfitted region estimator such as
-    :class:`~pwa_pipeline.pwa.regions.SVMRegions`) cannot tell their rows apart
+    :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`) cannot tell their rows apart
     (:func:`separable` is false): then they are
     copies of one mode that a residual-based assignment split along the noise, not modes of
     distinct regions. The mergeable pair with the smallest statistic is merged, until none is.

@@ -9,11 +9,11 @@ from scipy.spatial import cKDTree
 from sklearn.base import _fit_context
 from sklearn.utils._param_validation import Interval
 
-from .._arrays import column_rms
-from .._typing import Float2D
-from ._blas import single_threaded_blas
-from ._qr_kernels import local_solve
-from ._threads import map_in_threads
+from ..._arrays import column_rms
+from ..._blas import single_threaded_blas
+from ..._threads import map_in_threads
+from ..._typing import Float2D
+from ..kernels.qr import local_solve
 from .base import BaseLocalModels
 from .neighbours import distinct_rows, nearest_neighbours
 
@@ -56,7 +56,7 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool, rows: np.ndarray | N
     -------
     ndarray of shape (n, n_ρ) or (q, n_ρ), int
 
-    Above 12 dimensions the search is :func:`~pwa_pipeline.pwa.neighbours.nearest_neighbours`
+    Above 12 dimensions the search is :func:`~pwa_pipeline.pwa.steps.neighbours.nearest_neighbours`
     (exact, blocked float32 products; equal distances go to the lower row index), below it
     SciPy's k-d tree on every CPU (the neighbours of scikit-learn's, 4x faster on 400k rows).
     """

@@ -12,7 +12,7 @@ from abc import ABCMeta, abstractmethod
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from .._typing import Float2D
+from ..._typing import Float2D
 
 
 class BaseLocalModels(BaseEstimator, metaclass=ABCMeta):
@@ -99,7 +99,7 @@ class BaseRegions(BaseEstimator, metaclass=ABCMeta):
             The sub-models, one per region.
         output_lags : ndarray of shape (d,), optional
             Output of each column of φ, −1 for the others
-            (:func:`~pwa_pipeline.pwa.submodels.output_lag_columns`).
+            (:func:`~pwa_pipeline.pwa.steps.submodels.output_lag_columns`).
         experiment : ndarray of shape (n,), optional
             Experiment of each row (rows in time order within each).
         """

@@ -9,9 +9,9 @@ from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_memory
 
-from ..._arrays import array_digest
-from ..._typing import Float2D
-from .._blas import single_threaded_blas
+from ...._arrays import array_digest
+from ...._blas import single_threaded_blas
+from ...._typing import Float2D
 from ..base import BaseSubModels
 from ..neighbours import distinct_rows
 from .least_squares import _row_set_key, refit
@@ -141,11 +141,11 @@ class RefinedSubModels(BaseSubModels):
         ----------
         phi : ndarray of shape (n, d)
         target : ndarray of shape (n, m)
-        local : fitted :class:`~pwa_pipeline.pwa.local_models.LocalLeastSquares`
+        local : fitted :class:`~pwa_pipeline.pwa.steps.local_models.LocalLeastSquares`
             Cloned (with its parameters) for the missed-mode search.
-        clustering : fitted :class:`~pwa_pipeline.pwa.clustering.DBSCANClustering`
+        clustering : fitted :class:`~pwa_pipeline.pwa.steps.clustering.DBSCANClustering`
             Its labels start the refinement; cloned for the missed-mode search.
-        regions : unfitted :class:`~pwa_pipeline.pwa.regions.SVMRegions`
+        regions : unfitted :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`
             The region estimator of step 6, used to keep rows region-consistent.
         """
         min_pts = clustering.min_pts_

@@ -52,14 +52,14 @@ import pandas as pd
 from sklearn.base import BaseEstimator
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
-from .._typing import Float2D
-from ..scoring.evaluation import WARMUP
-from .output_error import OutputErrorRefinement, held_out, refine_outputs
-from .output_error.simulator import FreeRuns
-from .regressors import build_regressors
-from .scheduling import SignRegions
-from .structure_fit import StructureFit, clustered_models
-from .structures import (
+from ..._typing import Float2D
+from ...regressors import build_regressors
+from ...scoring.evaluation import WARMUP
+from ..output_error import OutputErrorRefinement, held_out, refine_outputs
+from ..output_error.simulator import FreeRuns
+from ..scheduling import SignRegions
+from ..structure_fit import StructureFit, clustered_models
+from ..structures import (
     COUPLINGS,
     FORMS,
     OutputModel,

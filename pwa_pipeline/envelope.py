@@ -23,7 +23,7 @@ the state-space conversion all call it.
 
 import numpy as np
 
-from .._typing import Float2D
+from ._typing import Float2D
 
 #: Widening of the envelope beyond the training range, as a share of each channel's span.
 PADDING = 0.05

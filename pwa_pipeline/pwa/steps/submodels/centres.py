@@ -3,7 +3,7 @@
 import numpy as np
 from sklearn.base import _fit_context
 
-from ..._typing import Float2D
+from ...._typing import Float2D
 from ..base import BaseSubModels
 
 

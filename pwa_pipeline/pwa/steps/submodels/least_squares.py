@@ -5,8 +5,8 @@ import hashlib
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from ..._typing import Float2D
-from .._blas import single_threaded_blas
+from ...._blas import single_threaded_blas
+from ...._typing import Float2D
 
 _NORMAL_COND = 1e6
 """Largest condition number of the column-scaled normal matrix solved as it is."""

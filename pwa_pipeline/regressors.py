@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._typing import Float2D
+from ._typing import Float2D
 
 
 @dataclass(frozen=True)

@@ -14,10 +14,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .._typing import Float2D
-from ._blas import single_threaded_blas
-from ._knn_kernels import kth_smallest_rows, select_nearest, tile_candidates
-from ._threads import map_in_threads
+from ..._blas import single_threaded_blas
+from ..._threads import map_in_threads
+from ..._typing import Float2D
+from ..kernels.knn import kth_smallest_rows, select_nearest, tile_candidates
 
 _BLOCK = 512
 """Rows of a block; a tile is one block of rows against one block of columns."""
