@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> None:
             fits.append({"dataset": name, "hparams": hparams, "method": method,
                          "fit_seconds": t.seconds,
                          "n_submodels": getattr(model, "n_submodels_", None),
-                         "structures": ", ".join(model.structure_fit_.model.structures)
+                         "structures": ", ".join([o.structure for o in model.structure_fit_.outputs])
                          if hasattr(model, "structure_fit_") else None,
                          "free_run_diverged": ev.diverged()})
             print(f"{name:11s} {method:10s} ({hparams:7s}) fit {t.seconds:7.2f} s  one-step NRMSE "

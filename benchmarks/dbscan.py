@@ -38,6 +38,8 @@ METHODS = ("pwa_pipeline", "scikit-learn")
 
 def embedding() -> tuple[np.ndarray, float, int, float]:
     """The paper setting's embedding of the robot's local models, ε, MinPts, local-model time."""
+    from sklearn.base import clone
+
     from pwa_pipeline import load_kuka
     from pwa_pipeline._validation import as_experiments
     from pwa_pipeline.config import HParamsFile
@@ -49,7 +51,7 @@ def embedding() -> tuple[np.ndarray, float, int, float]:
     reg = build_regressors(as_experiments(robot.u_train, robot.y_train), pwa.na, pwa.nb,
                            pwa.affine)
     with Timer() as t:
-        local = pwa.fit_step("local_models", reg)
+        local = clone(pwa.step_objects()["local_models"]).fit(reg.phi, reg.target)
     return exact_embedding(local.theta_), pwa.clustering.eps, pwa.clustering.min_pts, t.seconds
 
 

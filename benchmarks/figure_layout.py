@@ -16,6 +16,7 @@ import argparse
 import statistics
 
 import pandas as pd
+from sklearn.base import clone
 
 from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write_json
 from pwa_pipeline._validation import as_experiments
@@ -31,8 +32,9 @@ def rendering_seconds(setting: str, repeats: int) -> dict:
     pwa = HParamsFile().configuration(setting, "kuka_robot").pwa
     reg = build_regressors(as_experiments(robot.u_train, robot.y_train), pwa.na, pwa.nb,
                            pwa.affine)
-    local = pwa.fit_step("local_models", reg)
-    clustering = pwa.fit_step("clustering", reg, local_models=local)
+    steps = pwa.step_objects()
+    local = clone(steps["local_models"]).fit(reg.phi, reg.target)
+    clustering = clone(steps["clustering"]).fit(local, reg.target)
     seconds = {"hand": [], "constrained": []}
     for _ in range(repeats):
         for layout in seconds:

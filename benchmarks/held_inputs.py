@@ -56,7 +56,8 @@ def main(argv=None) -> None:
             continue
         error = np.nanmax(match_submodels(m.thetas_, HURE_VASAK_THETAS)[1])
         rows.append({"seed": seed, "error": "", "n_submodels": m.n_submodels_,
-                     "degenerate_share": m.local_models_.n_degenerate_ / len(m.labels_),
+                     "degenerate_share": m.steps_["local_models"].n_degenerate_
+                     / len(m.steps_["submodels"].labels_),
                      "max_param_error": float(error) if m.n_submodels_ == 4 else np.nan,
                      "fit_seconds": t.seconds})
         print(rows[-1], flush=True)

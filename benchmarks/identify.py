@@ -44,7 +44,7 @@ def simulation_report() -> list[dict]:
     for name in ("paper", "default"):
         model = clone(hp.configuration(name, "hure_vasak").pwa).fit(data.u, data.y)
         errs = mode_errors(model.thetas_, data.thetas)
-        noise, eps = model.clustering_.noise_share_, model.clustering_.eps_
+        noise, eps = model.steps_["clustering"].noise_share_, model.steps_["clustering"].eps_
         rows.append({"setting": name, "n_submodels": model.n_submodels_,
                      "noise_share": noise, "eps": eps,
                      **{f"max_error_mode{i + 1}": e for i, e in enumerate(errs)}})
@@ -75,7 +75,7 @@ def kuka_speed(repeats: int) -> list[dict]:
         med = {k: statistics.median(s[k] for s in steps) for k in steps[0]}
         rows.append({"setting": name, "median_seconds": statistics.median(times),
                      "runs": times, "n_submodels": model.n_submodels_,
-                     "noise_share": model.clustering_.noise_share_,
+                     "noise_share": model.steps_["clustering"].noise_share_,
                      **{f"step_{k}": v for k, v in med.items()}})
         print(f"KUKA fit, {name}: median {statistics.median(times):.2f} s over {repeats} "
               f"({', '.join(f'{x:.2f}' for x in times)}); steps {med}")

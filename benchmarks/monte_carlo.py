@@ -46,8 +46,8 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
     return {**row, "n_submodels": model.n_submodels_,
             "max_param_error": truth["max_param_error"] if model.n_submodels_ == 4 else np.nan,
             "region_accuracy": truth["region_accuracy"], "free_run_nrmse": ev.mean("free_run"),
-            "one_step_nrmse": ev.mean("one_step"), "noise_share": model.clustering_.noise_share_,
-            "eps": model.clustering_.eps_, "fit_seconds": t.seconds}
+            "one_step_nrmse": ev.mean("one_step"), "noise_share": model.steps_["clustering"].noise_share_,
+            "eps": model.steps_["clustering"].eps_, "fit_seconds": t.seconds}
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:

@@ -40,9 +40,9 @@ def orders(data, base, specs: list[str]) -> None:
             model = clone(base).set_params(na=na, nb=nb).fit(data.u_train, data.y_train)
         fit = model.structure_fit_
         chosen = np.array([fit.validation_cost[j][s]
-                           for j, s in enumerate(model.structure_.structures)])
+                           for j, s in enumerate([o.structure for o in model.structure_fit_.outputs])])
         rows.append({"na": na, "nb": nb, "held_out_nrmse": float(np.mean(np.sqrt(chosen) / sigma)),
-                     "structures": ", ".join(model.structure_.structures),
+                     "structures": ", ".join([o.structure for o in model.structure_fit_.outputs]),
                      "held_out_experiments": f"{fit.validation_experiments[0]}-"
                                              f"{fit.validation_experiments[-1]}",
                      "fit_seconds": t.seconds})
@@ -66,7 +66,7 @@ def weights(data, cfg, values: list[float], specs: list[str]) -> None:
                 model = est.fit(data.u_train, data.y_train)
             held = model.structure_fit_.validation_experiments
             if method == "pwa":
-                row["structures"] = ", ".join(model.structure_.structures)
+                row["structures"] = ", ".join([o.structure for o in model.structure_fit_.outputs])
                 row["held_out_experiments"] = f"{held[0]}-{held[-1]}"
                 fit_part = [i for i in range(len(data.u_train)) if i not in held]
             ev = evaluate(model, [data.u_train[i] for i in held],

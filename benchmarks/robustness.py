@@ -321,7 +321,7 @@ def one_run(name: str, seed: int, params: dict | None = None, n: int | None = No
             "oracle_param_error": float(np.nanmax(np.abs(oracle - system.thetas))),
             "oracle_bc_param_error": float(np.nanmax(np.abs(oracle_bc - system.thetas))),
             "n_uncompensated": getattr(model.regions_, "n_uncompensated_", np.nan),
-            "n_split": getattr(model.submodels_, "n_split_", np.nan),
+            "n_split": getattr(model.steps_["submodels"], "n_split_", np.nan),
             "region_accuracy": truth["region_accuracy"],
             **{f"free_run_nrmse_{k}": v for k, v in free.items()}}
 

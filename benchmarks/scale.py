@@ -9,7 +9,8 @@ times). Repeated (φ, y) rows count once in steps 2–4
 local models and clusters of the record once, and steps 5–6 fit on all 398,560 rows.
 
 Each case runs in a fresh subprocess with the data set's ``default`` hyper-parameter set;
-the steps run one after another as ``PWARX.fit`` runs them (``fit_step``), and before each
+the steps run one after another as ``PWARX.fit`` runs them (:func:`fit_steps`: each step
+object fitted on what the steps before it produced), and before each
 the process's peak resident memory (VmHWM) is reset (``/proc/self/clear_refs``), so a
 step's peak is its own, the data and the previous steps' results included. The memory
 guard's estimate (``pwa_pipeline.pwa.memory.fit_memory``, plus the regressors) is reported
@@ -74,13 +75,13 @@ def worker(case: str, size: int, out: str) -> None:
     reg = build_regressors(as_experiments(u, y), est.na, est.nb, est.affine)
     rows = [{"step": "regressors", "seconds": time.perf_counter() - t0}]
     n, d = reg.phi.shape
-    estimate = fit_memory(n, d, reg.target.shape[1], est.steps())
+    estimate = fit_memory(n, d, reg.target.shape[1], est.step_objects())
     fitted, error = {}, None
     for name in STEPS:
         resettable = reset_peak()
         t0 = time.perf_counter()
         try:
-            fitted[name] = est.fit_step(name, reg, **fitted)
+            fitted[name] = fit_step(est, name, reg, fitted)
         except ValueError as exc:  # e.g. every local set degenerate: timed all the same
             error = f"{name}: {exc}"
         rows.append({"step": name, "seconds": time.perf_counter() - t0,
@@ -89,13 +90,35 @@ def worker(case: str, size: int, out: str) -> None:
                      / 2**20 + baseline})
         if error:
             break
-    if error is None:
-        est.assemble(reg, **fitted)
     total = time.perf_counter() - t_all
     Path(out).write_text(json.dumps({
         "case": case, "size": size, "rows": n, "d": d, "steps": rows, "seconds": total,
         "baseline_mb": baseline, "peak_mb": max(r.get("peak_mb", 0) for r in rows),
-        "n_submodels": None if error else est.n_submodels_, "error": error}, default=float))
+        "n_submodels": None if error else fitted["regions"].n_regions_, "error": error},
+        default=float))
+
+
+def fit_step(est, name: str, reg, fitted: dict):
+    """Step ``name`` of ``est`` fitted on the regressors and the steps before it, with the
+    arguments ``PWARX.fit`` gives it on the paper's route (the steps' documented ``fit``)."""
+    from sklearn.base import clone
+
+    from pwa_pipeline.pwa.steps.submodels import output_lag_columns
+
+    steps = est.step_objects()
+    step = clone(steps[name])
+    if name == "local_models":
+        return step.fit(reg.phi, reg.target)
+    if name == "clustering":
+        return step.fit(fitted["local_models"], reg.target)
+    if name == "submodels":
+        return step.fit(reg.phi, reg.target, fitted["local_models"], fitted["clustering"],
+                        regions=steps["regions"])
+    subs = fitted["submodels"]
+    return step.fit(reg.phi, subs.labels_, subs.n_submodels_, sample_weight=subs.weights_,
+                    target=reg.target, thetas=subs.thetas_,
+                    output_lags=output_lag_columns(reg.n_outputs, est.na, reg.phi.shape[1]),
+                    experiment=reg.experiment)
 
 
 def exponent(sizes, values) -> float:

@@ -107,28 +107,18 @@ def worker(variant: str, out: str) -> None:
         result.update(second_seconds=time.perf_counter() - t0)
     else:
         est = estimator(variant)
-        cpu_steps: dict[str, float] = {}
-        fit_step = est.fit_step
-
-        def timed_step(name, *args, **kwargs):
-            c0 = time.process_time()
-            out = fit_step(name, *args, **kwargs)
-            cpu_steps[name] = time.process_time() - c0
-            return out
-
-        est.fit_step = timed_step  # each step's CPU seconds beside fit's wall timings_
         before = peak_rss_mb()
         t0, c0 = time.perf_counter(), time.process_time()
         model = est.fit(robot.u_train, robot.y_train)
         result.update(seconds=time.perf_counter() - t0, cpu_seconds=time.process_time() - c0,
                       peak_mb=peak_rss_mb())
-        first = dict(steps=dict(model.timings_), cpu_steps=dict(cpu_steps))
+        first = dict(steps=dict(model.timings_))
         t0 = time.perf_counter()
         est.fit(robot.u_train, robot.y_train)  # again, without what a process pays once
         result.update(second_seconds=time.perf_counter() - t0, **first,
                       second_steps=dict(est.timings_),
-                      eps=model.clustering_.eps_, n_submodels=model.n_submodels_,
-                      labels=model.clustering_.labels_.tolist(),
+                      eps=model.steps_["clustering"].eps_, n_submodels=model.n_submodels_,
+                      labels=model.steps_["clustering"].labels_.tolist(),
                       thetas=model.thetas_.tolist())
     import pwa_pipeline
 
@@ -181,6 +171,8 @@ def svm_tolerance() -> list[dict]:
     the former 1e-4 (both with the library's max_iter 50,000) and a reference 1e-5 with
     max_iter 500,000: seconds, convergence, primal objective, and the share of rows whose
     region is the reference's (training rows, held-out test rows)."""
+    from sklearn.base import clone
+
     from pwa_pipeline import load_kuka
     from pwa_pipeline._validation import as_experiments
     from pwa_pipeline.regressors import build_regressors
@@ -189,8 +181,9 @@ def svm_tolerance() -> list[dict]:
     est = estimator("paper")
     reg = build_regressors(as_experiments(robot.u_train, robot.y_train), 2, 2, False)
     held = build_regressors(as_experiments(robot.u_test, robot.y_test), 2, 2, False).phi
-    local = est.fit_step("local_models", reg)
-    labels = est.fit_step("clustering", reg, local_models=local).labels_
+    steps = est.step_objects()
+    local = clone(steps["local_models"]).fit(reg.phi, reg.target)
+    labels = clone(steps["clustering"]).fit(local, reg.target).labels_
     keep = labels >= 0
     x, lab = reg.phi[keep], labels[keep]
     mean, std = x.mean(axis=0), x.std(axis=0)
@@ -269,8 +262,6 @@ def main(argv=None) -> None:
         if "steps" in res[0]:
             for step in res[0]["steps"]:
                 row[f"step_{step}"] = statistics.median(r["steps"][step] for r in res)
-            for step in res[0]["cpu_steps"]:
-                row[f"cpu_{step}"] = statistics.median(r["cpu_steps"][step] for r in res)
             for key, steps in (("steps_1_4", "steps"), ("steps_1_4_again", "second_steps")):
                 row[key] = statistics.median(
                     sum(r[steps][s] for s in ("regressors", "local_models", "clustering"))

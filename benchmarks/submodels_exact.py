@@ -59,7 +59,7 @@ def worker(fit: str, rules: str, out: str) -> None:
     model = est.fit(u, y)
     live = np.isfinite(model.regions_.intercept_)
     Path(out).write_text(json.dumps({
-        "thetas": model.thetas_.tolist(), "labels": model.labels_.tolist(),
+        "thetas": model.thetas_.tolist(), "labels": model.steps_["submodels"].labels_.tolist(),
         "coef": model.regions_.coef_.tolist(),
         "intercept": np.where(live, model.regions_.intercept_, 0.0).tolist()}))
 

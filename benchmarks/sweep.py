@@ -3,14 +3,13 @@ recomputed.
 
 The 12 sets are the library default on the KUKA training record (na = nb = 2, n_rho = 72)
 with ε × MinPts from EPS × MIN_PTS (ε in the unit-free θ units of the default; the default's
-own choice is about 25). ``recompute``: each set is a full ``PWARX.fit``. ``reuse``: the
-regressors and the local-model step are fitted once (``PWARX.fit_step``), and each set fits
-only its clustering, sub-models and regions on them and joins the steps with
-``PWARX.assemble``: what the pipeline's local-model cache does (orchestration/assets/identification.py).
+own choice is about 25). ``recompute``: each set is a full ``PWARX.fit``. ``reuse``: each set
+is a full ``PWARX.fit`` whose local-model step keeps its result in the pipeline's cache
+(``LocalLeastSquares(memory=...)``, a ``SignedMemory`` in a new temporary folder each run),
+so the first set estimates the local models and the others read them.
 ``reuse + step 5``: the same with the pipeline's step-5 cache too (``RefinedSubModels``'s
-``memory``, a ``SignedMemory`` in a new temporary folder each run, so that the sweep fills
-it): each set whose clustering consolidates to a state an earlier set reached takes steps
-2–4 of step 5 from it. All give the same sub-models (checked). A set whose ε / MinPts leave
+``memory``): each set whose clustering consolidates to a state an earlier set reached takes
+steps 2–4 of step 5 from it. All give the same sub-models (checked). A set whose ε / MinPts leave
 DBSCAN without a cluster fails at the clustering step and is timed all the same.
 ``--repeats`` alternating runs of the three, medians; how busy the machine was
 (``MachineLoad``: the load average before and after, the CPU time stolen by the hypervisor).
@@ -35,59 +34,55 @@ from sklearn.base import clone
 
 from benchmarks._common import RESULTS, MachineLoad, describe_load, write_json
 from pwa_pipeline import load_kuka
-from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.orchestration.caches import SignedMemory
-from pwa_pipeline.regressors import build_regressors
 
 EPS = (15.0, 20.0, 25.0, 30.0)
 MIN_PTS = (36, 48, 60)
 
 
-def sets(every: bool = False, memory=None):
+def sets(every: bool = False, **memory):
+    """The 12 sets, with ``local_models__memory`` and ``submodels__memory`` when given."""
     base = clone(HParamsFile().configuration("default", "kuka_robot").pwa)
     if every:
         base.set_params(local_models__max_sets=None)
-    if memory is not None:
-        base.set_params(submodels=clone(base.steps()["submodels"]).set_params(memory=memory))
+    base.set_params(**memory)
     return [clone(base).set_params(clustering__eps=e, clustering__min_pts=m)
             for e in EPS for m in MIN_PTS]
 
 
-def recompute(u, y, every: bool) -> tuple[float, list]:
-    t0 = time.perf_counter()
+def fitted(models: list, u, y) -> list:
+    """Each set's θ_i, or the error that stopped its fit."""
     out = []
-    for est in sets(every):
+    for est in models:
         try:
             out.append(est.fit(u, y).thetas_)
         except ValueError as exc:
             out.append(str(exc))
-    return time.perf_counter() - t0, out
+    return out
 
 
-def reuse(u, y, every: bool, memory=None) -> tuple[float, list]:
+def recompute(u, y, every: bool) -> tuple[float, list]:
     t0 = time.perf_counter()
-    models = sets(every, memory)
-    reg = build_regressors(as_experiments(u, y), models[0].na, models[0].nb, models[0].affine)
-    local = models[0].fit_step("local_models", reg)
-    out = []
-    for est in models:
-        try:
-            fitted = {"local_models": local}
-            for name in ("clustering", "submodels", "regions"):
-                fitted[name] = est.fit_step(name, reg, **fitted)
-            out.append(est.assemble(reg, **fitted).thetas_)
-        except ValueError as exc:
-            out.append(str(exc))
+    out = fitted(sets(every), u, y)
     return time.perf_counter() - t0, out
+
+
+def reuse(u, y, every: bool, step_5: bool = False) -> tuple[float, list]:
+    with tempfile.TemporaryDirectory() as folder:
+        memory = {"local_models__memory": SignedMemory(Path(folder), "local_models")}
+        if step_5:
+            memory["submodels__memory"] = SignedMemory(Path(folder), "sub_models")
+        t0 = time.perf_counter()
+        out = fitted(sets(every, **memory), u, y)
+        seconds = time.perf_counter() - t0
+    if step_5:
+        HITS.append(memory["submodels__memory"].hits)
+    return seconds, out
 
 
 def reuse_with_step_5(u, y, every: bool) -> tuple[float, list]:
-    with tempfile.TemporaryDirectory() as folder:
-        memory = SignedMemory(Path(folder), "sub_models")
-        seconds, out = reuse(u, y, every, memory)
-    HITS.append(memory.hits)
-    return seconds, out
+    return reuse(u, y, every, step_5=True)
 
 
 HITS: list[int] = []

@@ -147,7 +147,7 @@ def build_pwarx(table: dict) -> PWARX:
         model.set_params(**{key: step_class(**values)})
     model.set_params(**_flatten(table))
     model._validate_params()
-    for step in [*model.steps().values(),
+    for step in [*model.step_objects().values(),
                  *filter(None, [model.refinement, model.scheduling, model.search])]:
         step._validate_params()
     return model

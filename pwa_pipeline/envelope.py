@@ -50,7 +50,7 @@ def channel_bounds(signal_range: Float2D, padding: float = PADDING
     ----------
     signal_range : array-like of shape (2, m + r)
         Row 0 the minima, row 1 the maxima of each output, then each input
-        (:func:`~pwa_pipeline.pwa.arx.training_range`).
+        (:func:`training_range`).
     padding : float, default :data:`PADDING`
         Share of each span added on either side; of max(|min|, |max|, 1) for a channel whose
         span is zero.
@@ -133,3 +133,21 @@ def outside_box(values: Float2D, lower: np.ndarray, upper: np.ndarray,
     with np.errstate(invalid="ignore"):
         inside = (values >= lower - margin) & (values <= upper + margin)
     return ~np.all(inside, axis=1)
+
+
+def training_range(experiments: list[tuple[Float2D, Float2D]]) -> Float2D:
+    """Smallest and largest value of each output, then each input, over the experiments.
+
+    Parameters
+    ----------
+    experiments : list of (u, y)
+        As :func:`~pwa_pipeline._validation.as_experiments` returns them.
+
+    Returns
+    -------
+    ndarray of shape (2, m + r)
+        Row 0 the minima, row 1 the maxima: the estimators keep it as ``signal_range_``,
+        the data envelope of their state-space form (:mod:`pwa_pipeline.control`).
+    """
+    joined = np.vstack([np.hstack([y, u]) for u, y in experiments])
+    return np.vstack([joined.min(axis=0), joined.max(axis=0)])

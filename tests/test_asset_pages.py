@@ -15,16 +15,12 @@ from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.registry import Dataset
 from pwa_pipeline.definitions import defs
-from pwa_pipeline.orchestration.assets.identification import (
-    REGIONS,
-    STRUCTURED_REGIONS,
-    SWITCHING,
-    structured_model,
-)
+from pwa_pipeline.orchestration.assets.identification import REGIONS, SWITCHING, model_output
 from pwa_pipeline.orchestration.definitions import build_definitions
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
+from pwa_pipeline.regressors import build_regressors
 
 #: A Sphinx role such as :mod:`x` or :func:`~x.y`, which Dagster shows raw.
 ROLE = re.compile(r":[a-z]+:`")
@@ -74,22 +70,23 @@ def structured_page(tmp_path_factory):
 
 
 def test_a_structured_sets_model_page_shows_what_its_description_promises(structured_page):
-    """The description promises a switching and a regions entry and says a structured set's
-    regions entry explains why it has no figure; the page holds exactly that: the switching
-    figure of each output's regions, titled with data set, set and method, within a laptop
-    screen, and the reason in place of the regions figure. No reST role shows."""
+    """The description promises a switching and a regions entry; the page holds both for a
+    model of several output groups as for the paper's route: the switching figure with a
+    lane per output group and the regions of the model as eq. (1) in a slice of φ, each
+    titled with data set, set and method, within a laptop screen. No reST role shows."""
     description, metadata, model = structured_page
-    assert model.structured and model.structure_.structures == ["offset", "offset"]
+    assert len(model.groups_) == 2 and model.structures_ == [
+        "velocity (1, 1), offset (2 regions)"] * 2
     assert "*switching*" in description and "*regions*" in description
-    assert "structured set's entry says why it has no such figure" in description
     assert not ROLE.search(description)
     switching = metadata[SWITCHING].value
-    assert switching.startswith("![hure_vasak | set moving | PWA Region of each output's model, "
-                                "held-out experiment 1")
-    width, height = _png_size(switching)
-    assert width <= 900 and height <= 650
-    assert metadata[REGIONS].value == STRUCTURED_REGIONS
-    assert STRUCTURED_REGIONS.startswith("No regions figure for a model with a structure")
+    assert switching.startswith("![hure_vasak | set moving | PWA Region of each output group's "
+                                "model, held-out experiment 1")
+    regions = metadata[REGIONS].value
+    assert regions.startswith("![hure_vasak | set moving | PWA ")
+    for figure in (switching, regions):
+        width, height = _png_size(figure)
+        assert width <= 900 and height <= 650
 
 
 def _header(table: str) -> list[str]:
@@ -98,9 +95,10 @@ def _header(table: str) -> list[str]:
 
 
 def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
-    """A structure chosen per output on held-out training experiments: the table has one
-    short column per candidate (its held-out free-run MSE), in order of richness, said in
-    a line above it; the outputs carry their units."""
+    """A structure chosen per output on held-out training experiments: the page lists each
+    output's structure and group, and a table with one short column per candidate (its
+    held-out free-run MSE), in order of richness, said in a line above it; the outputs
+    carry their units."""
     record = make_hure_vasak(n_samples=2400, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=600, snr_db=30, seed=1000)
     data = Dataset("hure_vasak", np.split(record.u, 4), np.split(record.y, 4), [test.u],
@@ -108,13 +106,20 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     path = tmp_path / "h.toml"
     path.write_text('[select.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
                     'outputs = "decoupled"\nscheduling.switch = "select"\n')
-    configuration = HParamsFile(path).configuration("select", "hure_vasak")
-    context = SimpleNamespace(log=logging.getLogger(__name__))
-    output = structured_model(context, configuration, data, "hure_vasak | set select | PWA")
-    table = output.metadata["structure per output"].value
+    model = HParamsFile(path).configuration("select", "hure_vasak").pwa.fit(data.u_train,
+                                                                           data.y_train)
+    context = SimpleNamespace(log=logging.getLogger(__name__), partition_key="hure_vasak|select")
+    phi = build_regressors(list(zip(data.u_train, data.y_train, strict=True)),
+                           model.output_lags_, model.nb, model.affine).phi
+    output = model_output(context, PipelineSettings(cache_dir=str(tmp_path / "cache")), model,
+                          data, cached=set(), phi=phi)
+    structure = output.metadata["structure per output"].value
+    assert _header(structure) == ["output", "structure", "group"]
+    table = output.metadata["candidates"].value
     assert table.startswith("Held-out free-run MSE of each candidate structure")
-    assert _header(table) == ["output", "structure", "regions", "linear", "offset", "all"]
+    line = next(line for line in table.splitlines() if line.startswith("|  "))
+    assert [c.strip() for c in line.strip("|").split("|")] == ["", "linear", "offset", "all"]
     rows = [line for line in table.splitlines() if line.startswith("| y")]
     assert [r.split("|")[1].strip() for r in rows] == ["y1 [V]", "y2"]
     assert output.metadata[SWITCHING].value.startswith("![hure_vasak | set select | PWA ")
-    assert output.metadata[REGIONS].value == STRUCTURED_REGIONS
+    assert output.metadata[REGIONS].value.startswith("![hure_vasak | set select | PWA ")

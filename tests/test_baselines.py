@@ -73,8 +73,8 @@ def test_experiments_never_leak_into_each_other():
 def test_evaluation_table_and_divergence_flag():
     rng = np.random.default_rng(2)
     stable = LinearARX(1, 1).fit(rng.normal(size=(300, 1)), _arx_response(0.5, 1.0, 300))
-    unstable = LinearARX(1, 1)
-    unstable.theta_, unstable.n_inputs_, unstable.n_outputs_ = np.array([[1.5], [1.0]]), 1, 1
+    unstable = LinearARX(1, 1).fit(rng.normal(size=(300, 1)), _arx_response(0.5, 1.0, 300))
+    unstable.theta_[:] = np.array([[1.5], [1.0]])  # (its output group holds the same array)
     u = rng.normal(size=(200, 1))
     y = stable.simulate(u, np.zeros((1, 1)))
     ok = evaluate(stable, u, y, warmup=3, output_names=["pos"])

@@ -79,5 +79,5 @@ def test_the_default_compensates_and_the_paper_setting_does_not():
     assert default.regions_.n_uncompensated_ == 0
     assert not np.allclose(default.thetas_, plain.thetas_, atol=1e-3)
     paper = PWARX.paper(1, 1, n_rho=20, eps=0.3, min_pts=5)
-    assert isinstance(paper.steps()["regions"], SVMRegions)
-    assert not isinstance(paper.steps()["regions"], ResidualRegions)
+    assert isinstance(paper.step_objects()["regions"], SVMRegions)
+    assert not isinstance(paper.step_objects()["regions"], ResidualRegions)

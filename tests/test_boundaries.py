@@ -79,12 +79,12 @@ def test_bad_residual_arguments_are_named():
 def test_the_estimator_passes_the_sub_models_and_uses_the_refitted_ones(sim_30db):
     model = PWARX(na=1, nb=1).fit(sim_30db.u[:1500], sim_30db.y[:1500])
     assert isinstance(model.regions_, ResidualRegions) and model.regions_.n_gate_iter_ > 0
-    assert model.thetas_ is model.regions_.thetas_ is model.base_thetas()
+    assert model.thetas_ is model.regions_.thetas_ is model.steps_["regions"].thetas_
     plain = PWARX(na=1, nb=1, regions=ResidualRegions(denoise=False)).fit(
         sim_30db.u[:1500], sim_30db.y[:1500])
     assert not np.allclose(plain.regions_.coef_, model.regions_.coef_)  # experiments passed
     paper = PWARX.paper(1, 1, n_rho=12, eps=0.3, min_pts=8)
-    assert type(paper.steps()["regions"]) is SVMRegions
+    assert type(paper.step_objects()["regions"]) is SVMRegions
 
 
 def test_step_6_fits_its_gate_with_blas_on_one_thread(monkeypatch):

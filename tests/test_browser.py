@@ -191,12 +191,12 @@ def _key(name: str):
 
 
 def test_the_run_page_follows_the_run_live(launched):
-    """While the run goes, its page lists the step in flight (an asset's op, or ``pwa_chain``,
+    """While the run goes, its page lists the step in flight (an asset's op, or ``pwa_fit``,
     the op of the chain's assets); when it ends, the page says so without a reload, and lists
     nothing as executing."""
     run, text, executing = launched
     steps = set(_defs().resolve_job_def(SWEEP_JOB).graph.node_names())
-    assert "pwa_chain" in steps and not set(CHAIN) & steps
+    assert "pwa_fit" in steps and not set(CHAIN) & steps
     assert executing and executing <= steps, executing
     assert "Executing (0)" in text and "Success" in text
 

@@ -95,7 +95,7 @@ def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflo
             stderr=subprocess.STDOUT, start_new_session=True,
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 120
-    while "pwa_chain" not in out.read_text():  # the run is fitting the PWA chain
+    while "pwa_fit" not in out.read_text():  # the run is fitting the PWA chain
         assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
         time.sleep(0.2)
     os.killpg(proc.pid, signal.SIGINT)

@@ -8,12 +8,14 @@ import json
 import numpy as np
 import pytest
 
-from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
-from pwa_pipeline.control import SCHEMA_VERSION, PWAStateSpace, to_state_space
+from pwa_pipeline import PWARX, LinearARX, make_hure_vasak
+from pwa_pipeline.control import SCHEMA_VERSION, PWAStateSpace
 from pwa_pipeline.control.polyhedra import Box, chebyshev_ball, irredundant_rows
 from pwa_pipeline.control.stability import stability_report
+from pwa_pipeline.pwa import ClusterCentres
 from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.scheduling import SignScheduling
+from pwa_pipeline.pwa.steps.base import BaseRegions
 from pwa_pipeline.pwa.steps.regions import SVMRegions
 
 
@@ -224,7 +226,7 @@ def test_a_sign_tie_goes_to_bit_zero_as_the_model_does():
                   scheduling=SignScheduling(switch="offset")).fit(u, y)
     ss = model.to_state_space()
     assert ss.n_modes == 2
-    out = model.structure_.outputs[0]
+    out = model.structure_fit_.outputs[0]
     c = (ss.envelope[0][0] + ss.envelope[1][0]) / 2
     x = np.array([[c, c, 0.0], [c, c - 0.1, 0.0], [c - 0.1, c, 0.0]])  # Δy = 0, > 0, < 0
     phi = np.column_stack([x, np.ones(3)])
@@ -239,13 +241,13 @@ def test_decoupled_outputs_take_the_product_partition():
     data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=2)
     model = PWARX(na=1, nb=1, form="velocity", outputs="decoupled").fit(data.u, data.y)
     ss = model.to_state_space()
-    sizes = model.structure_.n_regions
+    sizes = [o.n_regions for o in model.structure_fit_.outputs]
     assert ss.n_modes + len(ss.dropped_modes) == np.prod(sizes)
     np.testing.assert_allclose(ss.simulate(data.u, data.y[:5]), model.simulate(data.u, data.y[:5]),
                                rtol=0, atol=1e-8)
     x, phi = ss.states(data.u, data.y), ss.regressors(data.u, data.y)
     mode = ss.mode_of(x, data.u[2:])
-    for j, out in enumerate(model.structure_.outputs):
+    for j, out in enumerate(model.structure_fit_.outputs):
         np.testing.assert_array_equal(ss.mode_regions[mode, j], out.regions(phi))
     z = _random_in_envelope(ss, 5000, seed=1)
     np.testing.assert_array_equal(_closed_membership(ss, z).sum(axis=1), 1)
@@ -253,11 +255,10 @@ def test_decoupled_outputs_take_the_product_partition():
 
 def _model_regions(model, phi: np.ndarray) -> np.ndarray:
     """(N, m): the fitted model's region of each output's sub-model for each φ row."""
-    if isinstance(model, LinearARX):
-        return np.zeros((len(phi), model.n_outputs_), dtype=int)
-    if not model.structured:
-        return np.tile(model.regions_.predict(phi)[:, None], (1, model.n_outputs_))
-    return np.column_stack([o.regions(phi) for o in model.structure_.outputs])
+    out = np.empty((len(phi), model.n_outputs_), dtype=int)
+    for group in model.groups_:
+        out[:, group.outputs] = group.regions.predict(phi)[:, None]
+    return out
 
 
 @pytest.mark.parametrize("make, data", [
@@ -308,17 +309,49 @@ def test_the_envelope_is_the_padded_training_range(default_30db, default_ss, sim
         default_30db.to_state_space(padding=0.0)
 
 
-def test_uncovered_routes_raise_not_implemented(sim_30db):
+class _Intervals(BaseRegions):
+    """A region learner of one's own: φ's first entry cut at its quantiles into as many
+    intervals as there are sub-models (ties to the lower interval)."""
+
+    def fit(self, phi, labels, n_regions=None, sample_weight=None, **given):
+        self.n_regions_ = int(np.max(labels)) + 1 if n_regions is None else n_regions
+        self.cuts_ = np.quantile(phi[:, 0], np.arange(1, self.n_regions_) / self.n_regions_)
+        self.d_ = phi.shape[1]
+        return self
+
+    def predict(self, phi):
+        return np.searchsorted(self.cuts_, phi[:, 0], side="left")
+
+    def halfspaces(self):
+        e, out = np.eye(self.d_)[:1], []
+        for i in range(self.n_regions_):
+            rows = [(np.zeros((0, self.d_)), np.zeros(0))]
+            rows += [(e, self.cuts_[i:i + 1])] if i < self.n_regions_ - 1 else []
+            rows += [(-e, -self.cuts_[i - 1:i])] if i > 0 else []
+            out.append((np.vstack([r[0] for r in rows]), np.concatenate([r[1] for r in rows])))
+        return out
+
+
+def test_a_region_learner_of_ones_own_exports_and_a_wrong_one_is_refused(sim_30db):
+    """Any region step that writes its regions as halfspaces converts exactly; one whose
+    halfspaces do not describe its predict is refused, naming it, not exported wrong."""
+    u, y = sim_30db.u[:1500], sim_30db.y[:1500]
+    model = PWARX(na=1, nb=1, submodels=ClusterCentres(), regions=_Intervals()).fit(u, y)
+    ss = model.to_state_space()
+    assert ss.n_modes == model.n_submodels_ >= 2
+    x, now = ss.states(u, y), u[ss.n_initial:]
+    inside = ss.in_envelope(x, now)
+    assert inside.mean() > 0.9
+    np.testing.assert_allclose(ss.step(x[inside], now[inside])[1],
+                               model.predict(u, y)[ss.n_initial:][inside], rtol=0, atol=1e-8)
+
     class NearestRegions(SVMRegions):
         def predict(self, phi):
             return np.zeros(len(phi), dtype=int)
 
-    u, y = sim_30db.u[:1500], sim_30db.y[:1500]
-    model = PWARX(na=1, nb=1, regions=NearestRegions()).fit(u, y)
-    with pytest.raises(NotImplementedError, match="NearestRegions"):
-        model.to_state_space()
-    with pytest.raises(NotImplementedError, match="SubspaceSS"):
-        to_state_space(SubspaceSS().fit(u[:300], y[:300]))
+    wrong = PWARX(na=1, nb=1, submodels=ClusterCentres(), regions=NearestRegions()).fit(u, y)
+    with pytest.raises(ValueError, match=r"halfspaces\(\) of NearestRegions .* disagree"):
+        wrong.to_state_space()
 
 
 # --- export ------------------------------------------------------------------------------

@@ -171,7 +171,7 @@ def _assert_results_equal_the_reference(cluster: Cluster, keys: list[str],
         model = shared.load(dg.AssetKey("pwa_model"), key)
         expected = reference.load(dg.AssetKey("pwa_model"), key)
         assert np.array_equal(model.thetas_, expected.thetas_), key
-        assert np.array_equal(model.labels_, expected.labels_), key
+        assert np.array_equal(model.steps_["submodels"].labels_, expected.steps_["submodels"].labels_), key
 
 
 def _runs_of(instance: dg.DagsterInstance, keys: list[str]) -> list[dg.DagsterRun]:
@@ -262,9 +262,9 @@ def test_a_worker_killed_mid_sweep_leaves_a_complete_sweep_and_no_orphan(cluster
                           if e.is_dagster_event]
                 done = {e.step_key for e in events if e.event_type_value == "STEP_SUCCESS"}
                 running = [e for e in events if e.event_type_value == "STEP_START"
-                           and e.step_key == "pwa_chain" and e.step_key not in done]
+                           and e.step_key == "pwa_fit" and e.step_key not in done]
                 if running:
-                    killed, step = running[0].pid, (run.run_id, "pwa_chain")
+                    killed, step = running[0].pid, (run.run_id, "pwa_fit")
                     os.kill(killed, signal.SIGKILL)  # the worker process, mid-step
                     break
             time.sleep(0.05)
@@ -319,7 +319,7 @@ def test_the_tracking_server_stopped_mid_run_fails_clearly_and_a_rerun_completes
         stored = {e.dagster_event.step_key for e in instance.all_logs(failed.run_id)
                   if e.is_dagster_event and e.dagster_event.event_type_value == "STEP_SUCCESS"}
     # the store is intact: the fits of the failed run stored, nothing else changed, all loads
-    assert {"pwa_chain", "control_model", "linear_arx_model", "subspace_model"} <= stored
+    assert {"pwa_fit", "control_model", "linear_arx_model", "subspace_model"} <= stored
     assert comparison.read_bytes() == kept
     _assert_results_equal_the_reference(cluster, [key])
     assert _every_stored_file_loads(cluster.folder / "shared") > 10

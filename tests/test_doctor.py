@@ -69,7 +69,7 @@ def test_doctor_finds_a_killed_run_at_once_and_leaves_a_live_one(tmp_path, mlflo
         proc = subprocess.Popen([*cli, "run", "--partition", "kuka_robot|robot"], env=env,
                                 stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
     deadline = time.time() + 120
-    while "pwa_chain" not in out.read_text():  # the run is fitting the PWA chain
+    while "pwa_fit" not in out.read_text():  # the run is fitting the PWA chain
         assert proc.poll() is None and time.time() < deadline, out.read_text()[-2000:]
         time.sleep(0.2)
     doctor = [*cli, "doctor", "--tracking-uri", f"sqlite:///{tmp_path / 'mlflow.db'}"]

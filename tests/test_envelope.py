@@ -2,19 +2,17 @@
 the padded box of their training data (one-step and free run), the evaluation reports the
 share, MLflow logs it, and the prediction figure hatches those stretches."""
 
+import copy
 import pickle
 
 import numpy as np
 import pytest
 
 from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
-from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.datasets.registry import Dataset
 from pwa_pipeline.envelope import PADDING, channel_bounds, regressor_bounds
 from pwa_pipeline.orchestration.figures import prediction_figure
 from pwa_pipeline.orchestration.reporting import score_metrics
-from pwa_pipeline.pwa.arx import training_range
-from pwa_pipeline.regressors import build_regressors
 from pwa_pipeline.scoring.evaluation import evaluate
 
 WARMUP = 10
@@ -133,37 +131,37 @@ def test_the_flags_match_a_brute_force_check_of_phi_against_the_padded_box(make,
     one = model.outside_envelope(u, y)
     np.testing.assert_array_equal(one, _brute_force(u, y, model.signal_range_, lags, model.nb))
     assert 0.05 < one.mean() < 0.5
-    sim, free = model.simulate(u, y[:WARMUP], return_outside=True)
-    np.testing.assert_array_equal(free, _brute_force(u, sim, model.signal_range_, lags,
-                                                     model.nb, start=WARMUP))
-    np.testing.assert_array_equal(sim, model.simulate(u, y[:WARMUP]))  # same numbers
+    sim = model.simulate(u, y[:WARMUP])
+    free = model.outside_envelope(u, sim)
+    np.testing.assert_array_equal(free[WARMUP:], _brute_force(u, sim, model.signal_range_, lags,
+                                                              model.nb, start=WARMUP)[WARMUP:])
 
 
-def test_predict_and_simulate_return_the_flags_beside_unchanged_numbers(paper):
+def test_predict_and_simulate_answer_in_kind_and_the_flags_come_apart(paper):
+    """One experiment in, one array out; a list in, a list out; the envelope's flags from
+    outside_envelope, never beside the numbers."""
     model, _, test = paper
     u = test.u * 2.0
     us, ys = [u[:700], u[700:]], [test.y[:700], test.y[700:]]
-    pred, flags = model.predict(us, ys, n_init=20, return_outside=True)
-    plain = model.predict(us, ys, n_init=20)
-    assert isinstance(flags, list) and len(flags) == 2
-    for p, q, f, ue, ye in zip(pred, plain, flags, us, ys, strict=True):
-        np.testing.assert_array_equal(p, q)
-        assert f.shape == (ue.shape[0],) and not f[:20].any()  # rows returned as given
-        np.testing.assert_array_equal(f[20:], model.outside_envelope(ue, ye)[20:])
-        assert f.any()
-    one, flag = model.predict(u, test.y, return_outside=True)
-    assert isinstance(flag, np.ndarray) and flag.shape == (1500,)
-    sims, sim_flags = model.simulate(us, [y[:5] for y in ys], return_outside=True)
-    for s, f, ue in zip(sims, sim_flags, us, strict=True):
-        assert not f[:5].any()
-        np.testing.assert_array_equal(f[5:], model.outside_envelope(ue, s)[5:])
+    pred = model.predict(us, ys, n_init=20)
+    assert isinstance(pred, list) and [p.shape for p in pred] == [(700, 2), (800, 2)]
+    for p, ue, ye in zip(pred, us, ys, strict=True):
+        np.testing.assert_array_equal(p, model.predict(ue, ye, n_init=20))
+        flags = model.outside_envelope(ue, ye)
+        assert flags.shape == (ue.shape[0],) and flags.any()
+    assert isinstance(model.predict(u, test.y), np.ndarray)
+    sims = model.simulate(us, [y[:5] for y in ys])
+    assert isinstance(sims, list) and isinstance(model.simulate(u, test.y[:5]), np.ndarray)
+    with pytest.raises(TypeError, match="return_outside"):
+        model.simulate(u, test.y[:5], return_outside=True)
 
 
 def test_a_diverged_free_run_is_outside_from_where_it_is_not_finite():
     u = np.random.default_rng(3).normal(size=(400, 1))
     model = LinearARX(na=1, nb=1).fit(u, _arx(u[:, :1]))
-    model.theta_ = np.array([[10.0], [1.0]])  # y(k) = 10y(k−1) + u(k−1): overflows
-    sim, flags = model.simulate(u, np.zeros((1, 1)), return_outside=True)
+    model.theta_[:] = np.array([[10.0], [1.0]])  # y(k) = 10y(k−1) + u(k−1): overflows
+    sim = model.simulate(u, np.zeros((1, 1)))
+    flags = model.outside_envelope(u, sim)
     bad = np.flatnonzero(~np.isfinite(sim[:, 0]))
     assert bad.size and flags[bad[0] + 1:].all()
     ev = evaluate(model, u, _arx(u), warmup=WARMUP)
@@ -198,37 +196,17 @@ def test_the_envelope_is_the_one_the_state_space_form_bounds_its_regions_with(pa
     assert flags.any() and not flags.all()
 
 
-def test_assemble_takes_the_range_from_the_experiments_or_records_none(paper):
-    """The pipeline joins fitted steps with PWARX.assemble: given the training range it has
-    the fitted model's envelope; without it, no envelope (a clear error, a NaN share)."""
-    fitted, train, test = paper
-    est = PWARX(na=1, nb=1)
-    experiments = as_experiments(train.u, train.y)
-    reg = build_regressors(experiments, 1, 1, False)
-    steps = {}
-    for name in ("local_models", "clustering", "submodels", "regions"):
-        steps[name] = est.fit_step(name, reg, **steps)
-    joined = PWARX(na=1, nb=1).assemble(reg, **steps,
-                                        signal_range=training_range(experiments))
-    np.testing.assert_array_equal(joined.signal_range_, fitted.signal_range_)
-    # φ's rows alone would miss the last input sample (u(N−1) enters no regressor)
-    from_phi = np.vstack([reg.phi[:, 2:].min(axis=0), reg.phi[:, 2:].max(axis=0)])
-    assert not np.array_equal(from_phi, fitted.signal_range_[:, 2:]) or \
-        train.u[-1].min() >= from_phi[0].min()
-    bare = PWARX(na=1, nb=1).assemble(reg, **steps)
-    assert not hasattr(bare, "signal_range_")
+def test_a_model_without_its_training_range_has_no_envelope(paper):
+    """A model that records no training range (one pickled before signal_range_ existed)
+    says so, and the evaluation reports no share outside rather than a wrong one."""
+    fitted, _, test = paper
+    bare = copy.copy(fitted)
+    del bare.signal_range_
     with pytest.raises(ValueError, match="does not record the range of its training data"):
         bare.outside_envelope(test.u, test.y)
-    with pytest.raises(ValueError, match="does not record"):
-        bare.simulate(test.u, test.y[:1], return_outside=True)
     ev = evaluate(bare, test.u, test.y, warmup=WARMUP)
     assert ev.outside is None and ev.table["outside_share"].isna().all()
     assert not any("outside" in k for k in score_metrics(ev))
-    # a range from an earlier fit does not survive a join without one
-    refit = PWARX(na=1, nb=1).fit(train.u, train.y).assemble(reg, **steps)
-    assert not hasattr(refit, "signal_range_")
-    with pytest.raises(ValueError, match=r"signal_range has shape \(2, 3\)"):
-        PWARX(na=1, nb=1).assemble(reg, **steps, signal_range=np.zeros((2, 3)))
 
 
 def test_evaluate_reports_the_share_per_mode_and_mlflow_logs_it(paper):

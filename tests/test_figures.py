@@ -29,6 +29,7 @@ from pwa_pipeline.orchestration.figures import (
     to_markdown,
     to_png,
 )
+from pwa_pipeline.pwa.partitions import argmax_halfspaces
 from pwa_pipeline.pwa.steps.clustering import k_distances
 from pwa_pipeline.pwa.steps.embedding import exact_embedding
 from pwa_pipeline.regressors import build_regressors, lagged_matrix, regressor_names
@@ -160,9 +161,9 @@ def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
 
 
 def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatch):
-    model, step = fit.model, fit.model.clustering_
+    model, step = fit.model, fit.model.steps_["clustering"]
     assert step.unit_free
-    fig = parameter_clusters_figure(model.local_models_, step, fit.reg.target)
+    fig = parameter_clusters_figure(model.steps_["local_models"], step, fit.reg.target)
     assert len(fig.axes) == 2
     ax, ax_k = fig.axes
     assert sum(c.get_offsets().shape[0] for c in ax.collections) == step.clustered_.sum()
@@ -171,8 +172,8 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     (noise,) = [c for c in ax.collections if c.get_label().startswith("noise")]
     assert noise.get_offsets().shape[0] == np.sum(step.labels_[step.clustered_] < 0)
     assert np.allclose(noise.get_facecolor()[0][:3], 0x9A / 255)
-    theta = model.local_models_.theta_[step.clustered_]
-    scale = model.local_models_.phi_scale_[None, :, None] / column_rms(fit.reg.target)
+    theta = model.steps_["local_models"].theta_[step.clustered_]
+    scale = model.steps_["local_models"].phi_scale_[None, :, None] / column_rms(fit.reg.target)
     n = int(step.clustered_.sum())
     assert n <= figures._CURVE_POINTS  # every clustered local model is queried
     expected = k_distances(exact_embedding(theta * scale), step.min_pts_)
@@ -183,7 +184,7 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     assert ax_k.get_xlabel() == "% of the clustered local models, sorted"
     assert ax_k.get_title(loc="left") == f"k-distance curve (MinPts = {step.min_pts_})"
     monkeypatch.setattr(figures, "_CURVE_POINTS", 400)  # more than it queries: a subset
-    sub = parameter_clusters_figure(model.local_models_, step, fit.reg.target).axes[1]
+    sub = parameter_clusters_figure(model.steps_["local_models"], step, fit.reg.target).axes[1]
     assert np.allclose(_line(sub, "k-distance").get_ydata(), k_distances(
         exact_embedding(theta * scale), step.min_pts_, max_query=400))
     assert sub.get_title(loc="left") == (f"k-distance curve (MinPts = {step.min_pts_}; 400 of "
@@ -192,7 +193,7 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     assert np.allclose(eps.get_ydata(), step.eps_)
     given = copy.copy(step)
     given.eps_auto_ = False
-    fig = parameter_clusters_figure(model.local_models_, given, fit.reg.target)
+    fig = parameter_clusters_figure(model.steps_["local_models"], given, fit.reg.target)
     _line(fig.axes[1], f"ε = {step.eps_:.4g} (given)")
 
 
@@ -225,10 +226,10 @@ def test_switching_without_truth_and_bad_truth(fit):
     region = model.regions_.predict(lagged_matrix(test.u, test.y, 1, 1, False))
     assert np.array_equal(fig.axes[0].collections[0].get_offsets()[:, 1], region[:605])
     # 27 regions (the robot's paper setting), 3 of them visited: one level for each of those
-    many = copy.copy(model)
-    many.thetas_ = np.zeros((27, *model.thetas_.shape[1:]))
-    many.regions_ = SimpleNamespace(predict=lambda phi: np.array([3, 20, 26])[
-        np.arange(len(phi)) % 3])
+    many = SimpleNamespace(output_lags_=1, nb=1, affine=False,
+                           thetas_=np.zeros((27, *model.thetas_.shape[1:])),
+                           regions_=SimpleNamespace(predict=lambda phi: np.array([3, 20, 26])[
+                               np.arange(len(phi)) % 3]))
     ax = switching_figure(many, test.u, test.y).axes[0]
     assert np.array_equal(ax.collections[0].get_offsets()[:, 1], np.arange(605) % 3)
     assert [t.get_text() for t in ax.get_yticklabels()] == ["H4", "H21", "H27"]
@@ -266,11 +267,12 @@ def test_regions_figure_keeps_a_long_legend_inside_the_figure():
     entries, drawn in columns inside the figure, and no layout warning."""
     rng = np.random.default_rng(0)
     coef = rng.normal(size=(27, 4))
-    regions = SimpleNamespace(coef_=coef, n_regions_=27,
-                              predict=lambda x: np.argmax(x @ coef.T, axis=1))
+    regions = SimpleNamespace(n_regions_=27, predict=lambda x: np.argmax(x @ coef.T, axis=1),
+                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
     phi = rng.normal(size=(2000, 4))
-    model = SimpleNamespace(regions_=regions, labels_=np.r_[-1, rng.integers(0, 27, 1999)])
-    fig = regions_figure(model, phi, ["a", "b", "c", "d"])
+    model = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
+    fig = regions_figure(model, phi, ["a", "b", "c", "d"],
+                         labels=np.r_[-1, rng.integers(0, 27, 1999)])
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # "constrained_layout not applied" before the columns
         to_png(fig)  # drawn as the asset page shows it
@@ -354,7 +356,7 @@ def test_parameter_clusters_layout_keeps_every_text_inside_and_apart(fit):
     leaves the figure or covers the other panel, and the legend stays below the x label."""
     local, step, labels = _twenty_seven_clusters()
     many = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
-    one = parameter_clusters_figure(fit.model.local_models_, fit.model.clustering_,
+    one = parameter_clusters_figure(fit.model.steps_["local_models"], fit.model.steps_["clustering"],
                                     fit.reg.target)
     assert many.get_layout_engine() is None and many.get_figheight() > one.get_figheight()
     for fig in (many, one):
@@ -373,7 +375,7 @@ def _png(markdown):
 def test_to_markdown_inlines_a_small_png(fit):
     figs = [prediction_figure(fit.data, fit.ev, "pred [pwa]", WARMUP),
             prediction_figure(fit.data, _diverged(fit), "diverged", WARMUP),
-            parameter_clusters_figure(fit.model.local_models_, fit.model.clustering_,
+            parameter_clusters_figure(fit.model.steps_["local_models"], fit.model.steps_["clustering"],
                                       fit.reg.target),
             switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
                              fit.test.thetas),
@@ -394,9 +396,9 @@ def test_to_markdown_inlines_a_small_png(fit):
 def test_parameter_clusters_are_projected_on_their_principal_components(fit):
     from pwa_pipeline.orchestration.figures import _clustering_embedding
 
-    step = fit.model.clustering_
-    fig = parameter_clusters_figure(fit.model.local_models_, step, fit.reg.target)
-    emb = _clustering_embedding(fit.model.local_models_, step, fit.reg.target)
+    step = fit.model.steps_["clustering"]
+    fig = parameter_clusters_figure(fit.model.steps_["local_models"], step, fit.reg.target)
+    emb = _clustering_embedding(fit.model.steps_["local_models"], step, fit.reg.target)
     centred = emb - emb.mean(axis=0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
     drawn = {c.get_label(): c.get_offsets() for c in fig.axes[0].collections}
@@ -472,10 +474,11 @@ def test_every_figure_is_titled_with_its_data_set_set_and_method(fit, structured
                                       context=CONTEXT),
         "switching without truth": switching_figure(fit.model, test.u, test.y,
                                                     context=CONTEXT),
-        "structured switching": draw_structured_switching(outputs, fit.data.y_names, CONTEXT),
+        "structured switching": draw_structured_switching(outputs, CONTEXT),
         "regions": regions_figure(fit.model, fit.reg.phi, fit.names, context=CONTEXT),
         "parameter clusters": parameter_clusters_figure(
-            fit.model.local_models_, fit.model.clustering_, fit.reg.target, context=CONTEXT),
+            fit.model.steps_["local_models"], fit.model.steps_["clustering"], fit.reg.target,
+            context=CONTEXT),
     }
     for name, fig in figs.items():
         lines = fig.get_suptitle().splitlines()
@@ -588,21 +591,22 @@ def test_the_structured_switching_figure_shows_each_outputs_regions(fit, structu
     test = fit.test
     outputs = structured_switching_inputs(structured, test.u, test.y, ["q1", "q2"],
                                           ["tau1", "tau2"])
-    fig = draw_structured_switching(outputs, ["q1", "q2"], CONTEXT)
+    fig = draw_structured_switching(outputs, CONTEXT)
     assert len(fig.axes) == 2
     lags = structured.output_lags_
     phi = lagged_matrix(test.u, test.y, lags, 1, True)
     for j, ax in enumerate(fig.axes):
-        region = structured.structure_.outputs[j].regions(phi)
+        region = structured.structure_fit_.outputs[j].regions(phi)
         assert region.min() == 0 and region.max() == 1  # both signs occur
         drawn = ax.collections[0].get_offsets()
         assert np.array_equal(drawn[:, 0], np.arange(lags, MAX_SAMPLES))
         assert np.array_equal(drawn[:, 1], region[:MAX_SAMPLES - lags])
         assert [t.get_text() for t in ax.get_yticklabels()] == ["z ≤ 0", "z > 0"]
-        assert ax.get_title(loc="left") == (f"q{j + 1}: offset switching, regions by the sign "
-                                            f"of z = q{j + 1}(k-1) − q{j + 1}(k-2)")
+        assert ax.get_title(loc="left") == (
+            f"q{j + 1}: {structured.structures_[j]}, regions by the sign of "
+            f"z = q{j + 1}(k-1) − q{j + 1}(k-2)")
     assert fig.get_suptitle().splitlines()[1] == (
-        f"Region of each output's model, held-out experiment 1, the first "
+        f"Region of each output group's model, held-out experiment 1, the first "
         f"{MAX_SAMPLES - lags} of {phi.shape[0]} samples shown")
 
 
@@ -615,12 +619,13 @@ def test_every_figure_fits_a_laptop_screen(fit, robot_like):
     assert len(outputs.regions) == 6
     rng = np.random.default_rng(0)
     coef = rng.normal(size=(27, 4))
-    regions = SimpleNamespace(coef_=coef, n_regions_=27,
-                              predict=lambda x: np.argmax(x @ coef.T, axis=1))
-    many = SimpleNamespace(regions_=regions, labels_=np.r_[-1, rng.integers(0, 27, 1999)])
+    regions = SimpleNamespace(n_regions_=27, predict=lambda x: np.argmax(x @ coef.T, axis=1),
+                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
+    many = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
     local, step, labels = _twenty_seven_clusters()
-    figs = [draw_structured_switching(outputs, data.y_names, CONTEXT),
-            regions_figure(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"], CONTEXT),
+    figs = [draw_structured_switching(outputs, CONTEXT),
+            regions_figure(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"], CONTEXT,
+                           labels=np.r_[-1, rng.integers(0, 27, 1999)]),
             parameter_clusters_figure(local, step, np.ones((labels.size, 2)), CONTEXT),
             switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
                              fit.test.thetas, CONTEXT)]

@@ -15,8 +15,8 @@ from .conftest import max_param_error
 def test_held_inputs_give_every_mode_without_an_error(seed):
     u, y = held_hure_vasak(4000, seed)
     m = PWARX(na=1, nb=1).fit(u, y)
-    assert m.local_models_.n_degenerate_ > 500  # many local sets lie inside one hold
-    assert not (m.clustering_.labels_[m.local_models_.degenerate_] >= 0).any()
+    assert m.steps_["local_models"].n_degenerate_ > 500  # many local sets lie inside one hold
+    assert not (m.steps_["clustering"].labels_[m.steps_["local_models"].degenerate_] >= 0).any()
     assert m.n_submodels_ == 4 and max_param_error(m.thetas_, HURE_VASAK_THETAS) < 0.2
 
 

@@ -46,9 +46,9 @@ def test_paper_setting_reproduces_the_papers_method(sim_30db):
     m = _paper().fit(sim_30db.u, sim_30db.y)
     # NOTES.md: with raw regressors the paper's values find 2 of 4 modes, ~81 % noise
     assert m.n_submodels_ == 2
-    assert 0.7 < m.clustering_.noise_share_ < 0.9
-    assert m.clustering_.eps_ == 0.1
-    assert (m.labels_ == -1).mean() == pytest.approx(m.clustering_.noise_share_)
+    assert 0.7 < m.steps_["clustering"].noise_share_ < 0.9
+    assert m.steps_["clustering"].eps_ == 0.1
+    assert (m.steps_["submodels"].labels_ == -1).mean() == pytest.approx(m.steps_["clustering"].noise_share_)
     # the sub-models are the cluster centres: test_submodels.py checks them exactly
 
 

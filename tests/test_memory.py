@@ -10,7 +10,7 @@ from pwa_pipeline.pwa.memory import FitMemoryError, available_memory, fit_memory
 
 def test_a_fit_beyond_the_available_memory_fails_before_any_step(monkeypatch):
     data = make_hure_vasak(n_samples=600, snr_db=None, seed=0)  # 599 rows, d = 4, m = 2
-    need = fit_memory(599, 4, 2, PWARX.default().steps())
+    need = fit_memory(599, 4, 2, PWARX.default().step_objects())
     # the largest step fits, not with the regressors (599 × (4 + 2) floats) on top
     monkeypatch.setattr(memory, "available_memory", lambda: max(need.values()))
 
@@ -28,29 +28,29 @@ def test_the_message_names_the_setting_of_the_largest_step(monkeypatch):
     monkeypatch.setattr(memory, "available_memory", lambda: 1)
     est = PWARX.paper(2, 2, n_rho=61, eps=8.0, min_pts=22).set_params(
         clustering__embedding="literal")  # every local model clustered, 864 dimensions
-    need = fit_memory(10**6, 24, 6, est.steps())
+    need = fit_memory(10**6, 24, 6, est.step_objects())
     assert max(need, key=need.get) == "clustering"
     with pytest.raises(FitMemoryError, match="clustering__max_clustered"):
-        memory.check_fit_memory(10**6, 24, 6, est.steps())
+        memory.check_fit_memory(10**6, 24, 6, est.step_objects())
     default = PWARX.default(2, 2).set_params(regions__max_rows=None, local_models__n_rho=200,
                                              local_models__max_sets=None)
-    need = fit_memory(10**6, 24, 6, default.steps())
+    need = fit_memory(10**6, 24, 6, default.step_objects())
     assert max(need, key=need.get) == "local_models"
     with pytest.raises(FitMemoryError, match="local_models__n_rho"):
-        memory.check_fit_memory(10**6, 24, 6, default.steps())
+        memory.check_fit_memory(10**6, 24, 6, default.step_objects())
 
 
 def test_enough_memory_fits_as_usual(monkeypatch):
     data = make_hure_vasak(n_samples=600, snr_db=None, seed=0)
     usual = PWARX().fit(data.u, data.y)
-    need = max(fit_memory(599, 4, 2, PWARX.default().steps()).values()) + 599 * 6 * 8
+    need = max(fit_memory(599, 4, 2, PWARX.default().step_objects()).values()) + 599 * 6 * 8
     monkeypatch.setattr(memory, "available_memory", lambda: need)  # just enough
     np.testing.assert_array_equal(PWARX().fit(data.u, data.y).thetas_, usual.thetas_)
 
 
 def test_estimates_grow_with_the_record_and_the_machine_reports_memory():
-    small = fit_memory(10_000, 24, 6, PWARX.default().steps())
-    large = fit_memory(100_000, 24, 6, PWARX.default().steps())
+    small = fit_memory(10_000, 24, 6, PWARX.default().step_objects())
+    large = fit_memory(100_000, 24, 6, PWARX.default().step_objects())
     assert all(large[k] > small[k] for k in small)
     avail = available_memory()
     assert avail is None or avail > 0
@@ -58,8 +58,8 @@ def test_estimates_grow_with_the_record_and_the_machine_reports_memory():
 
 
 def test_the_search_counts_only_the_local_sets_estimated():
-    every = PWARX.default(2, 2).set_params(local_models__max_sets=None).steps()
-    some = PWARX.default(2, 2).steps()  # at most 5,000 local models
+    every = PWARX.default(2, 2).set_params(local_models__max_sets=None).step_objects()
+    some = PWARX.default(2, 2).step_objects()  # at most 5,000 local models
     assert fit_memory(4_000, 24, 6, some) == fit_memory(4_000, 24, 6, every)
     saved = (fit_memory(400_000, 24, 6, every)["local_models"]
              - fit_memory(400_000, 24, 6, some)["local_models"])

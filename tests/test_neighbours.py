@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial import cKDTree
 from sklearn.neighbors import NearestNeighbors
 
-from pwa_pipeline.pwa.steps import neighbours
 from pwa_pipeline.pwa.kernels.knn import sq_distance
+from pwa_pipeline.pwa.steps import neighbours
 from pwa_pipeline.pwa.steps.neighbours import nearest_neighbours
 
 

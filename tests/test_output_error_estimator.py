@@ -19,7 +19,7 @@ def test_refinement_removes_the_least_squares_bias_under_output_noise():
     truth = np.array([0.9, 0.5])
     assert abs(ls.theta_[0, 0] - 0.9) > 0.1  # equation error is biased here
     np.testing.assert_allclose(oe.theta_.ravel(), truth, atol=0.02)
-    assert oe.refinement_.cost_ < oe.refinement_.cost_start_
+    assert oe.steps_["refinement"].cost_ < oe.steps_["refinement"].cost_start_
 
 
 def test_pwarx_refinement_keeps_regions_and_lowers_the_training_free_run_error():
@@ -27,9 +27,9 @@ def test_pwarx_refinement_keeps_regions_and_lowers_the_training_free_run_error()
     plain = PWARX(na=1, nb=1).fit(data.u, data.y)
     refined = PWARX(na=1, nb=1, refinement=OutputErrorRefinement(max_iter=5)).fit(
         data.u, data.y)
-    np.testing.assert_array_equal(refined.base_thetas(), plain.thetas_)  # step 6's θ_i
+    np.testing.assert_array_equal(refined.steps_["regions"].thetas_, plain.thetas_)  # step 6's
     np.testing.assert_array_equal(refined.regions_.coef_, plain.regions_.coef_)
-    assert refined.refinement_.cost_ < refined.refinement_.cost_start_
+    assert refined.steps_["refinement"].cost_ < refined.steps_["refinement"].cost_start_
     assert np.abs(refined.thetas_ - plain.thetas_).max() > 0
     assert refined.resolved_params()["refinement__max_iter"] == 5
     assert "refinement" in refined.timings_
@@ -65,9 +65,9 @@ def test_the_pipeline_refines_pwa_and_linear_arx_when_the_set_asks(tmp_path, mlf
     np.testing.assert_array_equal(model.thetas_, step.thetas_)
     assert np.abs(model.thetas_ - result.asset_value("sub_models").thetas_).max() > 0
     linear = result.asset_value("linear_arx_model")
-    assert linear.refinement_.n_iter_ >= 1
+    assert linear.steps_["refinement"].n_iter_ >= 1
     meta = materialization(result, "output_error_refinement").metadata
-    assert meta["refined"].value is True and meta["iterations"].value == 3
+    assert meta["fitted"].value is True and meta["iterations"].value == 3
 
 
 def test_validation_experiments_choose_the_iterate_and_are_not_fitted():
@@ -106,9 +106,9 @@ def test_the_structured_route_passes_the_one_step_weight():
 
     far, kept = refined(0.0), refined(1e6)
     offset_ls = PWARX(**kw, scheduling=SignScheduling(switch="offset")).fit(us[:4], ys[:4])
-    np.testing.assert_allclose(kept.model.outputs[0].p, offset_ls.structure_.outputs[0].p,
-                               atol=1e-4)
-    assert np.abs(far.model.outputs[0].p - offset_ls.structure_.outputs[0].p).max() > 0.05
+    least_squares = offset_ls.structure_fit_.outputs[0].p
+    np.testing.assert_allclose(kept.outputs[0].p, least_squares, atol=1e-4)
+    assert np.abs(far.outputs[0].p - least_squares).max() > 0.05
     assert kept.refinement[0]["one_step"] == pytest.approx(kept.refinement[0]["one_step_start"],
                                                            rel=1e-6)
     assert far.refinement[0]["one_step"] > far.refinement[0]["one_step_start"]

@@ -30,7 +30,7 @@ def _weighted_objective(route: str):
     else:
         model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
                       scheduling=SignScheduling(switch="all")).fit(u, y)
-        outputs = dict(enumerate(model.structure_.outputs))
+        outputs = dict(enumerate(model.structure_fit_.outputs))
         runs = OutputFreeRuns(u, y, 2, 1, True, 2, outputs, [0, 1])
         x0 = np.concatenate([o.p for o in outputs.values()])
         errors = RefinementErrors(runs.simulate, runs.n_scored,
@@ -38,10 +38,7 @@ def _weighted_objective(route: str):
     # the model's own one-step predictions on the measured regressors, for J1(θ0)
     from pwa_pipeline.regressors import build_regressors
     reg = build_regressors(list(zip(u, y, strict=True)), 2, 1, route != "level")
-    if route == "level":
-        predicted = np.einsum("nd,ndm->nm", reg.phi, x0[model.regions_.predict(reg.phi)])
-    else:
-        predicted = model.structure_.predict_phi(reg.phi)
+    predicted = np.vstack([model.predict(ue, ye)[2:] for ue, ye in zip(u, y, strict=True)])
     one_step = np.mean((predicted - reg.target) ** 2)
     return errors, x0, x0 + 0.01 * rng.normal(size=x0.shape), one_step
 

@@ -71,8 +71,8 @@ def test_a_record_given_ten_times_gives_the_sub_models_of_the_record_once():
     once = PWARX(na=1, nb=1).fit(data.u, data.y)
     tiled = PWARX(na=1, nb=1).fit([data.u] * 10, [data.y] * 10)
     assert tiled.n_submodels_ == once.n_submodels_ == 4
-    np.testing.assert_array_equal(tiled.clustering_.labels_, np.tile(once.clustering_.labels_,
-                                                                     10))
+    np.testing.assert_array_equal(tiled.steps_["clustering"].labels_,
+                                  np.tile(once.steps_["clustering"].labels_, 10))
     # steps 5–6 see the copies (their region SVM weighs a repeated row more against its
     # regularisation): the sub-models agree to a small fraction of their noise
     np.testing.assert_allclose(tiled.thetas_, once.thetas_, atol=1e-3)

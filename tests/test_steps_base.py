@@ -45,7 +45,7 @@ def test_a_region_step_is_given_the_outputs_sub_models_output_lags_and_experimen
     given = _RecordingRegions.calls[-1]
     assert not any(_RecordingRegions.calls[:-1])
     assert set(given) == {"target", "thetas", "output_lags", "experiment"}
-    np.testing.assert_array_equal(given["thetas"], model.submodels_.thetas_)
+    np.testing.assert_array_equal(given["thetas"], model.steps_["submodels"].thetas_)
     np.testing.assert_array_equal(given["output_lags"], output_lag_columns(2, 1, 4))
     assert given["target"].shape == (len(data.y) - 1, 2)
     np.testing.assert_array_equal(given["experiment"], np.zeros(len(data.y) - 1, int))
@@ -82,6 +82,6 @@ def test_a_step_of_ones_own_that_implements_the_interface_is_used_by_pwarx():
     data = make_hure_vasak(n_samples=2000, snr_db=None, seed=1)
     model = PWARX(na=1, nb=1, clustering=_KMeansClustering(), submodels=ClusterCentres(),
                   regions=SVMRegions()).fit(data.u, data.y)
-    assert isinstance(model.clustering_, _KMeansClustering)
+    assert isinstance(model.steps_["clustering"], _KMeansClustering)
     assert model.get_params()["clustering__n_clusters"] == 4
     assert model.n_submodels_ == 4 and np.isfinite(model.thetas_).all()

@@ -44,7 +44,7 @@ def friction_fit():
 def test_search_finds_the_velocity_sign_and_the_friction_offset(friction_fit):
     model, _ = friction_fit
     report = model.structure_search_
-    (out,) = model.structure_.outputs
+    (out,) = model.structure_fit_.outputs
     assert report.linear is False
     assert out.n_regions == 2
     # the one variable kept is the sign of the output's increment, as the machine was built
@@ -53,7 +53,7 @@ def test_search_finds_the_velocity_sign_and_the_friction_offset(friction_fit):
     assert dict(zip(names, w, strict=True)) == {"y1(k-1)": 1.0, "y1(k-2)": -1.0,
                                                "y1(k-3)": 0.0, "u1(k-1)": 0.0, "1": 0.0}
     # its two regions' constants are the friction, ±0.08, within noise
-    thetas = model.structure_.thetas[0]
+    thetas = model.structure_fit_.outputs[0].thetas()
     np.testing.assert_allclose(sorted(thetas[:, -1]), [-0.08, 0.08], atol=0.01)
     np.testing.assert_allclose(thetas[:, names.index("u1(k-1)")], [0.3, 0.3], atol=0.02)
     assert report.validation_nrmse < 0.8 * report.linear_nrmse
@@ -87,7 +87,7 @@ def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
     model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
     report = model.structure_search_
     assert report.linear is True
-    assert model.structure_.structures == ["linear"]
+    assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert "Linear ARX: no switching structure beat it" in report.choice
     assert report.validation_nrmse == report.linear_nrmse
 
@@ -105,7 +105,7 @@ def test_the_linear_fallback_wins_over_a_switching_structure_worse_on_held_out_d
     monkeypatch.setattr(structure_search._Search, "refined", worse)
     u, y = friction_machine()
     model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
-    assert model.structure_.structures == ["linear"]
+    assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert model.structure_search_.linear is True
     assert model.structure_search_.validation_nrmse == model.structure_search_.linear_nrmse
 
@@ -191,9 +191,9 @@ def test_the_report_lists_every_candidate_with_its_outcome(friction_fit):
 def test_refit_fits_the_chosen_regions_on_every_training_experiment(friction_fit):
     model, (u, y) = friction_fit
     refit = PWARX.auto(na=2, nb=1, refit=True, refinement="none", **FAST).fit(u, y)
-    (out,) = refit.structure_.outputs
+    (out,) = refit.structure_fit_.outputs
     np.testing.assert_array_equal(out.region_of.weights,
-                                  model.structure_.outputs[0].region_of.weights)
+                                  model.structure_fit_.outputs[0].region_of.weights)
     # least squares in the same regions on all twelve experiments, held-out ones included
     everything = copy.deepcopy(out).fit(*_rows(u, y)).p
     np.testing.assert_allclose(out.p, everything, rtol=1e-10)
@@ -225,7 +225,7 @@ def test_a_diverging_candidate_is_listed_and_never_chosen(monkeypatch):
     offsets = table[(table.stage == "scheduled") & table.structure.str.contains("offset on")]
     assert len(offsets) > 5 and (offsets.outcome == "diverged").all()
     assert np.isinf(offsets.validation_nrmse).all()
-    assert model.structure_.structures == ["all"]
+    assert [o.structure for o in model.structure_fit_.outputs] == ["all"]
 
 
 def test_the_search_says_its_progress_a_line_per_stage(caplog):

@@ -45,7 +45,7 @@ def test_velocity_form_with_sign_offsets_recovers_the_friction_axis():
     u1 = [e[:, :1] for e in u]
     model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
                   scheduling=SignScheduling(switch="offset")).fit(u1, y)
-    out = model.structure_.outputs[0]
+    out = model.structure_fit_.outputs[0]
     assert out.names == ["Δy1(k-1)", "y1(k-1)", "u1(k-1)", "1"]
     # shared Δy, y, u parameters, then the offset of region 0 (moving down) and 1 (up)
     np.testing.assert_allclose(out.p, [A, B, G, F_DOWN, F_UP], atol=1e-8)
@@ -65,7 +65,7 @@ def test_velocity_form_under_process_noise_is_recovered_within_tolerance():
                   refinement=OutputErrorRefinement(max_iter=10)).fit(u1, y)
     # least squares on the five fitting experiments, the sixth held out for the refinement
     assert model.structure_fit_.validation_experiments == [5]
-    np.testing.assert_allclose(model.structure_.outputs[0].p, [A, B, G, F_DOWN, F_UP],
+    np.testing.assert_allclose(model.structure_fit_.outputs[0].p, [A, B, G, F_DOWN, F_UP],
                                atol=0.05)
     info = model.structure_fit_.refinement[0]
     assert info["cost"] <= info["cost_start"] and info["structure"] == "offset"
@@ -83,10 +83,10 @@ def test_user_scheduling_regions_select_the_sub_model_of_the_truth():
         y[k] = 0.5 * y[k - 1] + u[k - 1, 0] if up[k] else -0.3 * y[k - 1] + 0.2 * u[k - 1, 0] - 1
     scheduling = SignScheduling(variables=[{"u1(k-1)": 1.0, "u2(k-1)": 1.0}])
     model = PWARX(na=1, nb=1, affine=True, scheduling=scheduling).fit(u, y)
-    out = model.structure_.outputs[0]
+    out = model.structure_fit_.outputs[0]
     phi = np.column_stack([y[:-1, 0], u[:-1], np.ones(1499)])
     np.testing.assert_array_equal(out.regions(phi), up[1:].astype(int))
-    np.testing.assert_allclose(model.structure_.thetas[0],
+    np.testing.assert_allclose(model.structure_fit_.outputs[0].thetas(),
                                [[-0.3, 0.2, 0.0, -1.0], [0.5, 1.0, 0.0, 0.0]], atol=1e-8)
     np.testing.assert_allclose(model.predict(u, y)[1:], y[1:], atol=1e-8)
 
@@ -97,12 +97,12 @@ def test_the_choice_per_output_keeps_the_linear_output_linear_and_switches_the_o
     y = [e + 0.02 * rng.normal(size=e.shape) for e in y]
     model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
                   scheduling=SignScheduling(switch="select")).fit(u, y)
-    assert model.structure_.structures[0] == "linear"
-    assert model.structure_.structures[1] in ("offset", "all")
+    assert [o.structure for o in model.structure_fit_.outputs][0] == "linear"
+    assert [o.structure for o in model.structure_fit_.outputs][1] in ("offset", "all")
     fit = model.structure_fit_
     assert fit.validation_experiments == [9]  # the last 10 % of the training experiments
     assert fit.validation_cost[1]["linear"] > 2 * min(fit.validation_cost[1].values())
-    assert model.resolved_params()["structure_y1"] == "linear"
+    assert model.resolved_params()["structure_y1"] == "velocity (1, 1), linear"
     # the linear model of the same structure is worse on the switching output
     linear = LinearARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled").fit(u, y)
     test_u, test_y = _experiments(2, 400, seed=9, outputs=_two_axes)
@@ -116,8 +116,9 @@ def test_the_choice_per_output_keeps_the_linear_output_linear_and_switches_the_o
 def test_without_user_regions_the_papers_steps_run_per_output():
     u, y = _experiments(6, 600, seed=2, outputs=_two_axes)
     model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled").fit(u, y)
-    assert model.structure_.structures == ["clustered", "clustered"]
-    assert model.structure_.n_regions == [1, 2]  # the linear axis and the friction axis
+    assert [o.structure for o in model.structure_fit_.outputs] == ["clustered", "clustered"]
+    # the linear axis and the friction axis
+    assert [o.n_regions for o in model.structure_fit_.outputs] == [1, 2]
     assert model.resolved_params()["clustering"] == "DBSCANClustering"
     # exact one-step predictions but where the SVM's boundary misses the sign (2 rows here)
     exact = np.isclose(model.predict(u[0], y[0])[2:], y[0][2:], atol=1e-6).all(axis=1)
@@ -143,7 +144,7 @@ def test_linear_velocity_form_equals_least_squares_of_its_regressors():
                      for ue, e in zip(u, y, strict=True)])
     target = np.concatenate([e[2:, 1] - e[1:-1, 1] for e in y])
     expected = np.linalg.lstsq(phi, target, rcond=None)[0]
-    np.testing.assert_allclose(model.structure_fit_.model.outputs[1].p, expected, atol=1e-9)
+    np.testing.assert_allclose(model.structure_fit_.outputs[1].p, expected, atol=1e-9)
     assert model.theta_.shape == (2 * 2 + 2 + 1, 2)
     assert model.get_params()["form"] == "velocity"
 
@@ -152,7 +153,7 @@ def test_the_structured_jacobian_matches_finite_differences():
     u, y = _experiments(3, 120, seed=6, outputs=_two_axes)
     model = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
                   scheduling=SignScheduling(switch="all")).fit(u, y)
-    outputs = model.structure_.outputs
+    outputs = model.structure_fit_.outputs
     runs = OutputFreeRuns(u, y, 2, 1, True, 5, dict(enumerate(outputs)), [0, 1])
     # away from the least-squares fit (exact here), where the gradient is not zero
     p = np.concatenate([o.p for o in outputs]) + 0.01 * np.random.default_rng(0).normal(

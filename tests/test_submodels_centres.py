@@ -8,13 +8,13 @@ from pwa_pipeline.pwa.steps.submodels.centres import ClusterCentres, cluster_cen
 
 def test_paper_sub_models_are_the_cluster_means(sim_30db):
     model = HParamsFile().configuration("paper", "hure_vasak").pwa.fit(sim_30db.u, sim_30db.y)
-    theta, labels = model.local_models_.theta_, model.clustering_.labels_
+    theta, labels = model.steps_["local_models"].theta_, model.steps_["clustering"].labels_
     assert model.n_submodels_ == labels.max() + 1 >= 2
     for i in range(model.n_submodels_):
         members = theta[labels == i]
         np.testing.assert_allclose(model.thetas_[i], members.sum(axis=0) / len(members),
                                    rtol=1e-12, atol=1e-14)
-    np.testing.assert_array_equal(model.labels_, labels)
+    np.testing.assert_array_equal(model.steps_["submodels"].labels_, labels)
 
 
 def test_cluster_centres_are_the_mean_local_model_of_each_cluster():

@@ -17,9 +17,9 @@ def test_default_sub_models_are_refitted_on_their_rows(sim_30db, default_30db):
     model = default_30db
     phi = np.column_stack([sim_30db.y[:-1], sim_30db.u[:-1]])
     for i in range(model.n_submodels_):
-        rows = model.labels_ == i
+        rows = model.steps_["submodels"].labels_ == i
         ls = np.linalg.lstsq(phi[rows], sim_30db.y[1:][rows], rcond=None)[0]
-        np.testing.assert_allclose(model.submodels_.thetas_[i], ls, atol=1e-10)
+        np.testing.assert_allclose(model.steps_["submodels"].thetas_[i], ls, atol=1e-10)
     assert model.thetas_ is model.regions_.thetas_
 
 
@@ -27,7 +27,7 @@ def test_modes_a_few_noise_sigmas_apart_but_separable_stay_apart():
     """DBSCAN merges the two; the split search (split_gain) parts them again."""
     u, y, thetas, _ = _close_modes()
     model = PWARX(na=1, nb=1).fit(u, y)
-    assert model.n_submodels_ == 2 and model.submodels_.n_split_ >= 1
+    assert model.n_submodels_ == 2 and model.steps_["submodels"].n_split_ >= 1
     np.testing.assert_allclose(np.sort(model.thetas_, axis=0), thetas, atol=0.03)
     merged = PWARX.default(1, 1).set_params(submodels__split_tol=None).fit(u, y)
     assert merged.n_submodels_ == 1

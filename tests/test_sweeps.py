@@ -146,7 +146,7 @@ def test_a_two_partition_sweep_runs_on_the_dask_executor(dask_sweep):
             "existing": {"address": dask_sweep["address"]}}
     # every step was a task on the cluster (dagster-dask names them <job>.<step>)
     assert {f"sweep_dask.{m}_scores" for m in METHODS} | {
-        "sweep_dask.pwa_chain", "sweep_dask.comparison"} <= dask_sweep["tasks"]
+        "sweep_dask.pwa_fit", "sweep_dask.comparison"} <= dask_sweep["tasks"]
     # both partitions' assets stored, scores included, in the run's own store
     for key in KEYS:
         model = runs[0].io_manager.load(dg.AssetKey("pwa_model"), key)

@@ -62,7 +62,7 @@ def simulated() -> None:
     # the two entries that tell the four modes apart (0.9/0.7 and 0.6/0.8, eq. 11).
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharex=True, sharey=True)
     for ax, (name, model) in zip(axes, models.items()):
-        local, clustering = model.local_models_, model.clustering_
+        local, clustering = model.steps_["local_models"], model.steps_["clustering"]
         theta = np.asarray(local.theta_)
         rows = np.flatnonzero(np.all(np.isfinite(theta[:, :, 0]), axis=1))
         labels = clustering.labels_[rows]

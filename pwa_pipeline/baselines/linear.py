@@ -1,15 +1,18 @@
 """Linear ARX baseline with the same regressors as the PWARX model."""
 
+import time
 from numbers import Integral
 
 import numpy as np
 from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 
-from .._typing import Float2D, Signals
+from .._typing import Signals
 from .._validation import as_experiments
-from ..envelope import PADDING
-from ..pwa.arx import ARXModelBase, training_range
+from ..envelope import training_range
+from ..pwa.arx import ARXModelBase
+from ..pwa.groups import OutputGroup
+from ..pwa.partitions import SingleRegion
 from ..pwa.structure_fit import fit_structure
 from ..pwa.structures import COUPLINGS, FORMS
 from ..regressors import build_regressors
@@ -38,10 +41,18 @@ class LinearARX(ARXModelBase):
     theta_ : ndarray of shape (d, m)
         Over the level regressor φ (eq. 3; na + 1 output lags in the velocity form), so a
         velocity-form or decoupled model predicts as any ARX model.
-    refinement_ : fitted refinement step (with ``refinement`` and the level, joint route)
+    groups_ : list of OutputGroup
+        The fitted shape every ARX model shares (:mod:`~pwa_pipeline.pwa.groups`): one
+        group of every output with one region, ``theta_`` as its sub-model (its ``steps``
+        hold the fitted refinement, where one ran on the level, joint route). So
+        ``thetas_`` is ``theta_[None]``, ``n_submodels_`` 1.
+    structures_ : list of str
+        Each output's structure in words (form, orders, linear).
     structure_fit_ : StructureFit (velocity form or decoupled outputs)
         The validation experiments and the refinement of each output group
         (:class:`~pwa_pipeline.pwa.structure_fit.StructureFit`).
+    timings_ : dict
+        Seconds of the fit (``fit``).
     n_inputs_, n_outputs_ : int
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
@@ -81,28 +92,35 @@ class LinearARX(ARXModelBase):
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, u: Signals, y: Signals) -> "LinearARX":
         """Least-squares fit on one or several experiments (regressors never span two)."""
+        t0 = time.perf_counter()
         pairs = as_experiments(u, y)
         self.signal_range_ = training_range(pairs)
         self.n_inputs_ = pairs[0][0].shape[1]
         self.n_outputs_ = pairs[0][1].shape[1]
         self.n_features_in_ = self.n_inputs_
-        if self.structured:
+        steps = {}
+        if self.form != "level" or self.outputs != "joint":
             self.structure_fit_ = fit_structure(pairs, self.na, self.nb, self.affine, self.form,
                                                 self.outputs, refinement=self.refinement)
-            self.theta_ = np.column_stack([t[0] for t in self.structure_fit_.model.thetas])
-            return self
-        reg = build_regressors(pairs, self.na, self.nb, self.affine)
-        if reg.phi.shape[0] < reg.phi.shape[1]:
-            raise ValueError(
-                f"too few samples: {reg.phi.shape[0]} regressor rows for "
-                f"{reg.phi.shape[1]} parameters per output"
-            )
-        self.theta_ = np.linalg.lstsq(reg.phi, reg.target, rcond=None)[0]
-        if self.refinement is not None:
-            self.refinement_ = clone(self.refinement).fit(
-                self.theta_[None], [p[0] for p in pairs], [p[1] for p in pairs], self.na,
-                self.nb, self.affine)
-            self.theta_ = self.refinement_.thetas_[0]
+            self.theta_ = np.column_stack([o.thetas()[0] for o in self.structure_fit_.outputs])
+        else:
+            reg = build_regressors(pairs, self.na, self.nb, self.affine)
+            if reg.phi.shape[0] < reg.phi.shape[1]:
+                raise ValueError(
+                    f"too few samples: {reg.phi.shape[0]} regressor rows for "
+                    f"{reg.phi.shape[1]} parameters per output"
+                )
+            self.theta_ = np.linalg.lstsq(reg.phi, reg.target, rcond=None)[0]
+            if self.refinement is not None:
+                steps["refinement"] = clone(self.refinement).fit(
+                    self.theta_[None], [p[0] for p in pairs], [p[1] for p in pairs], self.na,
+                    self.nb, self.affine)
+                self.theta_ = steps["refinement"].thetas_[0]
+        self.groups_ = [OutputGroup(tuple(range(self.n_outputs_)),
+                                    SingleRegion(self.theta_.shape[0]), self.theta_[None],
+                                    steps)]
+        self.structures_ = [f"{self.form} ({self.na}, {self.nb}), linear"] * self.n_outputs_
+        self.timings_ = {"fit": time.perf_counter() - t0}
         return self
 
     def resolved_params(self) -> dict:
@@ -112,22 +130,3 @@ class LinearARX(ARXModelBase):
         if self.refinement is not None:
             params["refinement"] = type(self.refinement).__name__
         return params
-
-    def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
-                       padding: float = PADDING, input_names: list[str] | None = None,
-                       output_names: list[str] | None = None):
-        """The model as a PWA state-space model with one mode, x⁺ = A x + B u + f,
-        y = C x + g, valid in the data envelope (:func:`pwa_pipeline.control.to_state_space`,
-        whose parameters these are).
-
-        Returns
-        -------
-        pwa_pipeline.control.PWAStateSpace
-        """
-        from ..control.conversion import to_state_space
-
-        return to_state_space(self, u, y, padding=padding, input_names=input_names,
-                              output_names=output_names)
-
-    def _predict_phi(self, phi: Float2D) -> Float2D:
-        return phi @ self.theta_

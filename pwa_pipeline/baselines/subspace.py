@@ -9,6 +9,7 @@ through the Riccati equation. Only (k·(r+m)) × (k·(r+m)) matrices are factori
 N × N ones, so 40k samples need a few hundred MB at most.
 """
 
+import time
 from numbers import Integral, Real
 
 import numpy as np
@@ -19,6 +20,8 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._arrays import column_rms
 from .._blas import single_threaded_blas
+from ..envelope import PADDING, channel_bounds, outside_box, training_range
+from ..scoring.metrics import r2_score
 from .._typing import Float2D, Signals
 from .._validation import (
     _is_experiment_list,
@@ -64,6 +67,11 @@ class SubspaceSS(BaseEstimator):
     singular_values_ : ndarray
         Of the weighted oblique projection, for choosing the order.
     n_inputs_, n_outputs_ : int
+    signal_range_ : ndarray of shape (2, m + r)
+        Smallest and largest training value of each output, then each input: the data
+        envelope of :meth:`outside_envelope`.
+    timings_ : dict
+        Seconds of the fit (``fit``).
 
     Examples
     --------
@@ -104,7 +112,9 @@ class SubspaceSS(BaseEstimator):
             On bad input, experiments all shorter than 2·horizon + 1, or an order larger than
             horizon·m.
         """
+        t0 = time.perf_counter()
         pairs = as_experiments(u, y)
+        self.signal_range_ = training_range(pairs)
         # Identify on unit-RMS channels (conditioning of the LQ factor), then map back.
         su = column_rms(np.vstack([p[0] for p in pairs]))
         sy = column_rms(np.vstack([p[1] for p in pairs]))
@@ -168,6 +178,7 @@ class SubspaceSS(BaseEstimator):
         self.order_ = n
         self.n_inputs_, self.n_outputs_ = r, m
         self.n_features_in_ = r
+        self.timings_ = {"fit": time.perf_counter() - t0}
         return self
 
     def resolved_params(self) -> dict:
@@ -260,6 +271,51 @@ class SubspaceSS(BaseEstimator):
                     out[k] = self.C_ @ x + self.D_ @ ue[k]
                 x = self.A_ @ x + self.B_ @ ue[k]
         return out
+
+
+    def score(self, u: Signals, y: Signals) -> float:
+        """Mean R² (eq. 22, standard form) of the one-step-ahead prediction over outputs,
+        the first ``warmup`` samples of each experiment (the initial state's) left out."""
+        pairs = as_experiments(u, y)
+        yhat = self.predict([p[0] for p in pairs], [p[1] for p in pairs])
+        w = self.warmup
+        return float(np.mean(r2_score(np.vstack([p[1][w:] for p in pairs]),
+                                      np.vstack([p[w:] for p in yhat]))))
+
+    def outside_envelope(self, u: Signals, y: Signals, padding: float = PADDING
+                         ) -> np.ndarray | list[np.ndarray]:
+        """Whether each sample k follows data outside the training range: the state x(k)
+        sums up the past, and the model is known only where the past inputs and outputs
+        went, so sample k is flagged when u(k−1) or y(k−1) leaves its channel's training
+        range widened by ``padding`` of its span (:func:`~pwa_pipeline.envelope.
+        channel_bounds`; the ARX models test their regressor φ(k) likewise).
+
+        Parameters
+        ----------
+        u : array-like of shape (N, r), or a list of such arrays
+        y : array-like of shape (N, m), or a list of such arrays
+            Measured outputs, or a simulation's (NaN or inf counts as outside).
+        padding : float, default :data:`~pwa_pipeline.envelope.PADDING`
+
+        Returns
+        -------
+        ndarray of bool, shape (N,), or a list of them (one per experiment for a list)
+            False on sample 0, which has no past.
+        """
+        check_is_fitted(self)
+        lower, upper = channel_bounds(self.signal_range_, padding)
+        many = _is_experiment_list(u)
+        flags = []
+        for ue, ye in zip(u if many else [u], y if many else [y], strict=True):
+            ue = as_signal(ue, "u")
+            ye = np.asarray(ye, dtype=float)
+            ye = ye[:, None] if ye.ndim == 1 else ye
+            check_width(ue, self.n_inputs_, "u", "input(s)")
+            check_width(ye, self.n_outputs_, "y", "output(s)")
+            flag = np.zeros(len(ye), bool)
+            flag[1:] = outside_box(np.hstack([ye, ue])[:-1], lower, upper)
+            flags.append(flag)
+        return flags if many else flags[0]
 
 
 def _stabilised(a: Float2D, radius: float) -> Float2D:

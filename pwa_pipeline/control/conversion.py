@@ -7,23 +7,14 @@ region i (eq. 1). With the state x(k) = φ(k) without the constant, a mode's C_i
 those rows over x and over the constant, and A_i, B_i, f_i shift the lags
 (:func:`mode_matrices`).
 
-**Regions.** Each output's regions are a partition of φ-space given by the fitted model:
-
-- the multi-class SVM of step 6 and the default's gate (:class:`~pwa_pipeline.pwa.steps.regions.
-  SVMRegions`, :class:`~pwa_pipeline.pwa.steps.boundaries.ResidualRegions`): φ ∈ H_i ⇔
-  i = argmax_j (w_j·φ + b_j), so H_i = {φ : (w_j − w_i)·φ ≤ b_i − b_j for every j ≠ i}
-  (regions whose b_i is −inf are never chosen and have no row);
-- the same on an output group's regressor ψ = Mφ (structured route): w_j·Mφ;
-- the signs of scheduling variables w_vᵀφ (:class:`~pwa_pipeline.pwa.scheduling.
-  SignRegions`): bit v is 1 where w_vᵀφ > 0, so the region of bits β is
-  {φ : w_vᵀφ ≤ 0 where β_v = 0, −w_vᵀφ ≤ 0 where β_v = 1};
-- one region (a linear model).
-
-φ = [x; 1] (or x) is linear in z = [x; u], so each region is an H-polyhedron over z. Outputs
-with the same partition (all of them on the joint clustered routes) share it; otherwise
-(decoupled outputs, scheduling on each output's own increment) the PWA system's modes are the
-cells of the product partition, ordered lexicographically (the first output's region varies
-slowest), only those non-empty inside the envelope kept.
+**Regions.** The fitted model keeps its outputs in groups, each with one region map over φ
+(``model.groups_``, :mod:`pwa_pipeline.pwa.groups`) whose ``halfspaces()`` write each
+region as {φ : G φ ≤ q} (:mod:`pwa_pipeline.pwa.partitions`: the argmax of the SVM regions,
+the signs of scheduling variables, a map over an output group's regressor ψ = Mφ, one
+region). φ = [x; 1] (or x) is linear in z = [x; u], so each region is an H-polyhedron over
+z. With one group (the paper's route, a linear model) the modes are its regions; with several
+the PWA system's modes are the cells of the product partition, ordered lexicographically
+(the first group's region varies slowest), only those non-empty inside the envelope kept.
 
 **Envelope.** Each region is intersected with the data envelope: the box whose every entry
 spans its channel's training range (the smallest and largest value of that output or input
@@ -51,171 +42,36 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._typing import Float2D, Signals
 from .._validation import as_experiments
-from ..envelope import PADDING, channel_bounds, regressor_bounds
+from ..envelope import PADDING, channel_bounds, regressor_bounds, training_range
 from .polyhedra import EMPTY_RADIUS, Box, chebyshev_ball, irredundant_rows
 from .state_space import PWAStateSpace
 
 
 @dataclass
 class Partition:
-    """One partition of φ-space into closed regions {φ : G φ ≤ q}.
+    """One output group's partition of φ-space into closed regions {φ : G φ ≤ q}.
 
     Attributes
     ----------
     labels : ndarray of int, shape (s,)
-        The fitted model's index of each region.
+        The fitted model's index of each region (those that are ever chosen).
     rows : list of (ndarray of shape (k, D), ndarray of shape (k,))
         (G, q) of each region, over φ.
-    outputs : list of int
-        The outputs whose sub-model is chosen by this partition.
+    outputs : tuple of int
+        The outputs whose sub-model it chooses.
     """
 
     labels: np.ndarray
     rows: list[tuple[Float2D, np.ndarray]]
-    outputs: list[int]
-
-    def same_as(self, other: "Partition") -> bool:
-        """Whether both have the same regions, row for row."""
-        return (np.array_equal(self.labels, other.labels) and len(self.rows) == len(other.rows)
-                and all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-                        for a, b in zip(self.rows, other.rows, strict=True)))
+    outputs: tuple[int, ...]
 
 
-def single_partition(d: int, label: int = 0) -> Partition:
-    """One region, all of φ-space (a linear model)."""
-    return Partition(np.array([label]), [(np.zeros((0, d)), np.zeros(0))], [])
-
-
-def argmax_partition(coef: Float2D, intercept: np.ndarray, n_regions: int) -> Partition:
-    """The regions of φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j) (see the module doc).
-
-    Parameters
-    ----------
-    coef : ndarray of shape (s, D)
-    intercept : ndarray of shape (s,)
-        −inf marks a region that is never chosen (it gets no region).
-    n_regions : int
-        s; with one region, the whole space (as :meth:`SVMRegions.predict
-        <pwa_pipeline.pwa.steps.regions.SVMRegions.predict>`).
-    """
-    d = coef.shape[1]
-    live = np.flatnonzero(np.isfinite(intercept))
-    if n_regions == 1 or live.size <= 1:
-        return single_partition(d, int(live[0]) if live.size == 1 and n_regions > 1 else 0)
-    rows = []
-    for i in live:
-        others = live[live != i]
-        rows.append((coef[others] - coef[i], intercept[i] - intercept[others]))
-    return Partition(live.copy(), rows, [])
-
-
-def sign_partition(weights: Float2D) -> Partition:
-    """The 2^v regions Σ_v 2^v [w_vᵀφ > 0] of :class:`~pwa_pipeline.pwa.scheduling.
-    SignRegions` (see the module doc)."""
-    v, d = weights.shape
-    rows = []
-    for label in range(2 ** v):
-        bits = (label >> np.arange(v)) & 1
-        sign = np.where(bits == 1, -1.0, 1.0)
-        rows.append((weights * sign[:, None], np.zeros(v)))
-    return Partition(np.arange(2 ** v), rows, [])
-
-
-def _argmax_step(step, what: str) -> None:
-    """NotImplementedError unless ``step`` predicts by SVMRegions' argmax."""
-    from ..pwa.steps.regions import SVMRegions
-
-    if not isinstance(step, SVMRegions) or type(step).predict is not SVMRegions.predict:
-        raise NotImplementedError(
-            f"to_state_space: {what} uses the region step {type(step).__name__}, whose "
-            f"predict is not the argmax of affine functions of SVMRegions; only that rule "
-            f"(SVMRegions, ResidualRegions) and sign scheduling are converted to polyhedra")
-
-
-@dataclass
-class ModelParts:
-    """What :func:`to_state_space` reads from a fitted model.
-
-    Attributes
-    ----------
-    partitions : list of Partition
-        One per output (possibly the same object for several).
-    theta : callable
-        ``theta(p, label)`` → the row Θ_{p,label} over φ, shape (D,).
-    output_lags, input_lags : int
-    affine : bool
-    source : dict
-    """
-
-    partitions: list[Partition]
-    theta: object
-    output_lags: int
-    input_lags: int
-    affine: bool
-    source: dict
-
-
-def model_parts(model) -> ModelParts:
-    """The partitions and parameter rows of a fitted PWARX or LinearARX (any route).
-
-    Raises
-    ------
-    NotImplementedError
-        For another model class, or a route whose regions are not argmax or sign regions
-        (a region step of one's own), naming it.
-    """
-    from ..baselines.linear import LinearARX
-    from ..pwa.estimator import PWARX
-    from ..pwa.scheduling import SignRegions
-    from ..pwa.structure_fit import ProjectedRegions
-
-    if not isinstance(model, PWARX | LinearARX):
-        raise NotImplementedError(f"to_state_space converts PWARX and LinearARX models, not "
-                                  f"{type(model).__name__}")
-    check_is_fitted(model)
-    m = model.n_outputs_
-    lags, nb, affine = model.output_lags_, model.nb, model.affine
-    d = m * lags + model.n_inputs_ * nb + int(affine)
-    source = {"model": type(model).__name__, "na": model.na, "nb": nb, "affine": affine,
-              "form": model.form, "outputs": model.outputs}
-    if isinstance(model, LinearARX):
-        theta = model.theta_
-        source["route"] = "linear"
-        part = single_partition(d)
-        return ModelParts([part] * m, lambda p, label: theta[:, p], lags, nb, affine, source)
-    if not model.structured:
-        regions = model.regions_
-        _argmax_step(regions, "the joint level route")
-        thetas = model.thetas_
-        source["route"] = f"joint level, regions of {type(regions).__name__}"
-        part = argmax_partition(regions.coef_, regions.intercept_, regions.n_regions_)
-        return ModelParts([part] * m, lambda p, label: thetas[label][:, p], lags, nb, affine,
-                          source)
-    structure = model.structure_
-    parts, kinds = [], []
-    for p, out in enumerate(structure.outputs):
-        where = f"output {p + 1} of the {model.form} form, {model.outputs} outputs route"
-        region_of = out.region_of
-        if region_of is None:
-            part = single_partition(d)
-            kinds.append("one region")
-        elif isinstance(region_of, ProjectedRegions):
-            _argmax_step(region_of.predictor, where)
-            pred = region_of.predictor
-            part = argmax_partition(pred.coef_ @ region_of.M, pred.intercept_, pred.n_regions_)
-            kinds.append(f"regions of {type(pred).__name__}")
-        elif type(region_of) is SignRegions:
-            part = sign_partition(region_of.weights)
-            kinds.append("sign scheduling")
-        else:
-            raise NotImplementedError(
-                f"to_state_space: {where} has regions of {type(region_of).__name__}, which "
-                f"are not converted to polyhedra (argmax and sign regions are)")
-        parts.append(part)
-    thetas = structure.thetas
-    source["route"] = (f"{model.form} form, {model.outputs} outputs, "
-                       + ", ".join(sorted(set(kinds))))
-    return ModelParts(parts, lambda p, label: thetas[p][label], lags, nb, affine, source)
+def partition(group) -> Partition:
+    """The :class:`Partition` of a fitted output group (its region map's ``halfspaces()``,
+    the regions never chosen left out)."""
+    cells = group.regions.halfspaces()
+    live = [i for i, cell in enumerate(cells) if cell is not None]
+    return Partition(np.array(live), [cells[i] for i in live], tuple(group.outputs))
 
 
 def mode_matrices(theta: Float2D, m: int, r: int, lags: int, nb: int, affine: bool
@@ -267,9 +123,7 @@ def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
 
 def signal_range(u: Signals, y: Signals) -> Float2D:
     """Smallest and largest value of each output, then each input, over the experiments:
-    shape (2, m + r) (:func:`~pwa_pipeline.pwa.arx.training_range`)."""
-    from ..pwa.arx import training_range
-
+    shape (2, m + r) (:func:`~pwa_pipeline.envelope.training_range`)."""
     return training_range(as_experiments(u, y))
 
 
@@ -288,6 +142,8 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     Parameters
     ----------
     model : fitted PWARX or LinearARX
+        Any fitted model with output groups (``groups_``) over the regressor of eq. (2)–(3)
+        (``output_lags_``, ``nb``, ``affine``, ``n_outputs_``, ``n_inputs_``).
     u, y : array-like or lists of them, optional
         Data whose range makes the envelope (the training data). None: the model's
         ``signal_range_``, the range of its training data recorded at fit.
@@ -302,8 +158,6 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
 
     Raises
     ------
-    NotImplementedError
-        For a model or route whose regions are not converted (named in the message).
     ValueError
         If neither data nor ``signal_range_`` give the envelope, ``padding`` is not positive,
         or every region is empty inside the envelope.
@@ -323,9 +177,9 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     >>> bool(np.allclose(ss.simulate(u, y[:1]), model.simulate(u, y[:1]), rtol=0, atol=1e-8))
     True
     """
-    parts = model_parts(model)
+    check_is_fitted(model)
     m, r = model.n_outputs_, model.n_inputs_
-    lags, nb, affine = parts.output_lags, parts.input_lags, parts.affine
+    lags, nb, affine = model.output_lags_, model.nb, model.affine
     n = m * lags + r * nb
     if not (isinstance(padding, int | float) and np.isfinite(padding) and padding > 0):
         raise ValueError(f"padding must be a positive share of each span, got {padding!r}")
@@ -346,18 +200,12 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     p_dim = n + r
     box_H, box_h = box.rows()
 
-    # distinct partitions, and which one chooses each output's sub-model
-    distinct: list[Partition] = []
-    part_of = []
-    for p, part in enumerate(parts.partitions):
-        for k, known in enumerate(distinct):
-            if known is part or known.same_as(part):
-                part_of.append(k)
-                known.outputs.append(p)
-                break
-        else:
-            distinct.append(Partition(part.labels, part.rows, [p]))
-            part_of.append(len(distinct) - 1)
+    groups = list(model.groups_)
+    distinct = [partition(group) for group in groups]
+    part_of = [0] * m
+    for k, group in enumerate(groups):
+        for p in group.outputs:
+            part_of[p] = k
     zrows = [[_to_z(G, q, n, r, affine) for G, q in part.rows] for part in distinct]
 
     def ball(G: Float2D, q: np.ndarray) -> tuple[float, np.ndarray | None]:
@@ -397,7 +245,9 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     regions, mode_regions = [], []
     for index, G, q, centre in cells:
         labels = labels_of(index)
-        theta = np.column_stack([parts.theta(p, labels[p]) for p in range(m)])
+        theta = np.empty((n + int(affine), m))
+        for group in groups:
+            theta[:, group.outputs] = group.thetas[labels[group.outputs[0]]]
         for name, value in zip("ABfCg", mode_matrices(theta, m, r, lags, nb, affine),
                                strict=True):
             mats[name].append(value)
@@ -408,9 +258,39 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
         keep = irredundant_rows(Ht, ht, protected, interior=centre)
         regions.append(box.from_unit(Ht[keep], ht[keep]))
         mode_regions.append(labels)
-    return PWAStateSpace(
+    ss = PWAStateSpace(
         np.array(mats["A"]), np.array(mats["B"]), np.array(mats["f"]), np.array(mats["C"]),
         np.array(mats["g"]), regions, box.lower, box.upper, output_lags=lags, input_lags=nb,
         affine=affine, input_names=input_names, output_names=output_names, padding=padding,
         mode_regions=mode_regions, dropped_modes=np.array(dropped, dtype=int).reshape(-1, m),
-        source=parts.source)
+        source={"model": type(model).__name__, "na": model.na, "nb": nb, "affine": affine,
+                "structures": list(model.structures_)})
+    check_regions(ss, groups)
+    return ss
+
+
+#: Random points of the envelope at which :func:`check_regions` compares the exported
+#: regions with the model's own.
+CHECK_POINTS = 2000
+
+
+def check_regions(ss: PWAStateSpace, groups) -> None:
+    """Raise ValueError where the exported regions disagree with the output groups' own
+    ``predict`` at :data:`CHECK_POINTS` seeded random points of the envelope: a region map
+    whose ``halfspaces()`` do not describe the regions its ``predict()`` gives (a region
+    step of one's own that overrides one and not the other) would otherwise export another
+    model than the fitted one."""
+    rng = np.random.default_rng(0)
+    lower, upper = ss.envelope
+    z = lower + rng.random((CHECK_POINTS, lower.size)) * (upper - lower)
+    x = z[:, :ss.n_states]
+    phi = np.column_stack([x, np.ones(len(z))]) if ss.affine else x
+    exported = ss.mode_regions[ss.mode_of(x, z[:, ss.n_states:])]
+    for group in groups:
+        wrong = int(np.sum(group.regions.predict(phi) != exported[:, group.outputs[0]]))
+        if wrong:
+            raise ValueError(
+                f"to_state_space: the halfspaces() of {type(group.regions).__name__} (outputs "
+                f"{', '.join(f'y{j + 1}' for j in group.outputs)}) do not describe the regions "
+                f"its predict() gives: they disagree at {wrong} of {CHECK_POINTS} random "
+                f"points of the data envelope")

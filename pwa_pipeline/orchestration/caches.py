@@ -90,6 +90,14 @@ class SignedMemory:
     def __deepcopy__(self, memo: dict) -> "SignedMemory":
         return self
 
+    def __getstate__(self) -> dict:
+        """Where it keeps its entries, without the logging function (a run's logger, which
+        does not pickle) or the counts: a step holding it is hashed into cache keys."""
+        return {"root": self.root, "folder": self.folder, "salt": self.salt}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["root"], state["folder"], salt=state["salt"])
+
     def cache(self, func, ignore: Sequence[str] = ()):
         signature = inspect.signature(func)
 

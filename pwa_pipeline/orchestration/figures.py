@@ -441,7 +441,7 @@ def switching_inputs(model: PWARX, u: np.ndarray, y: np.ndarray,
     Parameters
     ----------
     model : fitted PWARX
-        On the paper's route (``regions_`` and ``thetas_``).
+        Any route (``regions_`` and ``thetas_``, the model as eq. 1).
     u : ndarray of shape (N, r)
     y : ndarray of shape (N, m)
         One experiment.
@@ -458,8 +458,8 @@ def switching_inputs(model: PWARX, u: np.ndarray, y: np.ndarray,
         nor the rows.
     """
     u, y = np.asarray(u, float), np.asarray(y, float)
-    phi = lagged_matrix(u, y, model.na, model.nb, model.affine)
-    n0 = n_initial(model.na, model.nb)
+    phi = lagged_matrix(u, y, model.output_lags_, model.nb, model.affine)
+    n0 = n_initial(model.output_lags_, model.nb)
     region = np.asarray(model.regions_.predict(phi))
     k = np.arange(n0, y.shape[0])
     s = model.thetas_.shape[0]
@@ -575,21 +575,24 @@ def switching_figure(model: PWARX, u: np.ndarray, y: np.ndarray,
 
 @dataclass(frozen=True)
 class OutputSwitching:
-    """What the switching figure of a structured model draws (:func:`structured_switching_inputs`).
+    """What the switching figure of a model of several output groups draws
+    (:func:`structured_switching_inputs`).
 
     Attributes
     ----------
     k : ndarray of shape (n,)
         The sample of each regressor row of the experiment.
     regions : list of ndarrays of shape (n,)
-        Per output, the region of each row (its own regions λ_j, :mod:`~pwa_pipeline.pwa.structures`).
+        Per output group, the region of each row (its own region map).
     n_regions : list of int
-        Per output, its number of regions.
+        Per output group, its number of regions.
     structures : list of str
-        Per output, its structure (``linear``, ``offset``, ``all``, ``clustered``).
+        Per group, its outputs' structures in words (``model.structures_``).
     variables : list of str
-        Per output, what its regions are the signs of (``z = q1(k-1) − q1(k-2)``), or ``""``
+        Per group, what its regions are the signs of (``z = q1(k-1) − q1(k-2)``), or ``""``
         (one region, or regions of the paper's steps).
+    outputs : list of str
+        Per group, its outputs' names.
     """
 
     k: np.ndarray
@@ -597,6 +600,7 @@ class OutputSwitching:
     n_regions: list[int]
     structures: list[str]
     variables: list[str]
+    outputs: list[str]
 
 
 def _combination(weights: np.ndarray, names: list[str]) -> str:
@@ -614,38 +618,40 @@ def _combination(weights: np.ndarray, names: list[str]) -> str:
 
 def structured_switching_inputs(model: PWARX, u: np.ndarray, y: np.ndarray,
                                 y_names: list[str], u_names: list[str]) -> OutputSwitching:
-    """The region of each output of a structured model (``model.structured``) at each sample
-    of one experiment.
+    """The region of each output group of a model (``model.groups_``) at each sample of one
+    experiment.
 
-    Each output j has its own regions λ_j(φ(k)) (:class:`~pwa_pipeline.pwa.structures.OutputModel`):
-    the signs of its scheduling variables (``scheduling``), the paper's steps 2–6 run on its
-    regressors (clustered), or one region (a linear model).
+    Each group has its own region map over φ (:mod:`~pwa_pipeline.pwa.partitions`): the
+    signs of scheduling variables, the paper's steps 2–6 run on its regressors (clustered),
+    or one region (a linear model).
 
     Parameters
     ----------
     model : fitted PWARX
-        On the structured route (``structure_``).
     u : ndarray of shape (N, r)
     y : ndarray of shape (N, m)
         One experiment.
     y_names, u_names : list of str
-        The channel names, to write the scheduling variables with.
+        The channel names, to write the scheduling variables and the groups with.
     """
     u, y = np.asarray(u, float), np.asarray(y, float)
     lags = model.output_lags_
     phi = lagged_matrix(u, y, lags, model.nb, model.affine)
     names = regressor_names(list(y_names), list(u_names), lags, model.nb, model.affine)
     variables = []
-    for out in model.structure_.outputs:
-        w = getattr(out.region_of, "weights", None)
+    for group in model.groups_:
+        w = getattr(group.regions, "weights", None)
         variables.append("" if w is None else ", ".join(
             f"z{v + 1 if len(w) > 1 else ''} = {_combination(row, names)}"
             for v, row in enumerate(w)))
     return OutputSwitching(
         k=np.arange(n_initial(lags, model.nb), y.shape[0]),
-        regions=[np.asarray(o.regions(phi)) for o in model.structure_.outputs],
-        n_regions=[o.n_regions for o in model.structure_.outputs],
-        structures=[o.structure for o in model.structure_.outputs], variables=variables)
+        regions=[np.asarray(g.regions.predict(phi)) for g in model.groups_],
+        n_regions=[g.n_regions for g in model.groups_],
+        structures=["; ".join(model.structures_[j] for j in g.outputs)
+                    for g in model.groups_],
+        variables=variables,
+        outputs=[", ".join(y_names[j] for j in g.outputs) for g in model.groups_])
 
 
 def _sign_labels(n_regions: int) -> list[str]:
@@ -658,28 +664,25 @@ def _sign_labels(n_regions: int) -> list[str]:
             for r in range(n_regions)]
 
 
-def draw_structured_switching(sw: OutputSwitching, y_names: list[str],
-                              context: str = "") -> Figure:
-    """The switching figure of a structured model: one panel per output, its region at each
-    of the first 606 samples of the experiment.
+def draw_structured_switching(sw: OutputSwitching, context: str = "") -> Figure:
+    """The switching figure of a model of several output groups: one panel per group, its
+    region at each of the first 606 samples of the experiment.
 
-    Each panel is titled with the output, its structure and what its regions are (the sign
-    of a scheduling variable, written with the data's channel names); an output with one
-    region (a linear model) says so instead of drawing a flat line. The panels share the
+    Each panel is titled with the group's outputs, their structure and what its regions are
+    (the sign of a scheduling variable, written with the data's channel names); a group with
+    one region (a linear model) says so instead of drawing a flat line. The panels share the
     sample axis and fit a laptop screen (at most :data:`MAX_HEIGHT` inches).
 
     Parameters
     ----------
     sw : OutputSwitching
-    y_names : list of str
-        The outputs' names, one per panel.
     context : str, optional
         The title's first line (:func:`context_title`: data set, set, method).
 
     Returns
     -------
     Figure
-        One axes per output.
+        One axes per output group.
     """
     k = sw.k
     shown, which = _shown(k)
@@ -706,15 +709,12 @@ def draw_structured_switching(sw: OutputSwitching, y_names: list[str],
             ticks = np.arange(0, lv.size, -(-lv.size // _MAX_LEVELS))
             ax.set_yticks(ticks, [labels[lv[i]] for i in ticks], fontsize=7.5)
             ax.set_ylim(-0.6, lv.size - 0.4)
-        what = {"linear": "linear", "offset": "offset switching",
-                "all": "every parameter switching",
-                "clustered": f"{s} regions of the paper's steps"}.get(sw.structures[j],
-                                                                      sw.structures[j])
         regions = f", regions by the sign of {sw.variables[j]}" if sw.variables[j] and s > 1 \
             else ""
-        ax.set_title(f"{y_names[j]}: {what}{regions}", fontsize=8.5, loc="left", pad=2)
+        ax.set_title(f"{sw.outputs[j]}: {sw.structures[j]}{regions}", fontsize=8.5,
+                     loc="left", pad=2)
     axes[-1].set_xlabel("sample k")
-    _suptitle(fig, context, "Region of each output's model, held-out experiment 1"
+    _suptitle(fig, context, "Region of each output group's model, held-out experiment 1"
                             + (which or f", all {k.size} samples"), fontsize=11)
     return fig
 
@@ -752,22 +752,27 @@ class RegionSlice:
     d: int
 
 
-def region_slice(model: PWARX, phi: np.ndarray, max_points: int = 3000) -> RegionSlice:
-    """The regions H_i (step 6) in the 2-D slice of φ where they differ most.
+def region_slice(model: PWARX, phi: np.ndarray, labels: np.ndarray | None = None,
+                 max_points: int = 3000) -> RegionSlice:
+    """The regions H_i of the model as eq. (1) (``model.regions_``) in the 2-D slice of φ
+    where they differ most.
 
-    The two regressors are those along which the region classifier varies most: largest
-    spread (max − min over regions) of the ``regions_.coef_`` column times the standard
-    deviation of that regressor in ``phi``; the others are held at their median. The regions
-    are evaluated on a 200 × 200 grid over the 0.5–99.5 % range of the two regressors
-    (widened by 5 %), and at most ``max_points`` training rows (a seeded subset) are kept
-    with their sub-model.
+    The two regressors are those along which the region boundaries vary most: the largest
+    coefficient of that regressor over every boundary of every output group's regions
+    (``halfspaces()``) times the regressor's standard deviation in ``phi`` (for the SVM's
+    argmax regions, the spread of its ``coef_`` column); the others are held at their
+    median. The regions are evaluated on a 200 × 200 grid over the 0.5–99.5 % range of the
+    two regressors (widened by 5 %), and at most ``max_points`` training rows (a seeded
+    subset) are kept with their label.
 
     Parameters
     ----------
-    model : fitted PWARX
-        On the paper's route (``regions_`` and ``labels_``).
+    model : fitted PWARX (any route)
     phi : ndarray of shape (n, d)
-        The training regressors (``Regressors.phi``), one row per ``model.labels_`` entry.
+        The training regressors at the model's lags.
+    labels : ndarray of shape (n,), optional
+        The rows' sub-models as the fit assigned them (step 5's ``labels_``, −1 noise);
+        default: their region.
     max_points : int, default 3000
 
     Raises
@@ -779,7 +784,9 @@ def region_slice(model: PWARX, phi: np.ndarray, max_points: int = 3000) -> Regio
     if phi.shape[1] < 2:
         raise ValueError("a 2-D slice needs at least 2 regressors")
     regions = model.regions_
-    spread = np.ptp(regions.coef_, axis=0) * phi.std(axis=0)
+    rows = [h[0] for g in model.groups_ for h in g.regions.halfspaces() if h is not None]
+    normals = np.vstack([np.zeros((1, phi.shape[1])), *rows])
+    spread = np.abs(normals).max(axis=0) * phi.std(axis=0)
     i, j = np.sort(np.argsort(-spread, kind="stable")[:2])
     lo, hi = np.quantile(phi[:, [i, j]], [0.005, 0.995], axis=0)
     pad = 0.05 * (hi - lo)
@@ -789,11 +796,12 @@ def region_slice(model: PWARX, phi: np.ndarray, max_points: int = 3000) -> Regio
     grid = np.tile(np.median(phi, axis=0), (mx.size, 1))
     grid[:, i], grid[:, j] = mx.ravel(), my.ravel()
     z = np.asarray(regions.predict(grid)).reshape(mx.shape)
+    labels = np.asarray(regions.predict(phi)) if labels is None else np.asarray(labels)
     rng = np.random.default_rng(0)
     rows = np.sort(rng.choice(phi.shape[0], max_points, replace=False)) \
         if phi.shape[0] > max_points else np.arange(phi.shape[0])
     return RegionSlice(int(i), int(j), gx, gy, z, int(regions.n_regions_), phi[rows][:, [i, j]],
-                       np.asarray(model.labels_)[rows], phi.shape[1])
+                       labels[rows], phi.shape[1])
 
 
 def draw_regions(sl: RegionSlice, names: list[str], context: str = "",
@@ -852,7 +860,8 @@ def draw_regions(sl: RegionSlice, names: list[str], context: str = "",
 
 
 def regions_figure(model: PWARX, phi: np.ndarray, names: list[str], context: str = "",
-                   max_points: int = 3000, units: Mapping[str, str] | None = None) -> Figure:
+                   max_points: int = 3000, units: Mapping[str, str] | None = None,
+                   labels: np.ndarray | None = None) -> Figure:
     """The regions H_i (step 6) in the 2-D slice of φ where they differ most:
     :func:`draw_regions` of :func:`region_slice` (see both for the parameters).
 
@@ -863,7 +872,7 @@ def regions_figure(model: PWARX, phi: np.ndarray, names: list[str], context: str
     """
     if len(names) != np.shape(phi)[1]:
         raise ValueError(f"{len(names)} names for {np.shape(phi)[1]} regressors")
-    return draw_regions(region_slice(model, phi, max_points), names, context, units)
+    return draw_regions(region_slice(model, phi, labels, max_points), names, context, units)
 
 
 def to_png(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> bytes:

@@ -5,13 +5,13 @@ with pwa-pipeline installed gives back the simulator of a logged run. Its input 
 with the model's input columns and output columns; the outputs are given on the leading
 warm-up rows (at least what the model needs, e.g. max(na, nb)) and empty (NaN) after. Its
 output is the table of output columns: the warm-up rows as given, then the free-run
-simulation (the same numbers as the model's ``simulate``). The logged PWARX keeps what
-simulation needs (θ_i, the regions, the orders); the record of its fit (local models,
-clusters, step 5, the rows' labels) stays in the ``pwa_model`` asset.
+simulation (the same numbers as the model's ``simulate``). The logged model keeps what
+simulation needs (its output groups' regions and sub-models, the orders); the record of its
+fit (the fitted steps, the structure search's report) stays in the ``pwa_model`` asset.
 """
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import joblib
 import mlflow.pyfunc
@@ -38,13 +38,10 @@ class Simulator(mlflow.pyfunc.PythonModel):
         self.y_names = list(y_names)
 
     def __getstate__(self) -> dict:
-        """The state MLflow pickles: the model without the record of its fit
-        (:attr:`PWARX.FIT_RECORD <pwa_pipeline.pwa.PWARX.FIT_RECORD>`; the robot's paper
-        setting: 69 MB of local models)."""
-        model = copy.copy(self.model)
-        for name in getattr(model, "FIT_RECORD", ()):
-            model.__dict__.pop(name, None)
-        return {**self.__dict__, "model": model}
+        """The state MLflow pickles: the model without the record of its fit (the output
+        groups' fitted steps, the structured fit and the search's report; the robot's
+        paper setting: 69 MB of local models)."""
+        return {**self.__dict__, "model": without_fit_record(self.model)}
 
     def predict(self, context, model_input: pd.DataFrame, params=None) -> pd.DataFrame:
         """Simulate from the warm-up rows of ``model_input``.
@@ -68,15 +65,33 @@ class Simulator(mlflow.pyfunc.PythonModel):
         return pd.DataFrame(simulated, columns=self.y_names, index=model_input.index)
 
 
+def without_fit_record(model):
+    """A copy of a fitted model that predicts, simulates and exports alike, without the
+    record of its fit: an ARX model's output groups without their fitted steps, and no
+    ``structure_fit_``, ``structure_search_`` or ``timings_`` (documented as the fit's
+    record); another model as it is."""
+    lean = copy.copy(model)
+    if hasattr(model, "groups_"):
+        lean.groups_ = [replace(g, steps={}) for g in model.groups_]
+    for name in ("structure_fit_", "structure_search_", "timings_"):
+        lean.__dict__.pop(name, None)
+    return lean
+
+
 def predictor_fingerprint(model, u_names: list[str], y_names: list[str]) -> str:
     """Hash of what a fitted model predicts with and of its column names: equal fingerprints
     simulate alike.
 
-    For a PWARX, its :meth:`~pwa_pipeline.pwa.PWARX.prediction_state` (θ_i, regions, orders;
-    not the record of the fit nor the unfitted steps, so that sets of a sweep that end in
-    the same model share one); for another model, all its attributes.
+    For an ARX model, its output groups (regions and sub-models), lags, widths and training
+    range, not the record of the fit nor the unfitted steps, so that sets of a sweep that end
+    in the same model share one; for another model, its attributes but the fit's timings.
     """
-    state = model.prediction_state() if hasattr(model, "prediction_state") else vars(model)
+    if hasattr(model, "groups_"):
+        state = [[(g.outputs, g.regions, g.thetas) for g in model.groups_],
+                 model.output_lags_, model.nb, model.affine, model.n_inputs_,
+                 model.n_outputs_, model.signal_range_]
+    else:
+        state = {k: v for k, v in vars(model).items() if k != "timings_"}
     return joblib.hash([type(model).__qualname__, state, list(u_names), list(y_names)])
 
 

@@ -1,11 +1,20 @@
-"""The paper's method, one module per step: regressors (eq. 2–3), local models (eq. 6–7),
-the Vθ embedding (eq. 8–10), clustering (DBSCAN), sub-models (step 5), regions (step 6), and
-the :class:`PWARX` estimator built from those step objects, and the structure search of
-:meth:`PWARX.auto`."""
+"""The PWARX estimator and what it is built from.
+
+:class:`PWARX` (:mod:`.estimator`) fits one shape whatever its parameters: output groups,
+each with one region map and its sub-models (:mod:`.groups`, :mod:`.partitions`), predicted,
+simulated and exported by what every ARX model shares (:mod:`.arx`). Its parts, each a
+sub-package or module of its own: the paper's steps 2–6 (:mod:`.steps`: local models,
+clustering, sub-models, regions), the model structures for machines (:mod:`.structures`,
+:mod:`.scheduling`, :mod:`.structure_fit`), the structure search of :meth:`PWARX.auto`
+(:mod:`.search`), simulation-error training (:mod:`.output_error`) and the compiled kernels
+(:mod:`.kernels`).
+"""
 
 from .estimator import PWARX, STEPS
+from .groups import OutputGroup
 from .memory import FitMemoryError
-from .search.search import SearchReport, SearchTimeLimit, StructureSearch
+from .partitions import RegionMap
+from .search import SearchReport, SearchTimeLimit, StructureSearch
 from .steps.boundaries import ResidualRegions
 from .steps.clustering import DBSCANClustering
 from .steps.local_models import LocalLeastSquares
@@ -13,5 +22,6 @@ from .steps.regions import SVMRegions
 from .steps.submodels import ClusterCentres, RefinedSubModels
 
 __all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
-           "LocalLeastSquares", "RefinedSubModels", "ResidualRegions", "SVMRegions",
-           "SearchReport", "SearchTimeLimit", "StructureSearch"]
+           "LocalLeastSquares", "OutputGroup", "RefinedSubModels", "RegionMap",
+           "ResidualRegions", "SVMRegions", "SearchReport", "SearchTimeLimit",
+           "StructureSearch"]

@@ -1,4 +1,7 @@
-"""Shared prediction, simulation and scoring of ARX-structured models (PWA and linear)."""
+"""What every ARX-structured model shares (PWA and linear): one fitted shape, prediction,
+simulation, scoring, the data envelope and the state-space form."""
+
+from typing import overload
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -13,65 +16,84 @@ from .._validation import (
     check_width,
     warmup_pairs,
 )
+from ..control.conversion import to_state_space
+from ..control.state_space import PWAStateSpace
 from ..envelope import PADDING, outside_box, regressor_bounds
 from ..regressors import lagged_matrix, n_initial
 from ..scoring.metrics import r2_score
+from .groups import modes, predict_groups
+from .partitions import RegionMap
 from .structures import output_lags
-
-
-def training_range(experiments: list[tuple[Float2D, Float2D]]) -> Float2D:
-    """Smallest and largest value of each output, then each input, over the experiments.
-
-    Parameters
-    ----------
-    experiments : list of (u, y)
-        As :func:`~pwa_pipeline._validation.as_experiments` returns them.
-
-    Returns
-    -------
-    ndarray of shape (2, m + r)
-        Row 0 the minima, row 1 the maxima: the estimators keep it as ``signal_range_``,
-        the data envelope of their state-space form (:mod:`pwa_pipeline.control`).
-    """
-    joined = np.vstack([np.hstack([y, u]) for u, y in experiments])
-    return np.vstack([joined.min(axis=0), joined.max(axis=0)])
 
 
 class ARXModelBase(BaseEstimator):
     """Base class for models y(k) = f(φ(k)) with φ(k) from eq. (2)–(3).
 
-    Subclasses set ``na``, ``nb``, ``affine``, ``form`` and ``outputs`` as parameters, the fitted
-    ``n_inputs_`` and ``n_outputs_`` (and ``signal_range_``, the training range, for the data
-    envelope), and implement :meth:`_predict_phi`. φ holds :attr:`output_lags_` output lags:
+    Subclasses take ``na``, ``nb``, ``affine`` and ``form`` as parameters and set at fit
+    the one fitted shape every model shares: ``groups_``, a list of
+    :class:`~.groups.OutputGroup` (outputs that switch together, their region map and
+    sub-models), with ``n_inputs_``, ``n_outputs_``, ``structures_`` (each output's structure
+    in words), ``signal_range_`` (the training range, for the data envelope) and
+    ``timings_`` (seconds per stage of the fit). φ holds :attr:`output_lags_` output lags:
     na, or na + 1 in the velocity form (:mod:`~.structures`).
+
+    From the groups every model has, whatever fitted it: :attr:`thetas_`, :attr:`regions_`
+    and :attr:`n_submodels_` (the model as eq. 1), :meth:`predict`, :meth:`simulate`,
+    :meth:`score` and :meth:`to_state_space`.
 
     **Data envelope.** A model is known only where its training regressors went.
     :meth:`outside_envelope` says, per sample, whether φ(k) leaves the box of the training
-    range padded by :data:`~.envelope.PADDING` (:mod:`~.envelope`); ``predict`` and
-    ``simulate`` return the same flags next to their numbers with ``return_outside=True``
-    (the numbers are the same either way: outside the envelope the model extrapolates, it
-    is not clipped).
-    """
+    range padded by :data:`~pwa_pipeline.envelope.PADDING` (:mod:`pwa_pipeline.envelope`);
+    outside it the model extrapolates (its numbers are not clipped).
 
-    @property
-    def structured(self) -> bool:
-        """Whether the fit takes the structured route of :mod:`~.structure_fit` (velocity
-        form or decoupled outputs)."""
-        return self.form != "level" or self.outputs != "joint"
+    **Return types.** ``predict`` and ``simulate`` take one experiment (arrays) or several
+    (lists of arrays) and answer in kind: an ndarray of shape (N, m) for one experiment, a
+    list of them, one per experiment, for a list.
+    """
 
     @property
     def output_lags_(self) -> int:
         """Output lags of φ: na, or na + 1 with ``form="velocity"``."""
         return output_lags(self.na, self.form)
 
-    def _predict_phi(self, phi: Float2D) -> Float2D:
-        """y(k) for each row φ(k); shape (n, m)."""
-        raise NotImplementedError
-
     @property
     def n_initial_(self) -> int:
         """Samples needed before the first prediction: max(output lags, nb)."""
         return n_initial(self.output_lags_, self.nb)
+
+    @property
+    def regions_(self) -> RegionMap:
+        """The region map of the model as eq. (1) (:func:`~.groups.modes`): the group's own
+        map for a model of one output group, else the product of the groups' maps (one
+        region per combination of the groups' regions). ``regions_.predict(phi)`` gives the
+        sub-model of each row of φ."""
+        check_is_fitted(self)
+        return modes(self.groups_, self.n_outputs_)[0]
+
+    @property
+    def thetas_(self) -> np.ndarray:
+        """θ_i of eq. (1), shape (s, D, m): each sub-model's parameter matrix over φ (for
+        several output groups, one per combination of their regions)."""
+        check_is_fitted(self)
+        return modes(self.groups_, self.n_outputs_)[1]
+
+    @property
+    def steps_(self) -> dict:
+        """The fitted steps that found the regions and sub-models, by name (``local_models``,
+        ``clustering``, ``submodels``, ``regions``, ``refinement``): those of the first output
+        group that ran any (``groups_[g].steps`` has each group's); empty when none ran."""
+        check_is_fitted(self)
+        return next((g.steps for g in self.groups_ if g.steps), {})
+
+    @property
+    def n_submodels_(self) -> int:
+        """s, the sub-models of eq. (1): the product of the groups' region counts."""
+        check_is_fitted(self)
+        return int(np.prod([g.n_regions for g in self.groups_]))
+
+    def _predict_phi(self, phi: Float2D) -> Float2D:
+        """y(k) for each row φ(k); shape (n, m)."""
+        return predict_groups(self.groups_, phi, self.n_outputs_)
 
     def _experiments(self, u: Signals, y: Signals, y_name: str):
         check_is_fitted(self)
@@ -81,10 +103,15 @@ class ARXModelBase(BaseEstimator):
             check_width(ye, self.n_outputs_, y_name, "output(s)")
         return pairs
 
-    def predict(
-        self, u: Signals, y: Signals, n_init: int | None = None, *,
-        return_outside: bool = False,
-    ) -> Float2D | list[Float2D] | tuple:
+    @overload
+    def predict(self, u: Float2D, y: Float2D, n_init: int | None = None) -> Float2D: ...
+
+    @overload
+    def predict(self, u: list[Float2D], y: list[Float2D], n_init: int | None = None
+                ) -> list[Float2D]: ...
+
+    def predict(self, u: Signals, y: Signals, n_init: int | None = None
+                ) -> Float2D | list[Float2D]:
         """One-step-ahead prediction ŷ(k) = f(φ(k)) from measured past outputs.
 
         Parameters
@@ -95,30 +122,16 @@ class ARXModelBase(BaseEstimator):
         n_init : int, optional
             Rows returned as given (a warm-up window); at least and by default
             max(output lags, nb). From 0 to below each experiment's length.
-        return_outside : bool, default False
-            Also return, per sample, whether the prediction's regressor φ(k) (the measured
-            past outputs and the past inputs) leaves the data envelope
-            (:meth:`outside_envelope`); the predictions are the same either way.
 
         Returns
         -------
-        ndarray of shape (N, m), or a list of them
+        ndarray of shape (N, m) for one experiment; a list of them for a list
             The first ``n_init`` rows are the given y; the rest are predictions.
-        outside : ndarray of bool, shape (N,), or a list of them (``return_outside`` only)
-            True where φ(k) leaves the envelope; False on the rows returned as given.
-
-        Raises
-        ------
-        ValueError
-            With ``return_outside=True``, if the model records no training range
-            (``signal_range_``).
         """
         pairs = self._experiments(u, y, "y")
         n0 = self.n_initial_
         keep = n0 if n_init is None else max(n_init, n0)
-        if return_outside:
-            lower, upper = self.envelope()
-        out, flags = [], []
+        out = []
         for ue, ye in pairs:
             check_n_init(n_init, ye.shape[0])
             yhat = ye.copy()
@@ -127,14 +140,15 @@ class ARXModelBase(BaseEstimator):
                 yhat[n0:] = self._predict_phi(phi)
                 yhat[:keep] = ye[:keep]
             out.append(yhat)
-            if return_outside:
-                flag = self._outside(ue, ye, lower, upper)
-                flag[:keep] = False
-                flags.append(flag)
-        return _returned(out, flags if return_outside else None, _is_experiment_list(y))
+        return out if _is_experiment_list(y) else out[0]
 
-    def simulate(self, u: Signals, y_init: Signals, *, return_outside: bool = False
-                 ) -> Float2D | list[Float2D] | tuple:
+    @overload
+    def simulate(self, u: Float2D, y_init: Float2D) -> Float2D: ...
+
+    @overload
+    def simulate(self, u: list[Float2D], y_init: list[Float2D]) -> list[Float2D]: ...
+
+    def simulate(self, u: Signals, y_init: Signals) -> Float2D | list[Float2D]:
         """Free-run simulation: φ(k) is built from the model's own past outputs.
 
         Parameters
@@ -143,49 +157,44 @@ class ARXModelBase(BaseEstimator):
         y_init : array-like of shape (n_init, m) with n_init ≥ max(output lags, nb), or a
             list
             Initial outputs (a warm-up window); simulation starts at sample n_init.
-        return_outside : bool, default False
-            Also return, per sample, whether the simulation's regressor φ(k) (its own past
-            outputs, the warm-up's where the lags reach into it, and the past inputs) leaves
-            the data envelope (:meth:`outside_envelope` of u and the returned outputs); the
-            simulation is the same either way.
 
         Returns
         -------
-        ndarray of shape (N, m), or a list of them
+        ndarray of shape (N, m) for one experiment; a list of them for a list
             The first n_init rows are ``y_init``. A run that diverges to ±inf or NaN is
             returned as it is (later rows non-finite), not raised.
-        outside : ndarray of bool, shape (N,), or a list of them (``return_outside`` only)
-            True where φ(k) leaves the envelope or is not finite (a diverged run); False on
-            the warm-up rows.
 
         Raises
         ------
         ValueError
             If the input width differs from the fitted one, ``y_init`` has fewer than
-            max(output lags, nb) rows or more rows than u, any value is non-finite, or
-            (``return_outside=True``) the model records no training range.
+            max(output lags, nb) rows or more rows than u, or any value is non-finite.
         """
         check_is_fitted(self)
         pairs = warmup_pairs(u, y_init, self.n_inputs_, self.n_outputs_, self.n_initial_)
-        if return_outside:
-            lower, upper = self.envelope()
-        out, flags = [], []
-        for ue, ye in pairs:
-            out.append(self._free_run(ue, ye))
-            if return_outside:
-                flag = self._outside(ue, out[-1], lower, upper)
-                flag[:ye.shape[0]] = False
-                flags.append(flag)
-        return _returned(out, flags if return_outside else None, _is_experiment_list(u))
+        out = [self._free_run(ue, ye) for ue, ye in pairs]
+        return out if _is_experiment_list(u) else out[0]
+
+    def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
+                       padding: float = PADDING, input_names: list[str] | None = None,
+                       output_names: list[str] | None = None) -> PWAStateSpace:
+        """The model as a PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i on
+        polyhedral regions of z = [x; u] (:func:`pwa_pipeline.control.to_state_space`, whose
+        parameters these are): its output groups' regions made explicit inside the data
+        envelope (``signal_range_``, or the range of ``u`` and ``y`` when given, widened by
+        ``padding``).
+        """
+        return to_state_space(self, u, y, padding=padding, input_names=input_names,
+                              output_names=output_names)
 
     def envelope(self, padding: float = PADDING) -> tuple[np.ndarray, np.ndarray]:
         """The data envelope over φ(k) without the constant
-        (:func:`~.envelope.regressor_bounds`): each entry's channel's training range widened
+        (:func:`~pwa_pipeline.envelope.regressor_bounds`): each entry's channel's training range widened
         by ``padding`` of its span.
 
         Parameters
         ----------
-        padding : float, default :data:`~.envelope.PADDING` (5 %)
+        padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (5 %)
 
         Returns
         -------
@@ -195,16 +204,14 @@ class ARXModelBase(BaseEstimator):
         Raises
         ------
         ValueError
-            If the model records no training range (``signal_range_``: e.g. a model joined by
-            ``PWARX.assemble`` without one).
+            If the model records no training range (``signal_range_``).
         """
         check_is_fitted(self)
         rng = getattr(self, "signal_range_", None)
         if rng is None:
             raise ValueError(
                 f"this {type(self).__name__} does not record the range of its training data "
-                f"(signal_range_), so it has no data envelope: fit it, or pass the range to "
-                f"PWARX.assemble(signal_range=...)")
+                f"(signal_range_), so it has no data envelope: fit it again")
         return regressor_bounds(rng, self.n_outputs_, self.n_inputs_, self.output_lags_,
                                 self.nb, padding)
 
@@ -223,7 +230,7 @@ class ARXModelBase(BaseEstimator):
         y : array-like of shape (N, m), or a list of such arrays
             May hold NaN or inf (a diverged simulation): a φ(k) with such an entry is
             outside.
-        padding : float, default :data:`~.envelope.PADDING` (5 %)
+        padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (5 %)
 
         Returns
         -------
@@ -294,11 +301,3 @@ class ARXModelBase(BaseEstimator):
         y_pred = np.vstack([p[n0:] for p in yhat])
         return float(np.mean(r2_score(y_true, y_pred)))
 
-
-def _returned(out: list, flags: list | None, many: bool):
-    """What ``predict`` and ``simulate`` return: the arrays of each experiment (one array
-    for a single one), with their envelope flags when asked (``flags`` not None)."""
-    result = out if many else out[0]
-    if flags is None:
-        return result
-    return result, (flags if many else flags[0])

@@ -8,20 +8,21 @@ from sklearn.base import BaseEstimator, _fit_context, clone
 from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from .._typing import Float2D, Signals
+from .._typing import Signals
 from .._validation import as_experiments
-from ..envelope import PADDING
+from ..envelope import training_range
 from ..regressors import Regressors, build_regressors
-from .arx import ARXModelBase, training_range
+from .arx import ARXModelBase
+from .groups import OutputGroup
 from .memory import check_fit_memory
-from .search.search import StructureSearch
+from .search import StructureSearch
 from .steps.boundaries import ResidualRegions
 from .steps.clustering import DBSCANClustering
 from .steps.local_models import LocalLeastSquares
 from .steps.regions import SVMRegions
 from .steps.submodels import ClusterCentres, RefinedSubModels, output_lag_columns
 from .structure_fit import fit_structure
-from .structures import COUPLINGS, FORMS
+from .structures import COUPLINGS, FORMS, output_groups
 
 #: The step parameters of :class:`PWARX`, in the order the fit runs them.
 STEPS = ("local_models", "clustering", "submodels", "regions")
@@ -43,24 +44,28 @@ class PWARX(ARXModelBase):
     The library default (``PWARX()``, the same as :meth:`PWARX.default`) differs from the
     paper where measurement showed the paper's version fails (``shared/paper/NOTES.md``):
     z-scored neighbour search and at most 5,000 local models estimated
-    (:class:`~.local_models.LocalLeastSquares`), unit-free θ_k,
+    (:class:`~.steps.local_models.LocalLeastSquares`), unit-free θ_k,
     mixed local sets left out and at most 3,000 local models clustered, ε from the k-distance
-    curve (:class:`~.clustering.DBSCANClustering`), and sub-models refitted, merged,
+    curve (:class:`~.steps.clustering.DBSCANClustering`), and sub-models refitted, merged,
     re-assigned by residual and region, with a search for missed modes
-    (:class:`~.submodels.RefinedSubModels`), and region boundaries refined on the
-    residuals (:class:`~.boundaries.ResidualRegions`). :meth:`PWARX.paper` is the paper's
+    (:class:`~.steps.submodels.RefinedSubModels`), and region boundaries refined on the
+    residuals (:class:`~.steps.boundaries.ResidualRegions`). :meth:`PWARX.paper` is the paper's
     setting.
 
-    Each step object implements the interface of its kind (:mod:`~.base`:
-    :class:`~.base.BaseLocalModels`, :class:`~.base.BaseClustering`,
-    :class:`~.base.BaseSubModels`, :class:`~.base.BaseRegions`), and :meth:`fit_step` calls
-    every step of a kind alike.
+    Each step object implements the interface of its kind (:mod:`~.steps.base`:
+    :class:`~.steps.base.BaseLocalModels`, :class:`~.steps.base.BaseClustering`,
+    :class:`~.steps.base.BaseSubModels`, :class:`~.steps.base.BaseRegions`): a step of
+    one's own is one class of that kind, e.g. a region learner implements ``fit``,
+    ``predict`` and ``halfspaces`` and then predicts, simulates and exports to state space
+    as the built-in ones do.
 
-    With ``form="velocity"``, ``outputs="decoupled"`` or ``scheduling``, the fit takes the
-    structured route of :mod:`~.structure_fit` (the paper's steps run per output group on ψ
-    when ``scheduling`` is None); with ``search`` (:meth:`auto`), the structure search of
-    :mod:`~.structure_search`. The model is then ``structure_`` and ``thetas_``,
-    ``regions_``, ``labels_`` and the fitted steps are not set.
+    ``form="velocity"``, ``outputs="decoupled"`` and ``scheduling`` give the structures of
+    :mod:`~.structure_fit` (the paper's steps run per output group on its regressor ψ when
+    ``scheduling`` is None); ``search`` (:meth:`auto`) the structure search of
+    :mod:`~.search`. Every combination ends in the same fitted shape: output groups, each
+    with one region map and its sub-models (:mod:`~.groups`), and from them ``thetas_``,
+    ``regions_``, ``n_submodels_``, :meth:`predict`, :meth:`simulate` and
+    :meth:`to_state_space`.
 
     Parameters
     ----------
@@ -92,7 +97,7 @@ class PWARX(ARXModelBase):
         each output's increment), in place of steps 2–6; sub-models by least squares per
         region, optionally a structure chosen per output on held-out training experiments.
     search : StructureSearch, optional
-        The structure chosen from the data (:class:`~.structure_search.StructureSearch`,
+        The structure chosen from the data (:class:`~.search.StructureSearch`,
         built by :meth:`auto`): form, coupling, regions (scheduling variables it proposes,
         or the steps' clusters), modes and orders up to ``na``, ``nb``, judged on held-out
         training experiments and refined; never worse there than its linear reference.
@@ -101,31 +106,36 @@ class PWARX(ARXModelBase):
 
     Attributes
     ----------
-    local_models_, clustering_, submodels_, regions_ : fitted step estimators
-        ``regions_.predict(phi)`` gives the region of each regressor row.
-    refinement_ : fitted refinement step (with ``refinement`` only)
+    groups_ : list of OutputGroup
+        The fitted model (:class:`~.groups.OutputGroup`): outputs that switch together,
+        their region map over φ and each region's parameter rows, with the fitted steps
+        that found them (``group.steps``: ``local_models``, ``clustering``, ``submodels``,
+        ``regions`` and ``refinement`` where they ran). The paper's route is one group.
     thetas_ : ndarray of shape (s, d, m)
-        Sub-model parameter matrices θ_i (eq. 4): refitted with the regions by the default's
-        step 6 (:class:`~.boundaries.ResidualRegions`), refined when ``refinement`` is given
-        (``submodels_.thetas_`` keeps step 5's, :meth:`base_thetas` those before the
-        refinement).
+        Sub-model parameter matrices θ_i (eq. 4) of the model as eq. (1): on the paper's
+        route refitted with the regions by the default's step 6
+        (:class:`~.steps.boundaries.ResidualRegions`) and refined when ``refinement`` is
+        given (``groups_[0].steps["submodels"].thetas_`` keeps step 5's); with several output
+        groups one per combination of their regions.
+    regions_ : RegionMap
+        ``regions_.predict(phi)`` gives the sub-model of each regressor row (the paper's
+        route: the fitted region step).
     n_submodels_ : int
-    labels_ : ndarray of shape (n,)
-        Sub-model of each training regressor row (−1: DBSCAN noise, paper setting only).
+        s.
+    structures_ : list of str
+        Each output's structure in words: form, orders and regions.
     n_inputs_, n_outputs_ : int
     timings_ : dict
-        Seconds spent in each step.
-    structure_ : StructuredModel (structured route only)
-        Per output its regressor, regions and sub-models (:mod:`~.structures`).
-    structure_fit_ : StructureFit (structured route only)
+        Seconds spent in each stage of the fit (the paper's steps by name, or the
+        structured fit, or the search): their sum is the fit's time.
+    structure_fit_ : StructureFit (structured fits and the search)
         The held-out experiments, each candidate's validation error, the refinements.
     structure_search_ : SearchReport (with ``search`` only)
         Every candidate the search tried, its held-out free-run NRMSE and outcome, and
-        why it chose (:class:`~.structure_search.SearchReport`).
+        why it chose (:class:`~.search.SearchReport`).
     signal_range_ : ndarray of shape (2, m + r)
-        Smallest and largest training value of each output, then each input (set by
-        :meth:`fit`, or given to :meth:`assemble`; a model joined without it has none): the
-        data envelope of :meth:`~.arx.ARXModelBase.outside_envelope` and of
+        Smallest and largest training value of each output, then each input: the data
+        envelope of :meth:`~.arx.ARXModelBase.outside_envelope` and of
         :meth:`to_state_space`.
 
     Examples
@@ -141,16 +151,6 @@ class PWARX(ARXModelBase):
     >>> PWARX.default(na=1, nb=1).set_params(clustering__eps=0.2).get_params()["clustering__eps"]
     0.2
     """
-
-    FIT_RECORD = ("local_models_", "clustering_", "submodels_", "labels_", "refinement_",
-                  "structure_fit_", "structure_search_", "timings_")
-    """Fitted attributes that record the fit (steps 2–5, the refinement, the rows' labels,
-    the structure search, the seconds): ``predict`` and ``simulate`` use none of them
-    (``thetas_`` and ``regions_``, or ``structure_``, make the model)."""
-
-    FIT_PARAMS = (*STEPS, "refinement")
-    """Parameters that only ``fit`` reads (the unfitted steps): ``predict`` and ``simulate``
-    read what they fitted."""
 
     _parameter_constraints: dict = {
         "na": [Interval(Integral, 0, None, closed="left")],
@@ -205,7 +205,7 @@ class PWARX(ARXModelBase):
 
     @classmethod
     def auto(cls, na: int = 2, nb: int = 2, **search: object) -> "PWARX":
-        """The structure chosen from the data (:mod:`~.structure_search`): forms, joint or
+        """The structure chosen from the data (:mod:`~.search`): forms, joint or
         per-output models, regions from scheduling variables the search proposes or from
         the paper's clustering, modes per output and orders up to (``na``, ``nb``), each
         judged by its free run on held-out training experiments, refined on the free-run
@@ -223,7 +223,7 @@ class PWARX(ARXModelBase):
         na, nb : int, default 2
             The largest orders tried.
         **search
-            Parameters of :class:`~.structure_search.StructureSearch` (e.g.
+            Parameters of :class:`~.search.StructureSearch` (e.g.
             ``max_seconds=60``).
         """
         return cls(na=na, nb=nb, affine=True,
@@ -248,15 +248,42 @@ class PWARX(ARXModelBase):
                                                confidence=None, max_clustered=None),
                    submodels=ClusterCentres(), regions=SVMRegions(max_rows=None, tol=1e-2))
 
-    def steps(self) -> dict[str, BaseEstimator]:
+    def step_objects(self) -> dict[str, BaseEstimator]:
         """The unfitted step objects, defaults filled in for those left None."""
-        defaults = type(self).default()
         return {name: getattr(self, name) if getattr(self, name) is not None
-                else getattr(defaults, name) for name in STEPS}
+                else _DEFAULT_STEPS[name]() for name in STEPS}
+
+    def set_params(self, **params) -> "PWARX":
+        """Set parameters, the steps' own by ``<step>__<parameter>`` (e.g.
+        ``clustering__eps``), as scikit-learn's ``set_params``; a step left at its default
+        (None) becomes the default step object first, so every documented step parameter is
+        settable on a plain ``PWARX(...)``.
+
+        Raises
+        ------
+        ValueError
+            For a parameter of ``refinement``, ``scheduling`` or ``search`` while that
+            option is None (off): give the option's object first.
+        """
+        for name in STEPS:
+            if getattr(self, name) is None and name not in params \
+                    and any(key.startswith(f"{name}__") for key in params):
+                setattr(self, name, _DEFAULT_STEPS[name]())
+        for name in ("refinement", "scheduling", "search"):
+            nested = [key for key in params if key.startswith(f"{name}__")]
+            if nested and getattr(self, name) is None and params.get(name) is None:
+                raise ValueError(f"{nested[0]}: {name} is None (off); set {name}= to its "
+                                 f"object first, e.g. {_OPTION_EXAMPLES[name]}")
+        return super().set_params(**params)
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, u: Signals, y: Signals) -> "PWARX":
         """Identify the PWARX model from one or several experiments.
+
+        Every parameter combination ends in the same fitted shape (:mod:`~.groups`): the
+        paper's steps on φ give one output group; ``form``, ``outputs`` or ``scheduling``
+        give the structures of :mod:`~.structure_fit`; ``search`` the structure search of
+        :mod:`~.search`.
 
         Parameters
         ----------
@@ -271,40 +298,26 @@ class PWARX(ARXModelBase):
         ------
         ValueError
             On NaN/inf, mismatched lengths or dimensions, too few samples for n_ρ, n_ρ ≤ d,
-            too few usable (non-degenerate) local sets to cluster, or when DBSCAN finds no
-            cluster.
+            too few usable (non-degenerate) local sets to cluster, when DBSCAN finds no
+            cluster, or for options that do not go together (named in the message).
         pwa_pipeline.pwa.memory.FitMemoryError
             At once, before any step, when the fit's estimated memory exceeds what the
             machine has available (:func:`~pwa_pipeline.pwa.memory.check_fit_memory`); the
             message gives the estimate and the setting to change.
         """
-        timings: dict[str, float] = {}
-        t0 = time.perf_counter()
         experiments = as_experiments(u, y)
         self.signal_range_ = training_range(experiments)
-        if self.structured:
-            return self._fit_structured(experiments)
-        reg = build_regressors(experiments, self.na, self.nb, self.affine)
-        timings["regressors"] = time.perf_counter() - t0
-        fitted = {}
-        for name in STEPS:
-            t0 = time.perf_counter()
-            fitted[name] = self.fit_step(name, reg, **fitted)
-            timings[name] = time.perf_counter() - t0
-        self.assemble(reg, **fitted, signal_range=self.signal_range_)
-        if self.refinement is not None:
-            t0 = time.perf_counter()
-            self.assemble(reg, **fitted, refinement=self.fit_refinement(experiments),
-                          signal_range=self.signal_range_)
-            timings["refinement"] = time.perf_counter() - t0
-        self.timings_ = timings
+        self.n_inputs_ = experiments[0][0].shape[1]
+        self.n_outputs_ = experiments[0][1].shape[1]
+        self.n_features_in_ = self.n_inputs_
+        self.timings_ = {}
+        if self.search is not None:
+            self.groups_, self.structures_ = self._fit_search(experiments)
+        elif self.form != "level" or self.outputs != "joint" or self.scheduling is not None:
+            self.groups_, self.structures_ = self._fit_structure(experiments)
+        else:
+            self.groups_, self.structures_ = self._fit_steps(experiments)
         return self
-
-    @property
-    def structured(self) -> bool:
-        """Whether the fit takes the structured route (velocity form, decoupled outputs or
-        user regions)."""
-        return super().structured or self.scheduling is not None or self.search is not None
 
     @property
     def output_lags_(self) -> int:
@@ -312,233 +325,129 @@ class PWARX(ARXModelBase):
         (whose na is the largest order it tries, in either form)."""
         return self.na + 1 if self.search is not None else super().output_lags_
 
-    def _fit_structured(self, experiments: list[tuple[Float2D, Float2D]]) -> "PWARX":
+    def _run_steps(self, reg: Regressors, eq3: bool, timings: dict | None = None
+                   ) -> tuple[np.ndarray, dict]:
+        """The paper's steps 2–6 on the regressors ``reg``: θ_i (s, d, m) and the fitted
+        steps by name, each step's seconds put in ``timings`` when given. ``eq3``: ``reg``
+        holds eq. (3)'s φ (the region step then gets its output-lag columns and each row's
+        experiment; an output group's ψ has neither)."""
+        steps = self.step_objects()
+        check_fit_memory(*reg.phi.shape, reg.target.shape[1], steps,
+                         base=reg.phi.nbytes + reg.target.nbytes)
+        fitted: dict[str, BaseEstimator] = {}
+
+        def timed(name: str, fit) -> BaseEstimator:
+            t0 = time.perf_counter()
+            fitted[name] = fit(clone(steps[name]))
+            if timings is not None:
+                timings[name] = time.perf_counter() - t0
+            return fitted[name]
+
+        local = timed("local_models", lambda s: s.fit(reg.phi, reg.target))
+        clusters = timed("clustering", lambda s: s.fit(local, reg.target))
+        subs = timed("submodels", lambda s: s.fit(reg.phi, reg.target, local, clusters,
+                                                  regions=steps["regions"]))
+        lags = output_lag_columns(reg.n_outputs, self.na, reg.phi.shape[1]) if eq3 else None
+        regions = timed("regions", lambda s: s.fit(
+            reg.phi, subs.labels_, subs.n_submodels_, sample_weight=subs.weights_,
+            target=reg.target, thetas=subs.thetas_, output_lags=lags,
+            experiment=reg.experiment if eq3 else None))
+        # the region step may refit the sub-models with its regions (ResidualRegions)
+        thetas = getattr(regions, "thetas_", subs.thetas_)
+        if regions.n_regions_ != len(thetas):
+            raise ValueError(f"the region step {type(regions).__name__} has "
+                             f"{regions.n_regions_} regions for {len(thetas)} sub-models; a "
+                             f"region step has one region per sub-model (fit's n_regions)")
+        return thetas, fitted
+
+    def _fit_steps(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
+        """The paper's route: steps 2–6 on φ, one output group, refined on request."""
         t0 = time.perf_counter()
+        reg = build_regressors(experiments, self.na, self.nb, self.affine)
+        self.timings_["regressors"] = time.perf_counter() - t0
+        thetas, steps = self._run_steps(reg, eq3=True, timings=self.timings_)
+        if self.refinement is not None:
+            t0 = time.perf_counter()
+            steps["refinement"] = clone(self.refinement).fit(
+                thetas, [e[0] for e in experiments], [e[1] for e in experiments], self.na,
+                self.nb, self.affine, region_of=steps["regions"].predict)
+            thetas = steps["refinement"].thetas_
+            self.timings_["refinement"] = time.perf_counter() - t0
+        group = OutputGroup(tuple(range(reg.n_outputs)), steps["regions"], thetas, steps)
+        kind = f"clustered ({group.n_regions} regions)" if group.n_regions > 1 else \
+            "clustered (1 region: linear)"
+        return [group], [f"level ({self.na}, {self.nb}), {kind}"] * reg.n_outputs
 
-        def cluster(reg: Regressors):
-            fitted: dict[str, BaseEstimator] = {}
-            for name in STEPS:
-                fitted[name] = self.fit_step(name, reg, **fitted)
-            subs, regions = fitted["submodels"], fitted["regions"]
-            return _base_thetas(subs, regions), regions, subs.n_submodels_
+    def _cluster(self, reg: Regressors) -> tuple[np.ndarray, dict]:
+        """The paper's steps 2–6 on an output group's regressors ψ (the structured routes'
+        clustered candidates)."""
+        return self._run_steps(reg, eq3=False)
 
-        if self.search is not None:
-            given = [name for name, default in (("form", "level"), ("outputs", "joint"))
-                     if getattr(self, name) != default]
-            given += [name for name in ("scheduling", "refinement")
-                      if getattr(self, name) is not None]
-            if given:
-                raise ValueError(f"the structure search chooses the form, the outputs' "
-                                 f"coupling and the regions and refines them itself; leave "
-                                 f"{', '.join(given)} out (the search's own parameters set "
-                                 f"what it tries)")
-            if not self.affine:
-                raise ValueError("the structure search fits a constant term and proposes "
-                                 "thresholds on it: it needs affine=True (PWARX.auto sets it)")
-            self.structure_fit_, self.structure_search_ = self.search.search(
-                experiments, self.na, self.nb, cluster=cluster)
-        else:
-            self.structure_fit_ = fit_structure(
-                experiments, self.na, self.nb, self.affine, self.form, self.outputs,
-                scheduling=self.scheduling, refinement=self.refinement,
-                cluster=cluster if self.scheduling is None else None)
-        self.structure_ = self.structure_fit_.model
-        self.n_inputs_ = experiments[0][0].shape[1]
-        self.n_outputs_ = experiments[0][1].shape[1]
-        self.n_features_in_ = self.n_inputs_
-        self.n_submodels_ = max(self.structure_.n_regions)
-        self.timings_ = {"structure": time.perf_counter() - t0}
-        return self
+    def _fit_structure(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
+        """The structures of :mod:`~.structure_fit` (velocity form, one model per output,
+        user regions)."""
+        t0 = time.perf_counter()
+        self.structure_fit_ = fit_structure(
+            experiments, self.na, self.nb, self.affine, self.form, self.outputs,
+            scheduling=self.scheduling, refinement=self.refinement,
+            cluster=self._cluster if self.scheduling is None else None)
+        self.timings_["structure"] = time.perf_counter() - t0
+        outputs = self.structure_fit_.outputs
+        described = [f"{self.form} ({self.na}, {self.nb}), {o.structure}"
+                     + (f" ({o.n_regions} regions)" if o.n_regions > 1 else "")
+                     for o in outputs]
+        return output_groups(outputs), described
 
-    def fit_refinement(self, experiments: list[tuple[Float2D, Float2D]]) -> BaseEstimator:
-        """Fit a clone of ``refinement`` from the assembled model's θ_i and regions.
-
-        Parameters
-        ----------
-        experiments : list of (u, y)
-            The training experiments (:func:`~pwa_pipeline._validation.as_experiments`).
-
-        Returns
-        -------
-        The fitted refinement step, for :meth:`assemble`.
-        """
-        return clone(self.refinement).fit(
-            self.base_thetas(), [e[0] for e in experiments], [e[1] for e in experiments],
-            self.na, self.nb, self.affine, region_of=self.regions_.predict)
-
-    def base_thetas(self) -> np.ndarray:
-        """The θ_i before any refinement (:func:`_base_thetas` of the fitted steps)."""
-        return _base_thetas(self.submodels_, self.regions_)
-
-    def fit_step(self, name: str, reg: Regressors, **fitted: BaseEstimator) -> BaseEstimator:
-        """Fit a clone of the step ``name`` (one of :data:`STEPS`) on the regressors.
-
-        Parameters
-        ----------
-        name : str
-        reg : Regressors
-            From :func:`~pwa_pipeline.regressors.build_regressors` with this model's
-            orders.
-        **fitted
-            The steps before ``name``, fitted, by name (``local_models=...`` for
-            ``clustering``; ``local_models`` and ``clustering`` for ``submodels``;
-            ``submodels`` for ``regions``).
-
-        Returns
-        -------
-        The fitted step. :meth:`fit` runs this for each step in turn; the pipeline runs it
-        once per asset and joins the results with :meth:`assemble`.
-        """
-        steps = self.steps()
-        step = clone(steps[name])
-        if name == "local_models":  # the first step: fail now if the fit cannot fit in memory
-            check_fit_memory(*reg.phi.shape, reg.target.shape[1], steps,
-                             base=reg.phi.nbytes + reg.target.nbytes)
-            return step.fit(reg.phi, reg.target)
-        if name == "clustering":
-            return step.fit(fitted["local_models"], reg.target)
-        if name == "submodels":
-            return step.fit(reg.phi, reg.target, fitted["local_models"], fitted["clustering"],
-                            regions=steps["regions"])
-        if name == "regions":
-            subs = fitted["submodels"]
-            # the output-lag columns of φ (eq. 3) and each row's experiment; the structured
-            # route's regressors are not eq. (3)'s φ and pass neither
-            output_lags = None if self.structured else output_lag_columns(
-                reg.n_outputs, self.na, reg.phi.shape[1])
-            return step.fit(reg.phi, subs.labels_, subs.n_submodels_,
-                            sample_weight=subs.weights_, target=reg.target,
-                            thetas=subs.thetas_, output_lags=output_lags,
-                            experiment=None if self.structured else reg.experiment)
-        raise ValueError(f"unknown step {name!r}; the steps are {list(STEPS)}")
-
-    def assemble(self, reg: Regressors, local_models: BaseEstimator,
-                 clustering: BaseEstimator, submodels: BaseEstimator,
-                 regions: BaseEstimator, refinement: BaseEstimator | None = None, *,
-                 signal_range: Float2D | None = None) -> "PWARX":
-        """Set the fitted attributes from the fitted steps (and the fitted refinement, whose
-        θ_i replace step 5's); returns self.
-
-        Parameters
-        ----------
-        reg : Regressors
-            The training regressors the steps were fitted on.
-        local_models, clustering, submodels, regions : fitted step estimators
-        refinement : fitted refinement step, optional
-        signal_range : array-like of shape (2, m + r), optional
-            The training range (:func:`~.arx.training_range` of the training experiments,
-            as :meth:`fit` records it), kept as ``signal_range_``: the model's data
-            envelope. It is taken from the experiments, not from ``reg``: φ's rows hold
-            the lagged outputs and inputs only, so they miss each experiment's first
-            max(na, nb) − na outputs and its inputs before max(na, nb) − nb and at its last
-            sample, and with nb = 0 every input. None: the model records no range (no
-            envelope: :meth:`~.arx.ARXModelBase.outside_envelope` raises and the
-            evaluation reports no share outside it).
-
-        Raises
-        ------
-        ValueError
-            If ``signal_range`` is not of shape (2, m + r).
-        """
-        self.n_inputs_ = reg.n_inputs
-        self.n_outputs_ = reg.n_outputs
-        self.n_features_in_ = self.n_inputs_
-        if signal_range is None:
-            vars(self).pop("signal_range_", None)  # (none from an earlier fit stays)
-        else:
-            rng = np.array(signal_range, dtype=float)
-            if rng.shape != (2, reg.n_outputs + reg.n_inputs):
-                raise ValueError(
-                    f"signal_range has shape {rng.shape}; expected (2, outputs + inputs) = "
-                    f"{(2, reg.n_outputs + reg.n_inputs)}")
-            self.signal_range_ = rng
-        self.local_models_, self.clustering_ = local_models, clustering
-        self.submodels_, self.regions_ = submodels, regions
-        self.thetas_ = self.base_thetas() if refinement is None else refinement.thetas_
-        if refinement is not None:
-            self.refinement_ = refinement
-        self.n_submodels_ = submodels.n_submodels_
-        self.labels_ = submodels.labels_
-        self.timings_ = {}
-        return self
+    def _fit_search(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
+        """The structure search of :mod:`~.search` (:meth:`auto`)."""
+        given = [name for name, default in (("form", "level"), ("outputs", "joint"))
+                 if getattr(self, name) != default]
+        given += [name for name in ("scheduling", "refinement")
+                  if getattr(self, name) is not None]
+        if given:
+            raise ValueError(f"the structure search chooses the form, the outputs' "
+                             f"coupling and the regions and refines them itself; leave "
+                             f"{', '.join(given)} out (the search's own parameters set "
+                             f"what it tries)")
+        if not self.affine:
+            raise ValueError("the structure search fits a constant term and proposes "
+                             "thresholds on it: it needs affine=True (PWARX.auto sets it)")
+        t0 = time.perf_counter()
+        self.structure_fit_, self.structure_search_ = self.search.search(
+            experiments, self.na, self.nb, cluster=self._cluster)
+        self.timings_["search"] = time.perf_counter() - t0
+        return output_groups(self.structure_fit_.outputs), list(
+            self.structure_search_.structures)
 
     def resolved_params(self) -> dict:
         """Every parameter as ``get_params(deep=True)`` names it, with the values the fit
-        chose filled in (n_ρ, ε, MinPts; on the structured route each output's structure,
-        ``structure_y1`` …); fitted models only."""
-        out = {"na": self.na, "nb": self.nb, "affine": self.affine}
-        if self.search is not None:
-            out["search"] = type(self.search).__name__
-            out.update({f"search__{k}": v for k, v in self.search.get_params().items()})
-        elif self.structured:
-            out.update(form=self.form, outputs=self.outputs)
-        if self.structured:
-            if self.scheduling is not None:
-                out["scheduling"] = type(self.scheduling).__name__
-                out.update({f"scheduling__{k}": v
-                            for k, v in self.scheduling.get_params().items()})
-            out.update({f"structure_y{j + 1}": s
-                        for j, s in enumerate(self.structure_.structures)})
-        for name in ([] if self.structured and self.scheduling is not None else STEPS):
-            # the structured route fits the steps once per output group and keeps none
-            step = self.steps()[name] if self.structured else getattr(self, name + "_")
-            out[name] = type(step).__name__
-            params = step.resolved_params() if hasattr(step, "resolved_params") \
-                and not self.structured else step.get_params()
-            out.update({f"{name}__{k}": v for k, v in params.items()})
-        if self.refinement is not None:
-            out["refinement"] = type(self.refinement).__name__
-            out.update({f"refinement__{k}": v for k, v in self.refinement.get_params().items()})
+        chose filled in (n_ρ, ε, MinPts, from the fitted steps where they ran) and each
+        output's structure (``structure_y1`` …); fitted models only. Caching handles
+        (``memory``) are left out: they change no result."""
+        check_is_fitted(self)
+        out = {"na": self.na, "nb": self.nb, "affine": self.affine, "form": self.form,
+               "outputs": self.outputs}
+        options = {"scheduling": self.scheduling, "search": self.search,
+                   "refinement": self.refinement}
+        for name, option in options.items():
+            if option is not None:
+                out[name] = type(option).__name__
+                out.update({f"{name}__{k}": v for k, v in option.get_params().items()})
+        fitted = next((g.steps for g in self.groups_ if g.steps), {})
+        if self.scheduling is None:
+            for name, step in self.step_objects().items():
+                step = fitted.get(name, step)
+                out[name] = type(step).__name__
+                params = step.resolved_params() if name in fitted and hasattr(
+                    step, "resolved_params") else step.get_params()
+                out.update({f"{name}__{k}": v for k, v in params.items() if k != "memory"})
+        out.update({f"structure_y{j + 1}": s for j, s in enumerate(self.structures_)})
         return out
 
-    def prediction_state(self) -> dict:
-        """What ``predict`` and ``simulate`` read: the model's attributes but
-        :attr:`FIT_RECORD` and :attr:`FIT_PARAMS`. Fitted models with equal states predict
-        alike, whatever steps and settings fitted them: e.g. the sets of a sweep over ε and
-        MinPts whose clusterings end in the same θ_i and regions (the pipeline scores, draws
-        and logs such a model once).
 
-        Returns
-        -------
-        dict
-            Attribute name to value (the model's own objects, not copies); fitted models only.
-        """
-        check_is_fitted(self)
-        return {k: v for k, v in vars(self).items()
-                if k not in self.FIT_RECORD and k not in self.FIT_PARAMS}
-
-    def to_state_space(self, u: Signals | None = None, y: Signals | None = None, *,
-                       padding: float = PADDING, input_names: list[str] | None = None,
-                       output_names: list[str] | None = None):
-        """The model as a PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i on
-        polyhedral regions of z = [x; u] (:func:`pwa_pipeline.control.to_state_space`, whose
-        parameters these are): every route, the regions made explicit inside the data
-        envelope (``signal_range_``, or the range of ``u`` and ``y`` when given, widened by
-        ``padding``).
-
-        Returns
-        -------
-        pwa_pipeline.control.PWAStateSpace
-
-        Raises
-        ------
-        NotImplementedError
-            For a region step of one's own whose regions are not an argmax of affine
-            functions (named in the message).
-        """
-        from ..control.conversion import to_state_space
-
-        return to_state_space(self, u, y, padding=padding, input_names=input_names,
-                              output_names=output_names)
-
-    def _predict_phi(self, phi: Float2D) -> Float2D:
-        if self.structured:
-            return self.structure_.predict_phi(phi)
-        region = self.regions_.predict(phi)
-        return np.einsum("nd,ndm->nm", phi, self.thetas_[region])
-
-
-def _base_thetas(submodels: BaseEstimator, regions: BaseEstimator) -> np.ndarray:
-    """The θ_i that go with fitted regions: the region step's where it refits them with the
-    regions (:class:`~.boundaries.ResidualRegions` has ``thetas_``), else step 5's."""
-    return getattr(regions, "thetas_", submodels.thetas_)
+#: The default step of each kind (:meth:`PWARX.step_objects`, :meth:`PWARX.set_params`).
+_DEFAULT_STEPS = {"local_models": LocalLeastSquares, "clustering": DBSCANClustering,
+                  "submodels": RefinedSubModels, "regions": ResidualRegions}
+_OPTION_EXAMPLES = {"refinement": "refinement=OutputErrorRefinement()",
+                    "scheduling": "scheduling=SignScheduling()",
+                    "search": "search=StructureSearch() (or PWARX.auto)"}

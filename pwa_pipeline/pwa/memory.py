@@ -53,7 +53,7 @@ def available_memory() -> int | None:
 def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     """Estimated peak bytes of each step of a fit on n regressor rows (d regressors, m
     outputs), beyond the regressors themselves; ``steps`` are the unfitted step objects by
-    name (:meth:`pwa_pipeline.pwa.estimator.PWARX.steps`).
+    name (:meth:`pwa_pipeline.pwa.estimator.PWARX.step_objects`).
 
     Counted: the arrays that grow with n (local sets, local models, candidate neighbour
     pairs, embeddings, distance blocks, residual tables, the SVM's copy of its rows), from

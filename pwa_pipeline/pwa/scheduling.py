@@ -104,25 +104,3 @@ class SignScheduling(BaseEstimator):
                                      f"be a number, got {coef!r}")
                 w[v, names.index(name)] = coef
         return w
-
-
-class SignRegions:
-    """The fitted region map φ → Σ_v 2^v [w_vᵀφ > 0] of one output.
-
-    Parameters
-    ----------
-    weights : ndarray of shape (v, D)
-    """
-
-    def __init__(self, weights: Float2D):
-        self.weights = np.asarray(weights, dtype=float)
-
-    @property
-    def n_regions(self) -> int:
-        """2^v."""
-        return 2 ** self.weights.shape[0]
-
-    def __call__(self, phi: Float2D) -> np.ndarray:
-        """The region of each row of φ (n, D); shape (n,)."""
-        bits = (phi @ self.weights.T) > 0
-        return bits @ (1 << np.arange(self.weights.shape[0]))

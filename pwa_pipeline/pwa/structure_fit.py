@@ -28,27 +28,14 @@ from .._typing import Float2D
 from ..regressors import Regressors, build_regressors
 from ..scoring.evaluation import WARMUP
 from .output_error import VALIDATION_FRACTION, OutputFreeRuns, held_out, refine_outputs
-from .scheduling import SignRegions
+from .partitions import ProjectedRegions, SignRegions
 from .structures import (
     OutputModel,
-    StructuredModel,
     assign_params,
     output_lags,
     output_regressors,
     phi_names,
 )
-
-
-class ProjectedRegions:
-    """Region map φ → ``predictor.predict(M φ)``: a fitted region step of the paper's
-    route, trained on an output group's regressors ψ = Mφ."""
-
-    def __init__(self, M: Float2D, predictor: BaseEstimator):
-        self.M, self.predictor = M, predictor
-
-    def __call__(self, phi: Float2D) -> np.ndarray:
-        """The region of each φ row."""
-        return self.predictor.predict(phi @ self.M.T)
 
 
 @dataclass(frozen=True)
@@ -57,7 +44,8 @@ class StructureFit:
 
     Attributes
     ----------
-    model : StructuredModel
+    outputs : list of OutputModel
+        Each output's structure and parameters (:mod:`~.structures`), in output order.
     validation_experiments : list of int
         Indices (in the training list) of the held-out experiments.
     validation_cost : dict
@@ -66,7 +54,7 @@ class StructureFit:
         Per group, the kept candidate's refinement (seconds, iterations, stop, costs).
     """
 
-    model: StructuredModel
+    outputs: list[OutputModel]
     validation_experiments: list[int]
     validation_cost: dict
     refinement: list[dict]
@@ -92,19 +80,20 @@ def clustered_models(group: list[int], reg: Regressors, parts: dict[int, tuple],
                      cluster: Callable) -> dict[int, OutputModel]:
     """The paper's steps 2–6 (``cluster``, see :func:`fit_structure`) on a group's
     regressors ψ = M φ: one model per output of ``group``, every parameter switching between
-    the clusters' regions, which the outputs share.
+    the clusters' regions, which the outputs share (one region map, the fitted steps kept
+    with it).
 
     ``parts[j]`` is output j's ``(M, c, names)`` from :func:`.structures.output_regressors`
     (the same M for every output of the group); the clusters are fitted to y_j − c φ.
     """
     M = parts[group[0]][0]
     target = reg.target[:, group] - reg.phi @ np.array([parts[j][1] for j in group]).T
-    thetas, regions, s = cluster(Regressors(phi=reg.phi @ M.T, target=target,
-                                            experiment=reg.experiment, time=reg.time,
-                                            n_inputs=reg.n_inputs))
-    return {j: OutputModel(M, parts[j][1], np.ones(M.shape[0], bool), s,
-                           ProjectedRegions(M, regions), "clustered", parts[j][2],
-                           p=thetas[:, :, jj].ravel())
+    thetas, steps = cluster(Regressors(phi=reg.phi @ M.T, target=target,
+                                       experiment=reg.experiment, time=reg.time,
+                                       n_inputs=reg.n_inputs))
+    regions = ProjectedRegions(M, steps["regions"])
+    return {j: OutputModel(M, parts[j][1], np.ones(M.shape[0], bool), len(thetas), regions,
+                           "clustered", parts[j][2], p=thetas[:, :, jj].ravel(), steps=steps)
             for jj, j in enumerate(group)}
 
 
@@ -125,7 +114,7 @@ def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str
             sign = SignRegions(scheduling.weights(j, names, lags))
             switching = np.array([n == "1" for n in psi_names]) if kind == "offset" \
                 else np.ones(len(psi_names), bool)
-            om = OutputModel(M, c, switching, sign.n_regions, sign, kind, psi_names)
+            om = OutputModel(M, c, switching, sign.n_regions_, sign, kind, psi_names)
         out[j] = om.fit(reg.phi, reg.target[:, j])
     return out
 
@@ -148,8 +137,8 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
         User regions; without it one region (``cluster`` None) or clusters.
     refinement : OutputErrorRefinement, optional
     cluster : callable, optional
-        ``cluster(reg)`` → (θ of shape (s, d, group size), fitted region step with
-        ``predict(ψ)``, s): the paper's steps 2–6 on a group's regressors.
+        ``cluster(reg)`` → (θ of shape (s, d, group size), the fitted steps by name): the
+        paper's steps 2–6 on a group's regressors.
 
     Raises
     ------
@@ -216,6 +205,6 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
         chosen.update(best[1])
         if best[2]:
             refined.append(best[2])
-    return StructureFit(model=StructuredModel([chosen[j] for j in range(m)], lags),
+    return StructureFit(outputs=[chosen[j] for j in range(m)],
                         validation_experiments=list(range(n - n_val, n)),
                         validation_cost=costs if n_val else {}, refinement=refined)

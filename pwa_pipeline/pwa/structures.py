@@ -21,12 +21,13 @@ The sub-models' parameters are a vector p_j with θ_{j,i} = A_i p_j: all entries
 effective parameter row over φ is Θ_{j,i} = c_j + M_jᵀ A_i p_j.
 """
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._typing import Float2D
+from .groups import OutputGroup, grouped
+from .partitions import RegionMap, SingleRegion
 
 #: Regressor forms and output couplings of the structured estimators.
 FORMS = ("level", "velocity")
@@ -113,24 +114,28 @@ class OutputModel:
     switching : ndarray of bool, shape (d,)
         The entries of ψ whose parameters differ between regions.
     n_regions : int
-    region_of : callable or None
-        φ rows (n, D) → region (n,); None with one region.
+    region_of : RegionMap or None
+        The map of φ rows to regions (:mod:`~.partitions`); None with one region.
     structure : str
         ``"linear"``, ``"offset"``, ``"all"`` or ``"clustered"``.
     names : list of str
         ψ's entry names.
     p : ndarray of shape (P,)
         Shared parameters first, then each region's switching ones.
+    steps : dict
+        The fitted steps that found the regions (clustered: the paper's steps 2–6 on ψ),
+        by name; empty otherwise.
     """
 
     M: Float2D
     c: np.ndarray
     switching: np.ndarray
     n_regions: int
-    region_of: Callable | None
+    region_of: RegionMap | None
     structure: str
     names: list[str]
     p: np.ndarray = field(default=None)
+    steps: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_params(self) -> int:
@@ -154,7 +159,8 @@ class OutputModel:
 
     def regions(self, phi: Float2D) -> np.ndarray:
         """The region of each φ row."""
-        return np.zeros(len(phi), dtype=int) if self.region_of is None else self.region_of(phi)
+        return np.zeros(len(phi), dtype=int) if self.region_of is None \
+            else self.region_of.predict(phi)
 
     def design(self, phi: Float2D) -> Float2D:
         """The rows φ(k)ᵀ M_jᵀ A_{λ_j(φ(k))} of the one-step prediction ŷ_j = c_jᵀφ + X p
@@ -185,39 +191,9 @@ def assign_params(models: dict[int, "OutputModel"], group: list[int], p: np.ndar
         models[j].p = p[offsets[jj]:offsets[jj + 1]]
 
 
-@dataclass
-class StructuredModel:
-    """One :class:`OutputModel` per output over a common φ.
-
-    Attributes
-    ----------
-    outputs : list of OutputModel
-    lags : int
-        L, the output lags of φ.
-    """
-
-    outputs: list[OutputModel]
-    lags: int
-
-    def __post_init__(self):
-        self.refresh()
-
-    def refresh(self) -> None:
-        """Recompute ``thetas``, the effective rows Θ_{j,i} over φ (one (s_j, D) array per
-        output), after the parameters changed."""
-        self.thetas = [o.thetas() for o in self.outputs]
-
-    def predict_phi(self, phi: Float2D) -> Float2D:
-        """ŷ(k) for each φ row: shape (n, m)."""
-        return np.column_stack([np.einsum("nd,nd->n", phi, t[o.regions(phi)])
-                                for o, t in zip(self.outputs, self.thetas, strict=True)])
-
-    @property
-    def n_regions(self) -> list[int]:
-        """Regions of each output."""
-        return [o.n_regions for o in self.outputs]
-
-    @property
-    def structures(self) -> list[str]:
-        """The structure of each output."""
-        return [o.structure for o in self.outputs]
+def output_groups(outputs: list[OutputModel]) -> list[OutputGroup]:
+    """The fitted shape of a structured model (:mod:`~.groups`): each output's rows
+    Θ_{j,i} over φ, outputs with the same region map in one group."""
+    regions = [SingleRegion(o.M.shape[1]) if o.region_of is None else o.region_of
+               for o in outputs]
+    return grouped(regions, [o.thetas() for o in outputs], [o.steps for o in outputs])

@@ -1,20 +1,24 @@
-"""The paper's chain as assets: configuration, raw_benchmark → regressors → local_models →
-clusters → sub_models → svm_regions → output_error_refinement (a no-op unless the set asks
-for it) → pwa_model; a set with a structure of its own is fitted whole by ``pwa_model``.
+"""The PWA model as assets: configuration, raw_benchmark → the fitted model and the fitted
+steps it shows.
 
-The chain is one multi-asset (``pwa_chain``): each step asset is drawn depending on the step
-before it alone, so the graph reads as the paper's chain, while a step reads what it needs
-of every earlier one (the clustering needs φ, the sub-models the local models) in memory.
-Selecting some of its assets fits the steps before them again, unstored, the costly ones
-from the store's caches."""
+One multi-asset (``pwa_fit``) fits the partition's PWARX once, by its ``fit``, and stores the
+model (``pwa_model``, what the scores score and MLflow registers), the training regressors
+(``regressors``, eq. 2–3, which its figures read) and each fitted step of the paper's chain
+that built it (``local_models`` → ``clusters`` → ``sub_models`` → ``svm_regions`` →
+``output_error_refinement``), taken from the fitted model: the graph reads as the paper's
+chain, the checks guard the clusters and sub-models, and the estimator runs its own loop.
+The costly steps are cached across sets through the steps' own ``memory=`` (the store's
+caches), as scikit-learn's estimators take one. A model whose regions come from elsewhere
+(scheduling variables, a structure search that kept no clusters) has no such step, and its
+step assets say so."""
 
 import logging
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 
 import dagster as dg
+import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
@@ -22,11 +26,10 @@ from ..._validation import as_experiments
 from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS
-from ...pwa import PWARX, STEPS
-from ...pwa.arx import training_range
-from ...pwa.search.search import SEARCH_LOG
+from ...pwa import PWARX
+from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
-from ..caches import SignedMemory, cache_key, load_or_compute
+from ..caches import SignedMemory
 from ..checks import (
     CLUSTER_CHECKS,
     SUB_MODEL_CHECKS,
@@ -45,64 +48,42 @@ from ..figures import (
     switching_inputs,
     to_markdown,
 )
-from ..files import inside
 from ..partitions import split_key
-from ..reporting import (
-    markdown,
-    params_table,
-    regions_table,
-    rounded,
-    theta_table,
-)
+from ..reporting import markdown, params_table, regions_table, rounded, theta_table
 from ..settings import PipelineSettings
-from .model_facts import (
-    figure_context,
-    ground_truth,
-    phi_names,
-    prediction_key,
-    truth_metadata,
-)
+from .model_facts import figure_context, ground_truth, phi_names, prediction_key, truth_metadata
 
 GROUP = "identification"
-#: The assets of the PWA chain, in the paper's order: each is drawn depending on the one
-#: before it alone (the steps read what they need of the earlier ones inside the chain).
-CHAIN = ("regressors", "local_models", "clusters", "sub_models", "svm_regions",
-         "output_error_refinement", "pwa_model")
-#: The asset holding each fitted step of ``pwa_pipeline.pwa.STEPS``, and the refinement.
-STEP_ASSETS = {**dict(zip(STEPS, CHAIN[1:5], strict=True)),
-               "refinement": "output_error_refinement"}
-#: Why the step assets hold nothing for a set with a structure of its own.
-STRUCTURED_SKIP = ("not fitted: the set has a structure of its own or searches one (form, "
-                   "outputs, scheduling, or preset auto), which pwa_model fits whole")
+#: The fitted steps the multi-asset shows, in the paper's order, by asset: the step's name in
+#: an output group's ``steps`` (:class:`~pwa_pipeline.pwa.groups.OutputGroup`).
+STEP_ASSETS = {"local_models": "local_models", "clusters": "clustering",
+               "sub_models": "submodels", "svm_regions": "regions",
+               "output_error_refinement": "refinement"}
+#: The assets of ``pwa_fit``, each drawn depending on the one before it.
+CHAIN = ("regressors", *STEP_ASSETS, "pwa_model")
 _DESCRIPTIONS = {
-    "regressors": "φ(k) and y(k) of the training experiments (eq. 2–3), never spanning two "
-                  "of them.",
+    "regressors": "φ(k) and y(k) of the training experiments (eq. 2–3) at the model's lags, "
+                  "never spanning two of them: what the model's regions figure slices.",
     "local_models": "θ_k of the local sets of n_ρ neighbours (eq. 6–7; by default of at most "
-                    "5,000 samples, `local_models.max_sets`), the fitted `local_models` "
-                    "step; cached across sets whose later steps alone differ. Empty for a "
-                    "set with a structure of its own (its steps are fitted per output group "
-                    "inside `pwa_model`).",
-    "clusters": "Extended DBSCAN on the Vθ distance of the local models (eq. 8–10), the "
+                    "5,000 samples, `local_models.max_sets`): the fitted `local_models` step "
+                    "of the PWA model, cached across sets whose later steps alone differ.",
+    "clusters": "Extended DBSCAN on the Vθ distance of the local models (eq. 8–10): the "
                 "fitted `clustering` step, with the local models drawn by cluster. Its "
-                "noise check stops the chain when most local models are noise.",
-    "sub_models": "One parameter matrix θ_i per cluster (step 5), the fitted `submodels` "
-                  "step; its steps 2–4 are cached across sets whose clusterings consolidate "
-                  "alike (`cache_sub_models`).",
-    "svm_regions": "Regions H_i from a multi-class linear SVM on φ (step 6), the fitted "
+                "noise check holds the model back when most local models are noise.",
+    "sub_models": "One parameter matrix θ_i per cluster (step 5): the fitted `submodels` "
+                  "step, cached across sets whose clusterings consolidate alike.",
+    "svm_regions": "Regions H_i from a multi-class linear SVM on φ (step 6): the fitted "
                    "`regions` step, with its hyperplanes.",
     "output_error_refinement": "θ_i refined to minimise the free-run error on the training "
-                               "experiments, regions kept (the fitted `refinement` step); "
-                               "empty when the set configures no refinement.",
-    "pwa_model": "The fitted PWARX model, joined from the steps above (or, for a set with a "
-                 "structure of its own, fitted whole here); what `pwa_scores` scores and "
-                 "MLflow registers. Its page shows its resolved parameters and two figure "
-                 "entries: *switching*, the estimated region of each sample of the first "
-                 "held-out experiment (for a structured set, each output's own region), and "
-                 "*regions*, the regions in the 2-D slice of φ where they differ most (a "
-                 "structured set's entry says why it has no such figure). The figures' "
-                 "numbers are cached by what the model predicts with (`cache_scores`); each "
-                 "set draws them titled with its own name.",
+                               "experiments, regions kept (the fitted `refinement` step).",
+    "pwa_model": "The fitted PWARX model, what `pwa_scores` scores and MLflow registers. Its "
+                 "page shows its resolved parameters, each output's structure, and two "
+                 "figures: *switching*, the region of each sample of the first held-out "
+                 "experiment (one lane per output group), and *regions*, the regions in the "
+                 "2-D slice of φ where they differ most.",
 }
+#: The figure keys of the ``pwa_model`` page.
+SWITCHING, REGIONS = "switching (first held-out experiment)", "regions"
 
 
 @contextmanager
@@ -126,13 +107,51 @@ def forwarded(logger_name: str, log) -> Iterator[None]:
         logger.setLevel(level)
 
 
-def _skipped(context: dg.AssetExecutionContext, asset: str) -> dg.Output:
-    """The empty output of a step asset of a structured set, said once in the log (by the
-    first step) for all four."""
-    if asset == "local_models":
-        context.log.info(f"local_models, clusters, sub_models, svm_regions: {STRUCTURED_SKIP}")
-    return dg.Output(None, output_name=asset, metadata={"skipped": STRUCTURED_SKIP,
-                                                         "seconds": 0.0})
+def with_caches(pwa: PWARX, settings: PipelineSettings, warn) -> tuple[PWARX, dict]:
+    """A clone of ``pwa`` whose costly steps keep their results in the store's caches (the
+    steps' ``memory=``, where the settings ask for it and the step takes one), and the
+    caches by parameter name, to count their hits and take them off again."""
+    model, caches = clone(pwa), {}
+    for name, use, folder in (("local_models", settings.cache_local_models, "local_models"),
+                              ("submodels", settings.cache_sub_models, "sub_models")):
+        params = model.step_objects()[name].get_params()
+        if use and "memory" in params and params["memory"] is None:
+            caches[f"{name}__memory"] = SignedMemory(settings.cache_root(), folder, warn=warn)
+    return model.set_params(**caches), caches
+
+
+def fit_model(context: dg.AssetExecutionContext, settings: PipelineSettings,
+              configuration: Configuration, data: Dataset) -> tuple[PWARX, set[str]]:
+    """The partition's PWARX fitted on the training experiments (the steps' caches on, the
+    search's progress in the run's log); returns it with the caches taken off its steps
+    (the stored model is the configured one), and the steps a cache answered."""
+    pwa = configuration.pwa
+    if (search := pwa.search) is not None:
+        context.log.info(f"structure search: orders up to ({pwa.na}, {pwa.nb}), at most "
+                         f"{search.max_seconds:g} s (search.max_seconds)")
+    model, caches = with_caches(pwa, settings, context.log.warning)
+    with forwarded(SEARCH_LOG, context.log):
+        model.fit(data.u_train, data.y_train)
+    model.set_params(**dict.fromkeys(caches))
+    for group in model.groups_:
+        for step in group.steps.values():
+            if step.get_params().get("memory") is not None:
+                step.set_params(memory=None)
+    return model, {key.removesuffix("__memory") for key, c in caches.items() if c.hits}
+
+
+def on_phi(model: PWARX) -> bool:
+    """Whether the model's steps ran on eq. (3)'s φ itself (the paper's route), so that φ's
+    names label their parameters and hyperplanes."""
+    return (model.search is None and model.scheduling is None and model.form == "level"
+            and model.outputs == "joint")
+
+
+def shown_steps(model: PWARX) -> tuple[dict, tuple[int, ...]]:
+    """The fitted steps the step assets show (those of the first output group that has
+    them) and that group's outputs."""
+    group = next((g for g in model.groups_ if g.steps), None)
+    return ({}, ()) if group is None else (group.steps, group.outputs)
 
 
 def identification_assets(partitions_def) -> list:
@@ -168,310 +187,204 @@ def identification_assets(partitions_def) -> list:
                 **{b: {dg.AssetKey(a)} for a, b in zip(CHAIN, CHAIN[1:])}}
 
     @dg.multi_asset(
-        name="pwa_chain", partitions_def=partitions_def, can_subset=True,
+        name="pwa_fit", partitions_def=partitions_def, can_subset=True,
         outs={name: dg.AssetOut(group_name="models" if name == "pwa_model" else GROUP,
                                 kinds={kinds.get(name, "scikit-learn")}, is_required=False,
                                 description=_DESCRIPTIONS[name]) for name in CHAIN},
         internal_asset_deps=previous, check_specs=[*CLUSTER_CHECKS, *SUB_MODEL_CHECKS])
-    def pwa_chain(context: dg.AssetExecutionContext, settings: PipelineSettings,
-                  configuration: Configuration, raw_benchmark: Dataset):
-        """The paper's chain, one asset per step (see ``CHAIN``): the selected ones
-        are stored, each as soon as it is fitted, and the steps before them are fitted
-        again in memory (the local models and sub-models from their caches)."""
+    def pwa_fit(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                configuration: Configuration, raw_benchmark: Dataset):
+        """The PWA model fitted once, then stored with the fitted steps that built it
+        (those selected), each with its page and checks."""
         selected = {key.to_user_string() for key in context.selected_asset_keys}
         checks = context.selected_asset_check_keys
-        last = max(CHAIN.index(name) for name in selected)
-        run = _ChainRun(context, settings, configuration, raw_benchmark)
-        for name in CHAIN[:last + 1]:
-            for event in _STEPS[name](run):
+        partition = str(context.partition_key)
+        pwa, data = configuration.pwa, raw_benchmark
+        reg = build_regressors(as_experiments(data.u_train, data.y_train), pwa.output_lags_,
+                               pwa.nb, pwa.affine)
+        if "regressors" in selected:
+            yield dg.Output(reg, output_name="regressors", metadata={
+                "rows": reg.phi.shape[0], "d": reg.phi.shape[1],
+                "regressors": ", ".join(phi_names(pwa, data))})
+        t0 = time.perf_counter()
+        model, cached = fit_model(context, settings, configuration, raw_benchmark)
+        context.log.info(f"PWA model: {'; '.join(_described(model, raw_benchmark))} "
+                         f"in {time.perf_counter() - t0:.1f} s"
+                         + (f" ({', '.join(sorted(cached))} from the cache)" if cached else ""))
+        steps, outputs = shown_steps(model)
+        for asset, name in STEP_ASSETS.items():
+            events = _step_events(asset, steps.get(name), model, raw_benchmark, outputs,
+                                  partition, name in cached)
+            for event in events:
                 if isinstance(event, dg.Output):
-                    run.fitted[name] = event.value
-                    if "seconds" in event.metadata:
-                        run.seconds[name] = event.metadata["seconds"].value
-                    if name in selected:
+                    if asset in selected:
                         yield event
                 elif dg.AssetCheckKey(event.asset_key, event.check_name) in checks:
                     yield event
                     if event.check_name == "noise_share_below_limit" and not event.passed:
-                        return  # (a blocking check: the steps after it are not fitted)
+                        return  # (a blocking check: the model is not stored)
+        if "pwa_model" in selected:
+            yield model_output(context, settings, model, raw_benchmark, cached, reg.phi)
 
-    return [configuration, raw_benchmark, pwa_chain]
-
-
-@dataclass
-class _ChainRun:
-    """What the steps of one run of the chain share: its context and inputs, the values
-    fitted so far (by asset) and their seconds."""
-
-    context: dg.AssetExecutionContext
-    settings: PipelineSettings
-    configuration: Configuration
-    data: Dataset
-    fitted: dict = field(default_factory=dict)
-    seconds: dict = field(default_factory=dict)
-
-    @property
-    def partition(self) -> str:
-        return str(self.context.partition_key)
+    return [configuration, raw_benchmark, pwa_fit]
 
 
-def _regressors(run: _ChainRun):
-    pwa = run.configuration.pwa
-    reg = build_regressors(as_experiments(run.data.u_train, run.data.y_train), pwa.na,
-                           pwa.nb, pwa.affine)
-    yield dg.Output(reg, output_name="regressors", metadata={
-        "rows": reg.phi.shape[0], "d": reg.phi.shape[1],
-        "regressors": ", ".join(phi_names(pwa, run.data))})
+def _described(model: PWARX, data: Dataset) -> list[str]:
+    """Each output's structure, named: ``q1: velocity (2, 2), linear``."""
+    return [f"{data.label(y)}: {s}" for y, s in zip(data.y_names, model.structures_,
+                                                    strict=True)]
 
 
-def _local_models(run: _ChainRun):
-    if run.configuration.pwa.structured:
-        yield _skipped(run.context, "local_models")
+def _not_fitted(model: PWARX, asset: str) -> str:
+    """Why a model has no fitted step for ``asset``."""
+    if asset == "output_error_refinement":
+        if model.search is not None:
+            return "not fitted: the structure search refines the structures it compares itself"
+        if model.refinement is None:
+            return "not fitted: the set configures no refinement"
+        return "not fitted: the structured fit refines each output group itself"
+    if model.scheduling is not None:
+        return "not fitted: the model's regions are the signs of its scheduling variables"
+    return f"not fitted: the structure search kept no clustered regions ({'; '.join(model.structures_)})"
+
+
+def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[int, ...],
+                 partition: str, cached: bool):
+    """The output of one step asset (the fitted step, or None and why; ``cached``: its
+    cache answered) and its checks."""
+    checks = {"clusters": CLUSTER_CHECKS, "sub_models": SUB_MODEL_CHECKS}.get(asset, [])
+    if step is None:
+        reason = _not_fitted(model, asset)
+        yield dg.Output(None, output_name=asset, metadata={"fitted": False, "reason": reason})
+        yield from not_applicable(checks, partition, reason)
         return
-    regressors = run.fitted["regressors"]
-    step = run.configuration.pwa.steps()["local_models"]
-    t0 = time.perf_counter()
-    key = cache_key(regressors.phi, regressors.target, step=type(step).__name__,
-                    **step.get_params())
-    root = run.settings.cache_root()
-    path = inside(root, "local_models", f"{key}.pkl")
-    local, cached = load_or_compute(
-        path, root, lambda: run.configuration.pwa.fit_step("local_models", regressors),
-        run.context.log.warning, "local-model cache entry", run.settings.cache_local_models)
-    run.context.log.info(
-        f"local models: {local.n_estimated_:,} of {local.estimated_.size:,} local sets of "
-        f"n_rho = {local.n_rho_}{' from the cache' if cached else ''} "
-        f"({local.n_degenerate_:,} degenerate) in {time.perf_counter() - t0:.1f} s")
-    yield dg.Output(local, output_name="local_models", metadata=rounded({
-        "n_rho": local.n_rho_, "from_cache": cached,
-        "estimated_local_sets": local.n_estimated_,
-        "degenerate_local_sets": local.n_degenerate_, "seconds": time.perf_counter() - t0,
-        "cache_key": key}))
+    where = {} if on_phi(model) else {"outputs": ", ".join(data.y_names[j] for j in outputs),
+                                      "regressors": "each output group's own ψ"}
+    if asset == "local_models":
+        meta = {"n_rho": step.n_rho_, "estimated_local_sets": step.n_estimated_,
+                "degenerate_local_sets": step.n_degenerate_}
+    elif asset == "clusters":
+        reg = build_regressors(as_experiments(data.u_train, data.y_train), model.na, model.nb,
+                               model.affine)
+        local = next(g.steps["local_models"] for g in model.groups_ if g.steps)
+        figure = parameter_clusters_figure(local, step, reg.target, context=figure_context(
+            partition, METHODS["pwa"].label)) if not where else None
+        meta = {"n_clusters": step.n_clusters_, "eps": step.eps_,
+                "eps_from_data": step.eps_auto_, "min_pts": step.min_pts_,
+                "noise_share": step.noise_share_,
+                **({} if figure is None else {
+                    "local models by cluster": dg.MetadataValue.md(to_markdown(figure))})}
+    elif asset == "sub_models":
+        names = phi_names(model, data) if not where else None
+        meta = {"n_submodels": step.n_submodels_, "merged": step.n_merged_,
+                "refinement_sweeps": step.n_iter_,
+                **({} if names is None else {
+                    "parameters": markdown(theta_table(step.thetas_, names, data.y_names))})}
+    elif asset == "svm_regions":
+        meta = {"n_regions": step.n_regions_, **({} if where else {
+            "hyperplanes": markdown(regions_table(step, phi_names(model, data)))})}
+    else:
+        meta = {"cost_start": step.cost_start_, "cost": step.cost_, "iterations": step.n_iter_,
+                "stop": step.stop_}
+    if asset in ("local_models", "sub_models"):
+        meta["from_cache"] = cached
+    yield dg.Output(step, output_name=asset, metadata=rounded(
+        {"fitted": True, **where, "seconds": model.timings_.get(STEP_ASSETS[asset], 0.0),
+         **meta}))
+    if asset == "clusters":
+        yield from cluster_results(step, partition)
+    elif asset == "sub_models":
+        yield from sub_model_results(step, partition)
 
 
-def _clusters(run: _ChainRun):
-    if run.configuration.pwa.structured:
-        yield _skipped(run.context, "clusters")
-        yield from not_applicable(CLUSTER_CHECKS, run.partition, STRUCTURED_SKIP)
-        return
-    regressors, local_models = run.fitted["regressors"], run.fitted["local_models"]
-    t0 = time.perf_counter()
-    step = run.configuration.pwa.fit_step("clustering", regressors, local_models=local_models)
-    run.context.log.info(f"clusters: {step.n_clusters_} with eps = {step.eps_:.4g}, "
-                         f"MinPts = {step.min_pts_}, noise {step.noise_share_:.1%}, in "
-                         f"{time.perf_counter() - t0:.1f} s")
-    figure = parameter_clusters_figure(local_models, step, regressors.target,
-                                       context=figure_context(run.partition,
-                                                              METHODS["pwa"].label))
-    yield dg.Output(step, output_name="clusters", metadata=rounded({
-        "n_clusters": step.n_clusters_, "eps": step.eps_, "eps_from_data": step.eps_auto_,
-        "min_pts": step.min_pts_, "noise_share": step.noise_share_,
-        "seconds": time.perf_counter() - t0,
-        "local models by cluster": dg.MetadataValue.md(to_markdown(figure))}))
-    yield from cluster_results(step, run.partition)
-
-
-def _sub_models(run: _ChainRun):
-    if run.configuration.pwa.structured:
-        yield _skipped(run.context, "sub_models")
-        yield from not_applicable(SUB_MODEL_CHECKS, run.partition, STRUCTURED_SKIP)
-        return
-    t0 = time.perf_counter()
-    pwa = run.configuration.pwa
-    step = pwa.steps()["submodels"]
-    params = step.get_params()
-    memory = None
-    if run.settings.cache_sub_models and "memory" in params and params["memory"] is None:
-        memory = SignedMemory(run.settings.cache_root(), "sub_models",
-                              warn=run.context.log.warning)
-        pwa = clone(pwa).set_params(submodels=clone(step).set_params(memory=memory))
-    step = pwa.fit_step("submodels", run.fitted["regressors"],
-                        local_models=run.fitted["local_models"],
-                        clustering=run.fitted["clusters"])
-    cached = memory is not None and memory.hits > 0
-    if memory is not None:
-        step.set_params(memory=None)  # the stored step is the configured one
-    run.context.log.info(f"sub-models: {step.n_submodels_} ({step.n_merged_} merges, "
-                         f"{step.n_iter_} sweeps"
-                         f"{', steps 2-4 from the cache' if cached else ''}) in "
-                         f"{time.perf_counter() - t0:.1f} s")
-    table = theta_table(step.thetas_, phi_names(run.configuration.pwa, run.data),
-                        run.data.y_names)
-    yield dg.Output(step, output_name="sub_models", metadata=rounded({
-        "n_submodels": step.n_submodels_, "merged": step.n_merged_,
-        "refinement_sweeps": step.n_iter_, "from_cache": cached,
-        "seconds": time.perf_counter() - t0, "parameters": markdown(table)}))
-    yield from sub_model_results(step, run.partition)
-
-
-def _svm_regions(run: _ChainRun):
-    if run.configuration.pwa.structured:
-        yield _skipped(run.context, "svm_regions")
-        return
-    t0 = time.perf_counter()
-    step = run.configuration.pwa.fit_step("regions", run.fitted["regressors"],
-                                          submodels=run.fitted["sub_models"])
-    table = regions_table(step, phi_names(run.configuration.pwa, run.data))
-    yield dg.Output(step, output_name="svm_regions", metadata=rounded({
-        "n_regions": step.n_regions_, "seconds": time.perf_counter() - t0,
-        "hyperplanes": markdown(table)}))
-
-
-def _refinement(run: _ChainRun):
-    pwa = run.configuration.pwa
-    if pwa.refinement is None or pwa.structured:
-        yield dg.Output(None, output_name="output_error_refinement",
-                        metadata={"refined": False, "seconds": 0.0})
-        return
-    fitted = run.fitted
-    model = clone(pwa).assemble(fitted["regressors"], local_models=fitted["local_models"],
-                                clustering=fitted["clusters"], submodels=fitted["sub_models"],
-                                regions=fitted["svm_regions"])
-    step = model.fit_refinement(as_experiments(run.data.u_train, run.data.y_train))
-    run.context.log.info(f"refinement: training free-run MSE {step.cost_start_:.4g} → "
-                         f"{step.cost_:.4g} in {step.n_iter_} steps, {step.seconds_:.1f} s "
-                         f"({step.stop_})")
-    yield dg.Output(step, output_name="output_error_refinement", metadata=rounded({
-        "refined": True, "cost_start": step.cost_start_, "cost": step.cost_,
-        "iterations": step.n_iter_, "stop": step.stop_, "seconds": step.seconds_}))
-
-
-def _pwa_model(run: _ChainRun):
-    if run.configuration.pwa.structured:
-        yield structured_model(run.context, run.configuration, run.data,
-                               figure_context(run.partition, METHODS["pwa"].label))
-        return
-    # the training range from the experiments, as fit records it (φ's rows miss some
-    # samples of each experiment: PWARX.assemble): the model's data envelope
-    model = clone(run.configuration.pwa).assemble(
-        run.fitted["regressors"], local_models=run.fitted["local_models"],
-        clustering=run.fitted["clusters"], submodels=run.fitted["sub_models"],
-        regions=run.fitted["svm_regions"], refinement=run.fitted["output_error_refinement"],
-        signal_range=training_range(as_experiments(run.data.u_train, run.data.y_train)))
-    model.timings_ = {step: run.seconds[asset] for step, asset in STEP_ASSETS.items()}
-    # the figures' numbers are cached (shared by the sets that end in this model), the
-    # figures drawn from them here, titled with this partition's set
-    memory = SignedMemory(run.settings.cache_root(), "model_figures",
-                          warn=run.context.log.warning, salt=figures_fingerprint())
+def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                 model: PWARX, data: Dataset, cached: set[str], phi: np.ndarray) -> dg.Output:
+    """``pwa_model`` with its page: resolved parameters, each output's structure, the
+    structure search's report or the structured fit's candidates, the ground truth when
+    comparable, and the switching and regions figures (their numbers cached by what the
+    model predicts with, drawn titled with this partition's set)."""
+    title = figure_context(str(context.partition_key), METHODS["pwa"].label)
+    memory = SignedMemory(settings.cache_root(), "model_figures",
+                          warn=context.log.warning, salt=figures_fingerprint())
     compute = memory.cache(model_figure_inputs, ignore=["model", "data", "phi"]) \
-        if run.settings.cache_scores else model_figure_inputs
-    inputs = compute(model, run.data, run.fitted["regressors"].phi, model.labels_,
-                     prediction_key(model, run.data))
-    figures = model_figures(inputs, model, run.data,
-                            figure_context(run.partition, METHODS["pwa"].label))
-    yield dg.Output(model, output_name="pwa_model", metadata=rounded({
-        "n_submodels": model.n_submodels_, "fit_seconds": sum(model.timings_.values()),
-        "resolved parameters": markdown(params_table(model.resolved_params())),
-        **truth_metadata(model, run.data), "figures_from_cache": memory.hits > 0,
-        **{name: dg.MetadataValue.md(text) for name, text in figures.items()}}))
-
-
-_STEPS = {"regressors": _regressors, "local_models": _local_models, "clusters": _clusters,
-          "sub_models": _sub_models, "svm_regions": _svm_regions,
-          "output_error_refinement": _refinement, "pwa_model": _pwa_model}
-
-
-def structured_model(context: dg.AssetExecutionContext, configuration: Configuration,
-                     data: Dataset, title: str = "") -> dg.Output:
-    """Fit the structured PWARX model on the training experiments, with the metadata that
-    says which training experiments (indices from 0) were held out to choose its structure
-    and refinement iterate, and each candidate's held-out free-run error, one narrow table
-    (a column per candidate, named as the structures are). Its figure is the switching
-    figure of each output's own regions on the first held-out experiment
-    (``draw_structured_switching``), titled ``title`` (data set, set, method); a regions
-    figure is not drawn and the metadata says why: each output has its own regions, over
-    its own regressors, so no one slice of φ shows them."""
-    t0 = time.perf_counter()
-    if (search := configuration.pwa.search) is not None:
-        context.log.info(f"structure search: orders up to ({configuration.pwa.na}, "
-                         f"{configuration.pwa.nb}), at most {search.max_seconds:g} s "
-                         f"(search.max_seconds)")
-    with forwarded(SEARCH_LOG, context.log):  # the search's progress, a line per stage
-        model = clone(configuration.pwa).fit(data.u_train, data.y_train)
-    fit = model.structure_fit_
-    table = pd.DataFrame({"output": [data.label(y) for y in data.y_names],
-                          "structure": model.structure_.structures,
-                          "regions": model.structure_.n_regions})
+        if settings.cache_scores else model_figure_inputs
+    inputs = compute(model, data, phi, prediction_key(model, data))
+    structure = pd.DataFrame({"output": [data.label(y) for y in data.y_names],
+                              "structure": model.structures_,
+                              "group": [next(i + 1 for i, g in enumerate(model.groups_)
+                                             if j in g.outputs)
+                                        for j in range(model.n_outputs_)]})
+    found = {}
+    fit = getattr(model, "structure_fit_", None)
+    if fit is not None:
+        found["validation_experiments"] = ", ".join(map(str, fit.validation_experiments)) \
+            or "none: one record, split in time"
+        kinds = {k for costs in fit.validation_cost.values() for k in costs}
+        if kinds:
+            costs = pd.DataFrame({kind: [fit.validation_cost[j].get(kind, float("nan"))
+                                         for j in range(model.n_outputs_)]
+                                  for kind in sorted(kinds, key=["linear", "offset", "all",
+                                                                 "clustered"].index)},
+                                 index=[data.label(y) for y in data.y_names])
+            found["candidates"] = dg.MetadataValue.md(
+                "Held-out free-run MSE of each candidate structure (in the output's unit "
+                "squared):\n\n" + costs.to_markdown(floatfmt=".4g"))
     report = getattr(model, "structure_search_", None)
-    if report is not None:  # what the search chose, per output, in place of the kind alone
-        table["structure"] = report.structures
-    kinds = {k for costs in fit.validation_cost.values() for k in costs}
-    for kind in sorted(kinds, key=["linear", "offset", "all", "clustered"].index):
-        table[kind] = [fit.validation_cost[j].get(kind, float("nan"))
-                       for j in range(len(data.y_names))]
-    seconds = time.perf_counter() - t0
-    shapes = zip(data.y_names, model.structure_.structures, model.structure_.n_regions,
-                 strict=True)
-    context.log.info("structured PWA model: " + ", ".join(
-        f"{data.label(y)} {s} ({n} region{'s' if n > 1 else ''})" for y, s, n in shapes)
-        + f" in {seconds:.1f} s")
     if report is not None:
         context.log.info(f"structure search: {len(report.table)} candidates in "
                          f"{report.seconds:.1f} s. {report.choice}")
-    switching = structured_switching_inputs(model, data.u_test[0], data.y_test[0],
-                                            data.y_names, data.u_names)
-    structure = markdown(table.set_index("output"))
-    if kinds:
-        structure = dg.MetadataValue.md(
-            "Held-out free-run MSE of each candidate structure (in the output's unit "
-            "squared); the kept one is under *structure*.\n\n" + structure.value)
-    found = {}
-    if report is not None:
         # the rows that decided, without the row numbers (the CSV has none), missing
         # errors (a skipped candidate) shown as a dash
         rows = report.summary().rename(columns={"validation_nrmse": "held-out NRMSE",
                                                 "seconds": "elapsed (s)"})
         rows["held-out NRMSE"] = rows["held-out NRMSE"].astype(object).where(
             rows["held-out NRMSE"].notna(), None)
-        found = {"structure chosen": dg.MetadataValue.md(report.choice),
-                 "structure search": dg.MetadataValue.md(
-                     f"{len(report.table)} candidates tried in {report.seconds:.1f} s; those "
-                     f"kept, refined and chosen (every candidate is in the MLflow run's "
-                     f"`structure_search.csv`):\n\n"
-                     f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
-    held_out = ", ".join(map(str, fit.validation_experiments)) or (
-        "none: one record, split in time" if report is not None else "none")
+        found |= {"structure chosen": dg.MetadataValue.md(report.choice),
+                  "structure search": dg.MetadataValue.md(
+                      f"{len(report.table)} candidates tried in {report.seconds:.1f} s; those "
+                      f"kept, refined and chosen (every candidate is in the MLflow run's "
+                      f"`structure_search.csv`):\n\n"
+                      f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
+    figures = model_figures(inputs, model, data, title)
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
-        "n_submodels": model.n_submodels_, "fit_seconds": seconds,
-        "validation_experiments": held_out,
+        "n_submodels": model.n_submodels_, "output_groups": len(model.groups_),
+        "fit_seconds": sum(model.timings_.values()),
+        "steps_from_cache": ", ".join(sorted(cached)) or "none",
+        "structure per output": markdown(structure.set_index("output")),
         **found,
-        "structure per output": structure,
         "resolved parameters": markdown(params_table(model.resolved_params())),
-        SWITCHING: dg.MetadataValue.md(to_markdown(
-            draw_structured_switching(switching, data.y_names, title))),
-        REGIONS: dg.MetadataValue.md(STRUCTURED_REGIONS)}))
+        **truth_metadata(model, data), "figures_from_cache": memory.hits > 0,
+        **{name: dg.MetadataValue.md(text) for name, text in figures.items()}}))
 
 
-#: The figure keys of the ``pwa_model`` page.
-SWITCHING, REGIONS = "switching (first held-out experiment)", "regions"
-#: The ``regions`` entry of a structured set's ``pwa_model`` page, in place of the figure.
-STRUCTURED_REGIONS = (
-    "No regions figure for a model with a structure of its own: each output has its own "
-    "regions (the sign of its scheduling variable, or clusters of its own regressors), over "
-    "its own regressors, so no single 2-D slice of φ shows them. The switching figure above "
-    "shows each output's region over time; *structure per output* lists them.")
-
-
-def model_figure_inputs(model: PWARX, data: Dataset, phi, labels, key: tuple[str, str]
+def model_figure_inputs(model: PWARX, data: Dataset, phi: np.ndarray, key: tuple[str, str]
                         ) -> dict:
-    """The numbers of the PWA model's switching and regions figures (``switching_inputs``
-    on the first held-out experiment, with the ground truth when comparable, and
-    ``region_slice``): what ``pwa_model`` caches, keyed by ``key`` (``prediction_key``) and
-    the rows' ``labels`` (the regions figure colours the rows by them) in place of the
-    model, the data and ``phi`` (the data's regressors at the model's orders). No title or
-    unit is cached: the sets sharing an entry each draw their own (``model_figures``)."""
+    """The numbers of the PWA model's switching figure on the first held-out experiment
+    (with the ground truth when comparable) and of its regions figure on the training
+    regressors ``phi`` (at the model's lags): what ``pwa_model`` caches, keyed by ``key``
+    (``prediction_key``) in place of the model, the data and ``phi``. No title or unit is
+    cached: the sets sharing an entry each draw their own (``model_figures``)."""
     truth = ground_truth(model, data)
-    return {"switching": switching_inputs(
-                model, data.u_test[0], data.y_test[0],
-                true_modes=truth.modes_test[0] if truth else None,
-                true_thetas=truth.thetas if truth else None),
-            "regions": region_slice(model, phi)}
+    if len(model.groups_) == 1:
+        switching = switching_inputs(model, data.u_test[0], data.y_test[0],
+                                     true_modes=truth.modes_test[0] if truth else None,
+                                     true_thetas=truth.thetas if truth else None)
+    else:
+        switching = structured_switching_inputs(model, data.u_test[0], data.y_test[0],
+                                                data.y_names, data.u_names)
+    steps, _ = shown_steps(model)
+    labels = steps["submodels"].labels_ if len(model.groups_) == 1 and "submodels" in steps \
+        else np.asarray(model.regions_.predict(phi))
+    return {"switching": switching, "regions": region_slice(model, phi, labels)}
 
 
 def model_figures(inputs: dict, model: PWARX, data: Dataset, title: str) -> dict[str, str]:
     """The switching and regions figures drawn from ``model_figure_inputs``, titled
     ``title`` (data set, set, method), the axes in the data's units, as Markdown images
     (``pwa_model``'s metadata)."""
-    return {SWITCHING: to_markdown(draw_switching(inputs["switching"], title)),
+    switching = inputs["switching"]
+    drawn = draw_switching(switching, title) if len(model.groups_) == 1 else \
+        draw_structured_switching(switching, title)
+    return {SWITCHING: to_markdown(drawn),
             REGIONS: to_markdown(draw_regions(inputs["regions"], phi_names(model, data), title,
                                               data.units))}

@@ -37,12 +37,11 @@ from ..reporting import (
     nrmse_summary,
     rounded,
     score_metrics,
-    theta_table,
 )
 from ..settings import PipelineSettings
 from ..tracking import MLflowTracker, model_description
 from .control import ControlModel
-from .model_facts import latest_metadata, phi_names, prediction_key, truth_metadata
+from .model_facts import phi_names, prediction_key, truth_metadata
 
 
 def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluation:
@@ -86,14 +85,22 @@ def scores_asset(method: Method, partitions_def):
         png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
-        fit_seconds = latest_metadata(context, f"{method.name}_model", "fit_seconds")
+        fit_seconds = float(sum(getattr(model, "timings_", {}).values())) or float("nan")
         facts, artifacts = {}, {}
-        if isinstance(model, PWARX) and model.structured:
-            facts.update(n_submodels=model.n_submodels_)
-            artifacts["structure.json"] = {
-                "outputs": data.y_names, "structure": model.structure_.structures,
-                "regressors": [o.names for o in model.structure_.outputs],
-                "parameters": [o.p.tolist() for o in model.structure_.outputs]}
+        if isinstance(model, PWARX):
+            steps = next((g.steps for g in model.groups_ if g.steps), {})
+            facts.update(n_submodels=model.n_submodels_, output_groups=len(model.groups_),
+                         **truth_metadata(model, data))
+            if "clustering" in steps:
+                facts.update(noise_share=steps["clustering"].noise_share_,
+                             eps=steps["clustering"].eps_)
+            names = phi_names(model, data)
+            artifacts["parameter_matrices.json"] = {
+                "regressors": names, "outputs": data.y_names,
+                "structures": model.structures_,
+                "groups": [{"outputs": [data.y_names[j] for j in g.outputs],
+                            "regions": g.n_regions, "theta": g.thetas.tolist()}
+                           for g in model.groups_]}
             if (search := getattr(model, "structure_search_", None)) is not None:
                 # the columns a reader compares first, numbers to 4 significant digits
                 artifacts["structure_search.csv"] = search.table[
@@ -105,14 +112,6 @@ def scores_asset(method: Method, partitions_def):
                              search_validation_nrmse=search.validation_nrmse,
                              search_linear_nrmse=search.linear_nrmse,
                              search_seconds=search.seconds)
-        elif isinstance(model, PWARX):
-            facts.update(n_submodels=model.n_submodels_,
-                         noise_share=model.clustering_.noise_share_,
-                         eps=model.clustering_.eps_, **truth_metadata(model, data))
-            thetas = theta_table(model.thetas_, phi_names(model, data), data.y_names)
-            artifacts["parameter_matrices.json"] = {
-                "regressors": list(thetas.index), "theta": model.thetas_.tolist(),
-                "outputs": data.y_names}
         if (exported := control.get("control_model")) is not None:
             ss, report = exported.state_space, exported.stability
             facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),

@@ -57,13 +57,12 @@ from ...regressors import build_regressors
 from ...scoring.evaluation import WARMUP
 from ..output_error import OutputErrorRefinement, held_out, refine_outputs
 from ..output_error.simulator import FreeRuns
-from ..scheduling import SignRegions
+from ..partitions import SignRegions
 from ..structure_fit import StructureFit, clustered_models
 from ..structures import (
     COUPLINGS,
     FORMS,
     OutputModel,
-    StructuredModel,
     assign_params,
     output_regressors,
     phi_names,
@@ -343,7 +342,7 @@ class StructureSearch(BaseEstimator):
             Largest orders (na ≥ 1, nb ≥ 1); φ holds na + 1 output lags (the velocity form's
             level) and nb input lags, and the constant.
         cluster : callable, optional
-            ``cluster(reg)`` → (θ (s, d, group size), fitted region step, s): the paper's
+            ``cluster(reg)`` → (θ (s, d, group size), the fitted steps by name): the paper's
             steps 2–6 (the estimator passes its own); None: no clustered candidate.
 
         Returns
@@ -417,7 +416,7 @@ class _Search:
             sign = SignRegions(np.array([v.weights for v in spec.variables]))
             switching = np.array([n == "1" for n in names]) if spec.switch == "offset" \
                 else np.ones(len(names), bool)
-            om = OutputModel(M, c, switching, sign.n_regions, sign, spec.switch, names)
+            om = OutputModel(M, c, switching, sign.n_regions_, sign, spec.switch, names)
         return om.fit(self.reg.phi, self.reg.target[:, j])
 
     def cost(self, models: dict, group: list[int]) -> float:
@@ -495,7 +494,7 @@ class _Search:
                               validation_nrmse=final, linear_nrmse=lin, seconds=seconds)
         n_val = self.n_experiments - self.n_fit
         fit = StructureFit(
-            model=StructuredModel([chosen[j] for j in range(self.m)], self.lags),
+            outputs=[chosen[j] for j in range(self.m)],
             validation_experiments=list(range(self.n_experiments - n_val, self.n_experiments)),
             validation_cost={}, refinement=[i for i in refined_info if i])
         return fit, report

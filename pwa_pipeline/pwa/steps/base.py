@@ -1,10 +1,12 @@
 """The interfaces of the steps :class:`~pwa_pipeline.pwa.estimator.PWARX` runs (paper steps 2–6).
 
 Each step kind is an abstract scikit-learn estimator whose ``fit`` takes what the steps
-before it produced, so that the estimator calls every step of a kind alike
-(:meth:`~pwa_pipeline.pwa.estimator.PWARX.fit_step`). A step object of one's own subclasses
-the base of its kind and implements its abstract methods; its parameters follow
-scikit-learn's conventions (``__init__`` stores them, fitted attributes end in ``_``).
+before it produced, so that the estimator calls every step of a kind alike. A step object of
+one's own subclasses the base of its kind and implements its abstract methods; its
+parameters follow scikit-learn's conventions (``__init__`` stores them, fitted attributes end
+in ``_``). A region step is also a region map (:class:`~pwa_pipeline.pwa.partitions.RegionMap`):
+with ``fit``, ``predict`` and ``halfspaces`` it predicts, simulates and exports to state space
+as the built-in ones do.
 """
 
 from abc import ABCMeta, abstractmethod
@@ -13,6 +15,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 
 from ..._typing import Float2D
+from ..partitions import Halfspaces, RegionMap
 
 
 class BaseLocalModels(BaseEstimator, metaclass=ABCMeta):
@@ -65,7 +68,7 @@ class BaseClustering(BaseEstimator, metaclass=ABCMeta):
         """
 
 
-class BaseRegions(BaseEstimator, metaclass=ABCMeta):
+class BaseRegions(RegionMap, BaseEstimator, metaclass=ABCMeta):
     """Step 6: the regions H_i of a partition of the regressor space (eq. 1).
 
     ``fit`` takes the labelled rows and, by keyword, what a region step may also use: the
@@ -107,6 +110,11 @@ class BaseRegions(BaseEstimator, metaclass=ABCMeta):
     @abstractmethod
     def predict(self, phi: Float2D) -> np.ndarray:
         """The region 0 … s−1 of each row of ``phi``."""
+
+    @abstractmethod
+    def halfspaces(self) -> list[Halfspaces]:
+        """Each region as rows (G, q) of G φ ≤ q (None: never chosen), for the state-space
+        form (:meth:`RegionMap.halfspaces <pwa_pipeline.pwa.partitions.RegionMap.halfspaces>`)."""
 
 
 class BaseSubModels(BaseEstimator, metaclass=ABCMeta):

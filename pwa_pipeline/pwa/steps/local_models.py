@@ -6,8 +6,9 @@ from numbers import Integral, Real
 
 import numpy as np
 from scipy.spatial import cKDTree
-from sklearn.base import _fit_context
-from sklearn.utils._param_validation import Interval
+from sklearn.base import _fit_context, clone
+from sklearn.utils._param_validation import HasMethods, Interval
+from sklearn.utils.validation import check_memory
 
 from ..._arrays import column_rms
 from ..._blas import single_threaded_blas
@@ -196,6 +197,10 @@ class LocalLeastSquares(BaseLocalModels):
         most of the fit's time. None (the paper): every sample.
     random_state : int, default 0
         Seed of that subset.
+    memory : str, object with the joblib.Memory interface, or None
+        Where to keep the fitted local models (``joblib.Memory``'s ``cache``), keyed by the
+        regressors, the outputs and the other parameters: the sets of a sweep whose later
+        steps alone differ estimate them once. None: no cache.
 
     Attributes
     ----------
@@ -242,15 +247,17 @@ class LocalLeastSquares(BaseLocalModels):
         "ridge": [Interval(Real, 0, None, closed="left")],
         "max_sets": [Interval(Integral, 1, None, closed="left"), None],
         "random_state": [Interval(Integral, 0, None, closed="left")],
+        "memory": [None, str, HasMethods(["cache"])],
     }
 
     def __init__(self, n_rho: int | None = None, standardize: bool = True, ridge: float = 0.0,
-                 max_sets: int | None = 5000, random_state: int = 0):
+                 max_sets: int | None = 5000, random_state: int = 0, memory=None):
         self.n_rho = n_rho
         self.standardize = standardize
         self.ridge = ridge
         self.max_sets = max_sets
         self.random_state = random_state
+        self.memory = memory
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
@@ -273,6 +280,13 @@ class LocalLeastSquares(BaseLocalModels):
         phi : ndarray of shape (n, d)
         target : ndarray of shape (n, m)
         """
+        plain = clone(self).set_params(memory=None)
+        fitted = check_memory(self.memory).cache(_fitted)(plain, phi, target)
+        self.__dict__.update({k: v for k, v in vars(fitted).items() if k.endswith("_")})
+        return self
+
+    def _fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
+        """:meth:`fit` without the cache."""
         n, d = phi.shape
         self.n_rho_ = self.n_rho if self.n_rho is not None else 3 * d
         check_n_rho(self.n_rho_, d)
@@ -338,6 +352,11 @@ class LocalLeastSquares(BaseLocalModels):
             state = {**state, **{name: _spread(state[name], rows, len(estimated), fill)
                                  for name, fill in _PER_SAMPLE.items()}}
         super().__setstate__(state)
+
+
+def _fitted(step: LocalLeastSquares, phi: Float2D, target: Float2D) -> LocalLeastSquares:
+    """``step`` (without a cache) fitted: what ``memory`` keeps."""
+    return step._fit(phi, target)
 
 
 def _spread(values: np.ndarray, rows: np.ndarray, n: int, fill) -> np.ndarray:
