@@ -2,7 +2,7 @@
 hand layout against matplotlib's constrained layout, which it had before.
 
 The robot's default and paper settings are fitted through step 4 once; then the figure of
-each is built and rendered to PNG (:func:`~pwa_pipeline.orchestration.figures.to_png`)
+each is built and rendered to PNG (:func:`~pwa_pipeline.orchestration.images.to_png`)
 ``--repeats`` times each way, the two ways alternating so that they share the machine's
 load: as drawn (laid out by hand) and with the constrained layout engine set on the same
 figure before rendering. Reported: the median seconds of the PNG rendering each way and
@@ -22,7 +22,8 @@ from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import load_kuka
-from pwa_pipeline.orchestration.figures import parameter_clusters_figure, to_png
+from pwa_pipeline.orchestration.images import to_png
+from pwa_pipeline.plotting import ParameterClustersDisplay
 from pwa_pipeline.regressors import build_regressors
 
 
@@ -38,7 +39,7 @@ def rendering_seconds(setting: str, repeats: int) -> dict:
     seconds = {"hand": [], "constrained": []}
     for _ in range(repeats):
         for layout in seconds:
-            fig = parameter_clusters_figure(local, clustering, reg.target)
+            fig = ParameterClustersDisplay.from_steps(local, clustering, reg.target).figure_
             if layout == "constrained":
                 fig.set_layout_engine("constrained")
             with Timer() as t:

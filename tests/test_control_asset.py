@@ -55,7 +55,7 @@ def test_the_partition_figure_draws_each_region_where_the_model_places_it():
     """Points of the slice lie in the drawn polygon of the mode ``mode_of`` gives them."""
     from matplotlib.path import Path as PolygonPath
 
-    from pwa_pipeline.orchestration.figures import partition_figure
+    from pwa_pipeline.plotting import PartitionDisplay
 
     data = load_dataset("hure_vasak")
     model = PipelineSettings().configuration("paper", "hure_vasak").pwa.fit(data.u_train,
@@ -63,7 +63,7 @@ def test_the_partition_figure_draws_each_region_where_the_model_places_it():
     ss = model.to_state_space()
     lower, upper = ss.envelope
     fixed = (lower + upper) / 2
-    fig = partition_figure(ss, fixed, "hure_vasak | set paper | PWA")
+    fig = PartitionDisplay.from_state_space(ss, fixed, "hure_vasak | set paper | PWA").figure_
     ax = fig.axes[0]
     polygons = {int(p.get_label().split()[1]) - 1: PolygonPath(p.get_xy()) for p in ax.patches}
     assert sorted(polygons) == [0, 1]
@@ -88,7 +88,7 @@ def test_the_partition_figure_takes_a_region_bound_on_a_coordinate_off_the_slice
     halfspace."""
     import copy
 
-    from pwa_pipeline.orchestration.figures import partition_figure
+    from pwa_pipeline.plotting import PartitionDisplay
 
     data = load_dataset("hure_vasak")
     model = PipelineSettings().configuration("paper", "hure_vasak").pwa.fit(data.u_train,
@@ -97,7 +97,7 @@ def test_the_partition_figure_takes_a_region_bound_on_a_coordinate_off_the_slice
     lower, upper = ss.envelope
     fixed = (lower + upper) / 2
     names = [*ss.state_names, *ss.input_names]
-    axes = partition_figure(ss, fixed, "").axes[0]
+    axes = PartitionDisplay.from_state_space(ss, fixed, "").figure_.axes[0]
     shown = [names.index(axes.get_xlabel()), names.index(axes.get_ylabel())]
     off = ss.n_states  # the first input u1(k): no region of this model reads it
     unit = np.eye(len(names))
@@ -107,6 +107,6 @@ def test_the_partition_figure_takes_a_region_bound_on_a_coordinate_off_the_slice
         if mode == 0:  # and mode 1 bounded on u1(k), the slice on that bound itself
             rows, bounds = rows + [unit[off]], bounds + [fixed[off]]
         ss.regions[mode] = (np.vstack([H, *rows]), np.append(h, bounds))
-    fig = partition_figure(ss, fixed, "hure_vasak | set paper | PWA")
+    fig = PartitionDisplay.from_state_space(ss, fixed, "hure_vasak | set paper | PWA").figure_
     assert names[off] not in (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel())
     assert sorted(p.get_label() for p in fig.axes[0].patches) == ["mode 1", "mode 2"]

@@ -11,8 +11,8 @@ import pytest
 from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
 from pwa_pipeline.datasets.registry import Dataset
 from pwa_pipeline.envelope import PADDING, channel_bounds, regressor_bounds
-from pwa_pipeline.orchestration.figures import prediction_figure
 from pwa_pipeline.orchestration.reporting import score_metrics
+from pwa_pipeline.plotting import PredictionDisplay
 from pwa_pipeline.scoring.evaluation import evaluate
 
 WARMUP = 10
@@ -236,12 +236,19 @@ def test_evaluate_reports_the_share_per_mode_and_mlflow_logs_it(paper):
     np.testing.assert_array_equal(again.outside["free_run"][1], ev.outside["free_run"][1])
 
 
-def test_a_model_without_a_regressor_reports_no_share():
+def test_the_subspace_model_flags_samples_whose_past_left_its_training_range():
+    """The state-space baseline has no regressor; its envelope is the channels' padded
+    training range, tested on the past sample's inputs and outputs."""
     data = make_hure_vasak(n_samples=600, snr_db=30, seed=5)
     model = SubspaceSS(order=2).fit(data.u, data.y)
-    ev = evaluate(model, data.u, data.y, warmup=WARMUP)
-    assert ev.outside is None and np.isnan(ev.outside_share("free_run"))
-    assert not any("outside" in k for k in score_metrics(ev))
+    u = data.u * np.where(np.arange(600) % 200 < 40, 3.0, 1.0)[:, None]
+    flags = model.outside_envelope(u, data.y)
+    lower, upper = channel_bounds(model.signal_range_)
+    past = np.hstack([data.y, u])[:-1]
+    np.testing.assert_array_equal(flags[1:], ((past < lower) | (past > upper)).any(axis=1))
+    ev = evaluate(model, u, data.y, warmup=WARMUP)
+    expected = float(np.mean(flags[WARMUP:]))
+    assert ev.outside_share("one_step") == pytest.approx(expected) and 0 < expected < 1
 
 
 def _stretches(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -261,7 +268,7 @@ def test_the_prediction_figure_hatches_the_stretches_outside_the_training_data(p
     data = Dataset("hure_vasak", [train.u], [train.y], [u], [test.y], train.u_names,
                    train.y_names)
     ev = evaluate(model, u, test.y, warmup=WARMUP, output_names=train.y_names)
-    fig = prediction_figure(data, ev, "hure_vasak | set s | PWA", WARMUP)
+    fig = PredictionDisplay.from_evaluation(ev, data, WARMUP, context="hure_vasak | set s | PWA").figure_
     for mode, label in (("one_step", "one-step"), ("free_run", "free run")):
         mask = ev.outside[mode][0][:606]
         assert mask[200:260].any()
@@ -287,7 +294,7 @@ def test_the_prediction_figure_has_no_hatching_inside_the_training_data():
     model = LinearARX(na=1, nb=1).fit(u, y)
     data = Dataset("d", [u], [y], [u], [y], ["u1", "u2"], ["y1"])
     ev = evaluate(model, u, y, warmup=WARMUP)
-    fig = prediction_figure(data, ev, "d | set s | ARX", WARMUP)
+    fig = PredictionDisplay.from_evaluation(ev, data, WARMUP, context="d | set s | ARX").figure_
     assert not [c for ax in fig.axes for c in ax.collections
                 if "outside the training data" in c.get_label()]
     assert len(fig.get_suptitle().splitlines()) == 2

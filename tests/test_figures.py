@@ -1,4 +1,4 @@
-"""The diagnostic figures of :mod:`pwa_pipeline.orchestration.figures` on a small fit."""
+"""The figures of :mod:`pwa_pipeline.plotting` on a small fit, as the pipeline's pages show them."""
 
 import base64
 import copy
@@ -15,20 +15,17 @@ from pwa_pipeline._arrays import column_rms
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.registry import Dataset
-from pwa_pipeline.orchestration import figures
-from pwa_pipeline.orchestration.figures import (
-    MAX_SAMPLES,
-    clip_range,
+from pwa_pipeline.orchestration.images import to_markdown, to_png
+from pwa_pipeline.plotting import (
+    ParameterClustersDisplay,
+    PredictionDisplay,
+    RegionsDisplay,
+    SwitchingDisplay,
     context_title,
-    draw_structured_switching,
-    parameter_clusters_figure,
-    prediction_figure,
-    regions_figure,
-    structured_switching_inputs,
-    switching_figure,
-    to_markdown,
-    to_png,
 )
+from pwa_pipeline.plotting import clusters as cluster_figure
+from pwa_pipeline.plotting.prediction import clip_range
+from pwa_pipeline.plotting.style import MAX_SAMPLES
 from pwa_pipeline.pwa.partitions import argmax_halfspaces
 from pwa_pipeline.pwa.steps.clustering import k_distances
 from pwa_pipeline.pwa.steps.embedding import exact_embedding
@@ -83,7 +80,7 @@ def _outside_line(ev):
 
 
 def test_prediction_titles_give_each_outputs_nrmse(fit):
-    fig = prediction_figure(fit.data, fit.ev, "pwa | test", WARMUP)
+    fig = PredictionDisplay.from_evaluation(fit.ev, fit.data, WARMUP, context="pwa | test").figure_
     assert len(fig.axes) == 2
     assert fig.get_suptitle() == ("pwa | test\nMeasured output, one-step prediction and free "
                                   "run: held-out experiment 1 of 1, samples 0–605 of 1500"
@@ -105,7 +102,7 @@ def test_prediction_titles_give_each_outputs_nrmse(fit):
 
 
 def test_diverged_free_run_is_clipped_marked_and_labelled(fit):
-    fig = prediction_figure(fit.data, _diverged(fit), "diverged", WARMUP)
+    fig = PredictionDisplay.from_evaluation(_diverged(fit), fit.data, WARMUP, context="diverged").figure_
     y = fit.data.y_test[0]
     exits = {0: 200, 1: 300}
     for j, ax in enumerate(fig.axes):
@@ -134,14 +131,15 @@ def _legend_texts(fig):
 
 
 def test_prediction_figure_has_one_legend_of_what_any_output_draws(fit):
-    fig = prediction_figure(fit.data, fit.ev, "t", WARMUP)
+    fig = PredictionDisplay.from_evaluation(fit.ev, fit.data, WARMUP, context="t").figure_
     # (the fit's free run leaves the data envelope at a sample of the experiment drawn)
     outside = ["free run outside the training data"] \
         if fit.ev.outside["free_run"][0][:MAX_SAMPLES].any() else []
     assert _legend_texts(fig) == ["warm-up", "measured", "one-step", "free run", *outside]
     # output 1 diverges (clipped, shaded), output 2 is NaN: each entry once, in drawn order
     diverged = _diverged(fit, flagged=False)
-    assert _legend_texts(prediction_figure(fit.data, diverged, "t", WARMUP)) == [
+    assert _legend_texts(PredictionDisplay.from_evaluation(diverged, fit.data, WARMUP,
+                                                           context="t").figure_) == [
         "warm-up", "measured", "one-step", "free run (clipped)", "free run out of range",
         "free run (diverged, clipped)", "diverged free run out of range"]
     to_png(fig)  # laid out: the legend below every axes and its x label, inside the figure
@@ -152,7 +150,8 @@ def test_prediction_figure_has_one_legend_of_what_any_output_draws(fit):
 
 
 def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
-    fig = prediction_figure(fit.data, _diverged(fit, flagged=False), "t", WARMUP)
+    fig = PredictionDisplay.from_evaluation(_diverged(fit, flagged=False), fit.data, WARMUP,
+                                            context="t").figure_
     ax1, ax2 = fig.axes
     assert _line(ax1, "free run (clipped)").get_color() == "C1"  # finite 1e30, not flagged
     _line(ax2, "free run (diverged, clipped)")  # NaN
@@ -163,7 +162,7 @@ def test_non_finite_free_run_counts_as_diverged_without_the_flag(fit):
 def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatch):
     model, step = fit.model, fit.model.steps_["clustering"]
     assert step.unit_free
-    fig = parameter_clusters_figure(model.steps_["local_models"], step, fit.reg.target)
+    fig = ParameterClustersDisplay.from_steps(model.steps_["local_models"], step, fit.reg.target).figure_
     assert len(fig.axes) == 2
     ax, ax_k = fig.axes
     assert sum(c.get_offsets().shape[0] for c in ax.collections) == step.clustered_.sum()
@@ -175,7 +174,7 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     theta = model.steps_["local_models"].theta_[step.clustered_]
     scale = model.steps_["local_models"].phi_scale_[None, :, None] / column_rms(fit.reg.target)
     n = int(step.clustered_.sum())
-    assert n <= figures._CURVE_POINTS  # every clustered local model is queried
+    assert n <= cluster_figure._CURVE_POINTS  # every clustered local model is queried
     expected = k_distances(exact_embedding(theta * scale), step.min_pts_)
     assert not np.allclose(expected, k_distances(exact_embedding(theta), step.min_pts_))
     curve = _line(ax_k, "k-distance")
@@ -183,8 +182,9 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     assert np.allclose(curve.get_xdata(), 100 * (np.arange(n) + 0.5) / n)
     assert ax_k.get_xlabel() == "% of the clustered local models, sorted"
     assert ax_k.get_title(loc="left") == f"k-distance curve (MinPts = {step.min_pts_})"
-    monkeypatch.setattr(figures, "_CURVE_POINTS", 400)  # more than it queries: a subset
-    sub = parameter_clusters_figure(model.steps_["local_models"], step, fit.reg.target).axes[1]
+    monkeypatch.setattr(cluster_figure, "_CURVE_POINTS", 400)  # more than it queries: a subset
+    sub = ParameterClustersDisplay.from_steps(model.steps_["local_models"], step,
+                                              fit.reg.target).figure_.axes[1]
     assert np.allclose(_line(sub, "k-distance").get_ydata(), k_distances(
         exact_embedding(theta * scale), step.min_pts_, max_query=400))
     assert sub.get_title(loc="left") == (f"k-distance curve (MinPts = {step.min_pts_}; 400 of "
@@ -193,7 +193,7 @@ def test_parameter_clusters_show_the_unit_free_embedding_and_eps(fit, monkeypatc
     assert np.allclose(eps.get_ydata(), step.eps_)
     given = copy.copy(step)
     given.eps_auto_ = False
-    fig = parameter_clusters_figure(model.steps_["local_models"], given, fit.reg.target)
+    fig = ParameterClustersDisplay.from_steps(model.steps_["local_models"], given, fit.reg.target).figure_
     _line(fig.axes[1], f"ε = {step.eps_:.4g} (given)")
 
 
@@ -205,7 +205,8 @@ def test_switching_agreement_matches_a_direct_count(fit):
     assert 80 < agreement < 100
     assert abs(100 * np.mean(region == test.modes[1:]) - agreement) > 1  # pairing matters
     for modes in (test.modes, test.modes[1:]):  # per sample or per regressor row
-        fig = switching_figure(model, test.u, test.y, modes, test.thetas)
+        fig = SwitchingDisplay.from_estimator(model, test.u, test.y, true_modes=modes,
+                                              true_thetas=test.thetas).figure_
         assert len(fig.axes) == 2
         # the agreement is over every row of the experiment, of which the first 605 are drawn
         assert fig.get_suptitle() == (
@@ -221,28 +222,30 @@ def test_switching_agreement_matches_a_direct_count(fit):
 
 def test_switching_without_truth_and_bad_truth(fit):
     model, test = fit.model, fit.test
-    fig = switching_figure(model, test.u, test.y)
+    fig = SwitchingDisplay.from_estimator(model, test.u, test.y).figure_
     assert len(fig.axes) == 1
     region = model.regions_.predict(lagged_matrix(test.u, test.y, 1, 1, False))
     assert np.array_equal(fig.axes[0].collections[0].get_offsets()[:, 1], region[:605])
     # 27 regions (the robot's paper setting), 3 of them visited: one level for each of those
-    many = SimpleNamespace(output_lags_=1, nb=1, affine=False,
-                           thetas_=np.zeros((27, *model.thetas_.shape[1:])),
-                           regions_=SimpleNamespace(predict=lambda phi: np.array([3, 20, 26])[
-                               np.arange(len(phi)) % 3]))
-    ax = switching_figure(many, test.u, test.y).axes[0]
+    regions = SimpleNamespace(n_regions_=27, predict=lambda phi: np.array([3, 20, 26])[
+        np.arange(len(phi)) % 3])
+    many = SimpleNamespace(output_lags_=1, nb=1, affine=False, structures_=["x", "x"],
+                           groups_=[SimpleNamespace(outputs=(0, 1), regions=regions,
+                                                    n_regions=27)])
+    ax = SwitchingDisplay.from_estimator(many, test.u, test.y).figure_.axes[0]
     assert np.array_equal(ax.collections[0].get_offsets()[:, 1], np.arange(605) % 3)
     assert [t.get_text() for t in ax.get_yticklabels()] == ["H4", "H21", "H27"]
     assert ax.get_ylabel() == "estimated region\n(3 of 27 visited)"
     with pytest.raises(ValueError, match="true_thetas"):
-        switching_figure(model, test.u, test.y, test.modes)
+        SwitchingDisplay.compute(model, test.u, test.y, true_modes=test.modes)
     with pytest.raises(ValueError, match="true_modes has 10 entries"):
-        switching_figure(model, test.u, test.y, test.modes[:10], test.thetas)
+        SwitchingDisplay.compute(model, test.u, test.y, true_modes=test.modes[:10],
+                                 true_thetas=test.thetas)
 
 
 def test_regions_slice_covers_every_region(fit):
     model = fit.model
-    fig = regions_figure(model, fit.reg.phi, fit.names)
+    fig = RegionsDisplay.from_estimator(model, fit.reg.phi, fit.names).figure_
     assert len(fig.axes) == 1
     ax = fig.axes[0]
     # The modes of the system switch on y(k−1): those are the two regressors chosen.
@@ -259,7 +262,7 @@ def test_regions_slice_covers_every_region(fit):
     points = [c for c in ax.collections if not isinstance(c, ContourSet)]
     assert sum(c.get_offsets().shape[0] for c in points) == fit.reg.phi.shape[0]
     with pytest.raises(ValueError, match="names"):
-        regions_figure(model, fit.reg.phi, fit.names[:3])
+        RegionsDisplay.from_estimator(model, fit.reg.phi, fit.names[:3]).figure_
 
 
 def test_regions_figure_keeps_a_long_legend_inside_the_figure():
@@ -271,8 +274,8 @@ def test_regions_figure_keeps_a_long_legend_inside_the_figure():
                               halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
     phi = rng.normal(size=(2000, 4))
     model = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
-    fig = regions_figure(model, phi, ["a", "b", "c", "d"],
-                         labels=np.r_[-1, rng.integers(0, 27, 1999)])
+    fig = RegionsDisplay.from_estimator(model, phi, ["a", "b", "c", "d"], labels=np.r_[-1, rng.integers(0, 27,
+                                                                                                        1999)]).figure_
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # "constrained_layout not applied" before the columns
         to_png(fig)  # drawn as the asset page shows it
@@ -301,7 +304,7 @@ def test_parameter_clusters_legend_lists_the_clusters_with_their_own_colour():
     """27 clusters (the paper's setting on the robot): the 8 with a colour of their own and
     noise are listed, the rest is one line with their sizes."""
     local, step, labels = _twenty_seven_clusters()
-    fig = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
+    fig = ParameterClustersDisplay.from_steps(local, step, np.ones((labels.size, 2))).figure_
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         to_png(fig)
@@ -355,13 +358,13 @@ def test_parameter_clusters_layout_keeps_every_text_inside_and_apart(fit):
     the longest legend (27 clusters), and with long tick labels on the log axis, nothing
     leaves the figure or covers the other panel, and the legend stays below the x label."""
     local, step, labels = _twenty_seven_clusters()
-    many = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
-    one = parameter_clusters_figure(fit.model.steps_["local_models"], fit.model.steps_["clustering"],
-                                    fit.reg.target)
+    many = ParameterClustersDisplay.from_steps(local, step, np.ones((labels.size, 2))).figure_
+    one = ParameterClustersDisplay.from_steps(fit.model.steps_["local_models"],
+                                              fit.model.steps_["clustering"], fit.reg.target).figure_
     assert many.get_layout_engine() is None and many.get_figheight() > one.get_figheight()
     for fig in (many, one):
         assert _clusters_layout_faults(fig) == []
-    squeezed = parameter_clusters_figure(local, step, np.ones((labels.size, 2)))
+    squeezed = ParameterClustersDisplay.from_steps(local, step, np.ones((labels.size, 2))).figure_
     squeezed.axes[0].set_position([0.05, 0.05, 0.9, 0.9])  # a layout that is wrong
     assert len(_clusters_layout_faults(squeezed)) > 3
 
@@ -373,13 +376,13 @@ def _png(markdown):
 
 
 def test_to_markdown_inlines_a_small_png(fit):
-    figs = [prediction_figure(fit.data, fit.ev, "pred [pwa]", WARMUP),
-            prediction_figure(fit.data, _diverged(fit), "diverged", WARMUP),
-            parameter_clusters_figure(fit.model.steps_["local_models"], fit.model.steps_["clustering"],
-                                      fit.reg.target),
-            switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
-                             fit.test.thetas),
-            regions_figure(fit.model, fit.reg.phi, fit.names)]
+    figs = [PredictionDisplay.from_evaluation(fit.ev, fit.data, WARMUP, context="pred [pwa]").figure_,
+            PredictionDisplay.from_evaluation(_diverged(fit), fit.data, WARMUP, context="diverged").figure_,
+            ParameterClustersDisplay.from_steps(fit.model.steps_["local_models"],
+                                                fit.model.steps_["clustering"], fit.reg.target).figure_,
+            SwitchingDisplay.from_estimator(fit.model, fit.test.u, fit.test.y, true_modes=fit.test.modes,
+                                            true_thetas=fit.test.thetas).figure_,
+            RegionsDisplay.from_estimator(fit.model, fit.reg.phi, fit.names).figure_]
     for fig in figs:
         png = _png(to_markdown(fig))
         assert png.startswith(b"\x89PNG\r\n\x1a\n")
@@ -394,11 +397,10 @@ def test_to_markdown_inlines_a_small_png(fit):
 
 
 def test_parameter_clusters_are_projected_on_their_principal_components(fit):
-    from pwa_pipeline.orchestration.figures import _clustering_embedding
 
     step = fit.model.steps_["clustering"]
-    fig = parameter_clusters_figure(fit.model.steps_["local_models"], step, fit.reg.target)
-    emb = _clustering_embedding(fit.model.steps_["local_models"], step, fit.reg.target)
+    fig = ParameterClustersDisplay.from_steps(fit.model.steps_["local_models"], step, fit.reg.target).figure_
+    emb = cluster_figure._embedding(fit.model.steps_["local_models"], step, fit.reg.target)
     centred = emb - emb.mean(axis=0)
     _, sv, vt = np.linalg.svd(centred, full_matrices=False)
     drawn = {c.get_label(): c.get_offsets() for c in fig.axes[0].collections}
@@ -466,19 +468,19 @@ def test_every_figure_is_titled_with_its_data_set_set_and_method(fit, structured
     and the method; the second says what is drawn."""
     assert CONTEXT == "hure_vasak | set my_set | PWA"
     test = fit.test
-    outputs = structured_switching_inputs(structured, test.u, test.y, fit.data.y_names,
-                                          fit.data.u_names)
+    outputs = SwitchingDisplay.compute(structured, test.u, test.y, y_names=fit.data.y_names,
+                                       u_names=fit.data.u_names)
     figs = {
-        "prediction": prediction_figure(fit.data, fit.ev, CONTEXT, WARMUP),
-        "switching": switching_figure(fit.model, test.u, test.y, test.modes, test.thetas,
-                                      context=CONTEXT),
-        "switching without truth": switching_figure(fit.model, test.u, test.y,
-                                                    context=CONTEXT),
-        "structured switching": draw_structured_switching(outputs, CONTEXT),
-        "regions": regions_figure(fit.model, fit.reg.phi, fit.names, context=CONTEXT),
-        "parameter clusters": parameter_clusters_figure(
+        "prediction": PredictionDisplay.from_evaluation(fit.ev, fit.data, WARMUP, context=CONTEXT).figure_,
+        "switching": SwitchingDisplay.from_estimator(fit.model, test.u, test.y, true_modes=test.modes,
+                                                     true_thetas=test.thetas, context=CONTEXT).figure_,
+        "switching without truth": SwitchingDisplay.from_estimator(fit.model, test.u, test.y,
+                                                                   context=CONTEXT).figure_,
+        "structured switching": outputs.plot(CONTEXT).figure_,
+        "regions": RegionsDisplay.from_estimator(fit.model, fit.reg.phi, fit.names, context=CONTEXT).figure_,
+        "parameter clusters": ParameterClustersDisplay.from_steps(
             fit.model.steps_["local_models"], fit.model.steps_["clustering"], fit.reg.target,
-            context=CONTEXT),
+            context=CONTEXT).figure_,
     }
     for name, fig in figs.items():
         lines = fig.get_suptitle().splitlines()
@@ -495,7 +497,7 @@ def test_every_figure_is_titled_with_its_data_set_set_and_method(fit, structured
 def test_the_prediction_axes_carry_units_and_fit_a_laptop_screen(robot_like):
     """Six outputs (the robot's) in a 3 × 2 grid, each y axis ``q<i> [deg]``, at most
     900 × 650 px as rendered (the figure was 900 × 1134 px stacked)."""
-    fig = prediction_figure(robot_like.data, robot_like.ev, CONTEXT, WARMUP)
+    fig = PredictionDisplay.from_evaluation(robot_like.ev, robot_like.data, WARMUP, context=CONTEXT).figure_
     width, height = _pixels(fig)
     assert width <= 900 and height <= 650, (width, height)
     assert 90 * fig.get_figheight() >= 550  # six panels still readable, not squashed
@@ -523,7 +525,7 @@ def test_the_prediction_grid_keeps_every_output_and_the_sample_axis(fit, m):
     import pandas as pd
 
     ev = Evaluation(pd.DataFrame(rows), {"one_step": [y_test + 0.1], "free_run": [y_test - 0.1]})
-    fig = prediction_figure(data, ev, CONTEXT, WARMUP)
+    fig = PredictionDisplay.from_evaluation(ev, data, WARMUP, context=CONTEXT).figure_
     assert [ax.get_ylabel() for ax in _reading_order(fig)] == names
     columns = -(-m // 3)  # 3 rows at most, filled evenly: 4 outputs in 2 × 2
     assert len({round(ax.get_position().x0, 3) for ax in fig.axes}) == columns
@@ -538,8 +540,9 @@ def test_the_measured_line_is_drawn_on_top_and_stays_visible(fit, robot_like):
     """Of every line of every output's axes (one-step, free run, clipped free run and its
     exit markers) the measured one has the highest z-order; it is opaque and black, and the
     one-step line under it is wider and translucent, so both show where they coincide."""
-    for fig in (prediction_figure(robot_like.data, robot_like.ev, CONTEXT, WARMUP),
-                prediction_figure(fit.data, _diverged(fit), CONTEXT, WARMUP)):
+    for fig in (PredictionDisplay.from_evaluation(robot_like.ev, robot_like.data, WARMUP,
+                                                  context=CONTEXT).figure_,
+                PredictionDisplay.from_evaluation(_diverged(fit), fit.data, WARMUP, context=CONTEXT).figure_):
         for ax in fig.axes:
             measured = _line(ax, "measured")
             others = [ln for ln in ax.get_lines() if ln is not measured]
@@ -554,7 +557,7 @@ def test_the_measured_line_is_drawn_on_top_and_stays_visible(fit, robot_like):
 
 def test_axes_of_regions_and_regressors_carry_units(fit):
     units = {"y1": "V", "y2": "V", "u1": "A"}
-    ax = regions_figure(fit.model, fit.reg.phi, fit.names, units=units).axes[0]
+    ax = RegionsDisplay.from_estimator(fit.model, fit.reg.phi, fit.names, units=units).figure_.axes[0]
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("y1(k-1) [V]", "y2(k-1) [V]")
     data = Dataset("d", [], [], [], [], ["u1", "u2"], ["y1", "y2"], units=units)
     assert [data.label(n) for n in ("y1", "u1(k-2)", "u2", "1")] == [
@@ -589,9 +592,9 @@ def test_units_are_not_part_of_the_digest(fit):
 
 def test_the_structured_switching_figure_shows_each_outputs_regions(fit, structured):
     test = fit.test
-    outputs = structured_switching_inputs(structured, test.u, test.y, ["q1", "q2"],
-                                          ["tau1", "tau2"])
-    fig = draw_structured_switching(outputs, CONTEXT)
+    outputs = SwitchingDisplay.compute(structured, test.u, test.y, y_names=["q1", "q2"], u_names=["tau1",
+                                                                                                  "tau2"])
+    fig = outputs.plot(CONTEXT).figure_
     assert len(fig.axes) == 2
     lags = structured.output_lags_
     phi = lagged_matrix(test.u, test.y, lags, 1, True)
@@ -614,8 +617,8 @@ def test_every_figure_fits_a_laptop_screen(fit, robot_like):
     """At 90 dpi no figure is wider than 900 px or higher than 650 px: six outputs of a
     structured model, the regions figure with its longest legend, the clusters figure."""
     data = robot_like.data
-    outputs = structured_switching_inputs(robot_like.structured, data.u_test[0],
-                                          data.y_test[0], data.y_names, data.u_names)
+    outputs = SwitchingDisplay.compute(robot_like.structured, data.u_test[0], data.y_test[0],
+                                       y_names=data.y_names, u_names=data.u_names)
     assert len(outputs.regions) == 6
     rng = np.random.default_rng(0)
     coef = rng.normal(size=(27, 4))
@@ -623,12 +626,14 @@ def test_every_figure_fits_a_laptop_screen(fit, robot_like):
                               halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
     many = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
     local, step, labels = _twenty_seven_clusters()
-    figs = [draw_structured_switching(outputs, CONTEXT),
-            regions_figure(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"], CONTEXT,
-                           labels=np.r_[-1, rng.integers(0, 27, 1999)]),
-            parameter_clusters_figure(local, step, np.ones((labels.size, 2)), CONTEXT),
-            switching_figure(fit.model, fit.test.u, fit.test.y, fit.test.modes,
-                             fit.test.thetas, CONTEXT)]
+    figs = [outputs.plot(CONTEXT).figure_,
+            RegionsDisplay.from_estimator(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"],
+                                          labels=np.r_[-1, rng.integers(0, 27,
+                                                                        1999)], context=CONTEXT).figure_,
+            ParameterClustersDisplay.from_steps(local, step, np.ones((labels.size, 2)),
+                                                context=CONTEXT).figure_,
+            SwitchingDisplay.from_estimator(fit.model, fit.test.u, fit.test.y, true_modes=fit.test.modes,
+                                            true_thetas=fit.test.thetas, context=CONTEXT).figure_]
     for fig in figs:
         width, height = _pixels(fig)
         assert width <= 900 and height <= 650, (fig.get_suptitle(), width, height)

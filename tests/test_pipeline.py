@@ -18,7 +18,7 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.control import PWAStateSpace
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
-from pwa_pipeline.orchestration import figures
+from pwa_pipeline.orchestration import images
 from pwa_pipeline.orchestration.assets import model_facts
 from pwa_pipeline.orchestration.assets import scores as score_assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
@@ -429,7 +429,7 @@ def test_baselines_are_reused_across_sets_with_their_settings(resources, tmp_pat
 
     # the scores' cache holds numbers only: changed figure code draws the figures again
     # from the cached fits and scores
-    monkeypatch.setattr(figures, "figures_fingerprint", lambda: "other figure code")
+    monkeypatch.setattr(images, "figures_fingerprint", lambda: "other figure code")
     run = dg.materialize(list(sweep.assets), selection=steps,
                          partition_key="hure_vasak|set_1", resources=resources)
     assert all(metadata(run, n, "from_cache") for n in names)

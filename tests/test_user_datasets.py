@@ -210,7 +210,7 @@ def test_units_given_at_registration_reach_the_figures_and_the_listing(tmp_path,
     of the data set's figures (``y1 [deg]``); a column without one stays bare."""
     from pwa_pipeline import LinearARX
     from pwa_pipeline.orchestration.cli import main
-    from pwa_pipeline.orchestration.figures import prediction_figure
+    from pwa_pipeline.plotting import PredictionDisplay
     from pwa_pipeline.scoring.evaluation import evaluate
 
     monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
@@ -225,7 +225,7 @@ def test_units_given_at_registration_reach_the_figures_and_the_listing(tmp_path,
     assert data.units == {"y1": "deg", "u2": "N·m"}
     model = LinearARX(na=1, nb=1).fit(data.u_train, data.y_train)
     ev = evaluate(model, data.u_test, data.y_test, warmup=10, output_names=data.y_names)
-    fig = prediction_figure(data, ev, "plant | set default | linear ARX", 10)
+    fig = PredictionDisplay.from_evaluation(ev, data, 10, context="plant | set default | linear ARX").figure_
     assert [ax.get_ylabel() for ax in fig.axes] == ["y1 [deg]", "y2"]
     assert [data.label(n) for n in data.u_names] == ["u1", "u2 [N·m]"]
     # the units change no fit or score: the digest is that of the data without them

@@ -20,8 +20,6 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._arrays import column_rms
 from .._blas import single_threaded_blas
-from ..envelope import PADDING, channel_bounds, outside_box, training_range
-from ..scoring.metrics import r2_score
 from .._typing import Float2D, Signals
 from .._validation import (
     _is_experiment_list,
@@ -30,6 +28,8 @@ from .._validation import (
     check_n_init,
     check_width,
 )
+from ..envelope import PADDING, channel_bounds, outside_box, training_range
+from ..scoring.metrics import r2_score
 
 
 def _block_hankel(x: Float2D, start: int, rows: int, cols: int) -> Float2D:

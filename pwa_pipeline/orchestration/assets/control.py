@@ -9,9 +9,10 @@ import numpy as np
 
 from ...control import PWAStateSpace, StabilityReport
 from ...datasets import Dataset
+from ...plotting import PartitionDisplay
 from ...pwa import PWARX
-from ..figures import partition_figure, to_markdown
 from ..files import atomic_write, inside
+from ..images import to_markdown
 from ..partitions import split_key
 from ..reporting import rounded
 from ..settings import PipelineSettings
@@ -71,8 +72,8 @@ def control_model_asset(partitions_def):
         inputs = [u[ss.n_initial:] for u in data.u_train]
         fixed = np.median(np.hstack([np.vstack(states), np.vstack(inputs)]), axis=0)
         names = [data.label(name) for name in [*ss.state_names, *ss.input_names]]
-        figure = partition_figure(ss, fixed, figure_context(context.partition_key, "PWA"),
-                                  names)
+        figure = PartitionDisplay.from_state_space(
+            ss, fixed, figure_context(context.partition_key, "PWA"), names).figure_
         context.log.info(f"control_model: {ss.n_modes} region(s) in {ss.n_states} states; "
                          f"{report.message}")
         yield dg.Output(ControlModel(ss, report, files), metadata=rounded({

@@ -26,6 +26,7 @@ from ..._validation import as_experiments
 from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS
+from ...plotting import ParameterClustersDisplay, RegionsDisplay, SwitchingDisplay
 from ...pwa import PWARX
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
@@ -37,17 +38,7 @@ from ..checks import (
     not_applicable,
     sub_model_results,
 )
-from ..figures import (
-    draw_regions,
-    draw_structured_switching,
-    draw_switching,
-    figures_fingerprint,
-    parameter_clusters_figure,
-    region_slice,
-    structured_switching_inputs,
-    switching_inputs,
-    to_markdown,
-)
+from ..images import figures_fingerprint, to_markdown
 from ..partitions import split_key
 from ..reporting import markdown, params_table, regions_table, rounded, theta_table
 from ..settings import PipelineSettings
@@ -267,8 +258,9 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
         reg = build_regressors(as_experiments(data.u_train, data.y_train), model.na, model.nb,
                                model.affine)
         local = next(g.steps["local_models"] for g in model.groups_ if g.steps)
-        figure = parameter_clusters_figure(local, step, reg.target, context=figure_context(
-            partition, METHODS["pwa"].label)) if not where else None
+        figure = None if where else ParameterClustersDisplay.from_steps(
+            local, step, reg.target, context=figure_context(partition, METHODS["pwa"].label)
+        ).figure_
         meta = {"n_clusters": step.n_clusters_, "eps": step.eps_,
                 "eps_from_data": step.eps_auto_, "min_pts": step.min_pts_,
                 "noise_share": step.noise_share_,
@@ -365,26 +357,21 @@ def model_figure_inputs(model: PWARX, data: Dataset, phi: np.ndarray, key: tuple
     (``prediction_key``) in place of the model, the data and ``phi``. No title or unit is
     cached: the sets sharing an entry each draw their own (``model_figures``)."""
     truth = ground_truth(model, data)
-    if len(model.groups_) == 1:
-        switching = switching_inputs(model, data.u_test[0], data.y_test[0],
-                                     true_modes=truth.modes_test[0] if truth else None,
-                                     true_thetas=truth.thetas if truth else None)
-    else:
-        switching = structured_switching_inputs(model, data.u_test[0], data.y_test[0],
-                                                data.y_names, data.u_names)
+    one = len(model.groups_) == 1
+    switching = SwitchingDisplay.compute(
+        model, data.u_test[0], data.y_test[0], y_names=data.y_names, u_names=data.u_names,
+        true_modes=truth.modes_test[0] if truth and one else None,
+        true_thetas=truth.thetas if truth and one else None)
     steps, _ = shown_steps(model)
-    labels = steps["submodels"].labels_ if len(model.groups_) == 1 and "submodels" in steps \
-        else np.asarray(model.regions_.predict(phi))
-    return {"switching": switching, "regions": region_slice(model, phi, labels)}
+    labels = steps["submodels"].labels_ if one and on_phi(model) and "submodels" in steps \
+        else None
+    return {"switching": switching, "regions": RegionsDisplay.compute(model, phi, labels)}
 
 
 def model_figures(inputs: dict, model: PWARX, data: Dataset, title: str) -> dict[str, str]:
     """The switching and regions figures drawn from ``model_figure_inputs``, titled
     ``title`` (data set, set, method), the axes in the data's units, as Markdown images
     (``pwa_model``'s metadata)."""
-    switching = inputs["switching"]
-    drawn = draw_switching(switching, title) if len(model.groups_) == 1 else \
-        draw_structured_switching(switching, title)
-    return {SWITCHING: to_markdown(drawn),
-            REGIONS: to_markdown(draw_regions(inputs["regions"], phi_names(model, data), title,
-                                              data.units))}
+    return {SWITCHING: to_markdown(inputs["switching"].plot(title).figure_),
+            REGIONS: to_markdown(inputs["regions"].plot(phi_names(model, data), title,
+                                                        data.units).figure_)}

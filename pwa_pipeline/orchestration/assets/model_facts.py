@@ -4,10 +4,10 @@ are cached by."""
 
 from ...datasets import Dataset
 from ...datasets.registry import GroundTruth
+from ...plotting import context_title
 from ...pwa import PWARX
 from ...regressors import regressor_names
 from ...scoring.truth import ground_truth_scores
-from ..figures import context_title
 from ..mlflow_models import predictor_fingerprint
 from ..partitions import split_key
 
@@ -42,7 +42,7 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
 
 def figure_context(partition_key: str, method: str) -> str:
     """The first line of a figure's title for the partition ``dataset|hparams`` and the
-    method labelled ``method`` (``pwa_pipeline.orchestration.figures.context_title``):
+    method labelled ``method`` (``pwa_pipeline.plotting.context_title``):
     drawn by each set itself, never taken from a cache that sets share."""
     dataset, hparams = split_key(partition_key)
     return context_title(dataset, hparams, method)

@@ -10,6 +10,7 @@ import pandas as pd
 from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS, Method
+from ...plotting import PredictionDisplay, context_title
 from ...pwa import PWARX
 from ...scoring.comparison import mean_scores
 from ...scoring.evaluation import Evaluation, evaluate
@@ -18,12 +19,7 @@ from ..checks import (
     COMPARISON_CHECKS,
     comparison_results,
 )
-from ..figures import (
-    context_title,
-    png_markdown,
-    prediction_figure,
-    to_png,
-)
+from ..images import png_markdown, to_png
 from ..mlflow_models import (
     ModelToLog,
     Simulator,
@@ -80,8 +76,8 @@ def scores_asset(method: Method, partitions_def):
         score = memory.cache(scored, ignore=["model", "data"]) if settings.cache_scores \
             else scored
         ev = score(model, data, configuration.warmup, prediction_key(model, data))
-        figure = prediction_figure(data, ev, context_title(dataset, hparams, method.label),
-                                   configuration.warmup)
+        figure = PredictionDisplay.from_evaluation(
+            ev, data, configuration.warmup, context=context_title(dataset, hparams, method.label)).figure_
         png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
