@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> None:
     write_table(table[["dataset", "hparams", "method", "mode", "output", "nrmse", "r2", "rmse"]],
                 "comparison")
     write_table(pd.DataFrame(fits), "comparison_fit")
-    md = [f"## {ds} — {mode}\n\n" + table1(table, ds, mode).to_markdown(floatfmt=".4g") + "\n"
+    md = [f"## {ds} — {mode}\n\n" + table1(table, ds, mode, list(METHODS)).to_markdown(floatfmt=".4g") + "\n"
           for ds in table["dataset"].unique() for mode in ("one_step", "free_run")]
     (RESULTS / "comparison.md").write_text("\n".join(md))
     print("\n".join(md))

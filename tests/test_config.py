@@ -133,15 +133,15 @@ def test_table1_layout_follows_the_method_registry():
     rows = [{"dataset": "d", "method": m, "mode": "free_run", "output": o, "nrmse": 0.1 * i,
              "r2": 1 - 0.01 * i} for i, m in enumerate(reversed(list(METHODS)))
             for o in ("q1", "mean")]
-    t = table1(pd.DataFrame(rows), "d", "free_run")
+    t = table1(pd.DataFrame(rows), "d", "free_run", list(METHODS))
     assert list(t.index) == ["q1", "mean"]
     assert list(t.columns[::2]) == [f"{m} NRMSE" for m in METHODS]
     assert t.loc["q1", "linear_arx R² %"] == pytest.approx(99.0)
     assert np.isclose(t.loc["mean", "pwa NRMSE"], 0.2)
     with_sets = pd.DataFrame(rows).assign(hparams="paper")
-    assert table1(with_sets, "d", "free_run").columns[0] == "pwa (paper) NRMSE"
+    assert table1(with_sets, "d", "free_run", list(METHODS)).columns[0] == "pwa (paper) NRMSE"
     with pytest.raises(ValueError, match=r"unknown method\(s\) \['lstm'\]"):
-        table1(pd.DataFrame(rows).replace("subspace", "lstm"), "d", "free_run")
+        table1(pd.DataFrame(rows).replace("subspace", "lstm"), "d", "free_run", list(METHODS))
 
 
 @pytest.mark.parametrize(("text", "message"), [

@@ -86,7 +86,7 @@ def test_leaderboard_ranks_by_free_run_and_puts_diverged_runs_last():
                       "diverged": diverged and mode == "free_run"} for out in ("y1", "mean")]
     rows.append({**rows[1], "dataset": "robot", "nrmse": 0.123456789})  # one-step mean
     rows.append({**rows[3], "dataset": "robot", "nrmse": 0.87654321})  # free-run mean
-    table = leaderboard(pd.DataFrame(rows))
+    table = leaderboard(pd.DataFrame(rows), list(METHODS))
     sim = table[table["dataset"] == "sim"]
     assert list(zip(sim["method"], sim["hparams"], sim["rank"], strict=True)) == [
         ("pwa", "default", 1), ("linear_arx", "paper", 1), ("pwa", "paper", 3),

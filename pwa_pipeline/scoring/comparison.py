@@ -21,20 +21,20 @@ def _ordered(labels, methods: list[str]) -> list[str]:
     return sorted(dict.fromkeys(labels), key=lambda lab: rank[lab.split(" (")[0]])
 
 
-def table1(scores: pd.DataFrame, dataset: str, mode: str) -> pd.DataFrame:
+def table1(scores: pd.DataFrame, dataset: str, mode: str, methods: list[str]
+           ) -> pd.DataFrame:
     """NRMSE and R² (%) per output and method, like the paper's Table 1, for one mode.
 
     ``scores`` has columns dataset, method, mode, output, nrmse, r2 (fraction), and
     optionally hparams (several sets of one method then get a column each). Methods are
-    ordered as in :data:`pwa_pipeline.methods.METHODS`; a method not there raises.
+    ordered as in ``methods`` (e.g. ``list(pwa_pipeline.methods.METHODS)``); a method not
+    there raises.
     """
-    from ..methods import METHODS
-
     sel = scores[(scores["dataset"] == dataset) & (scores["mode"] == mode)]
     sel = sel.assign(column=_column_labels(sel))
     wide = sel.pivot_table(index="output", columns="column", values=["nrmse", "r2"], sort=False)
     wide["r2"] = wide["r2"] * 100
-    order = _ordered(sel["column"], list(METHODS))
+    order = _ordered(sel["column"], methods)
     return wide[[(k, c) for c in order for k in ("nrmse", "r2")]].set_axis(
         [f"{c} {'NRMSE' if k == 'nrmse' else 'R² %'}" for c in order for k in ("nrmse", "r2")],
         axis=1)
@@ -58,7 +58,7 @@ LEADERBOARD_COLUMNS = ["dataset", "rank", "method", "hparams", "one_step_nrmse",
                        "free_run_nrmse", "free_run_r2", "free_run_diverged"]
 
 
-def leaderboard(scores: pd.DataFrame) -> pd.DataFrame:
+def leaderboard(scores: pd.DataFrame, methods: list[str]) -> pd.DataFrame:
     """Every data set × hyper-parameter set × method in one table, ranked by free run.
 
     ``scores`` has columns dataset, hparams, method, mode, output, nrmse, r2 and diverged
@@ -66,10 +66,8 @@ def leaderboard(scores: pd.DataFrame) -> pd.DataFrame:
     output-averaged NRMSE and R² of one-step prediction and free run and whether the free run
     diverged; ``rank`` orders the rows of a data set by free-run NRMSE (1 is best, ties share
     a rank, a diverged or non-finite free run ranks last). Rows are sorted by data set (as
-    they come), rank, then method (registry order) and set. No score: no row.
+    they come), rank, then method (in the order of ``methods``) and set. No score: no row.
     """
-    from ..methods import METHODS
-
     means = scores[scores["output"] == "mean"]
     if means.empty:  # nothing scored yet: the table's columns, no row
         return pd.DataFrame(columns=LEADERBOARD_COLUMNS)
@@ -83,7 +81,7 @@ def leaderboard(scores: pd.DataFrame) -> pd.DataFrame:
     finite = table["free_run_nrmse"].where(~table["free_run_diverged"]
                                            & np.isfinite(table["free_run_nrmse"]), np.inf)
     table["rank"] = finite.groupby(table["dataset"], sort=False).rank(method="min").astype(int)
-    order = {m: i for i, m in enumerate(METHODS)}
+    order = {m: i for i, m in enumerate(methods)}
     datasets = {d: i for i, d in enumerate(dict.fromkeys(scores["dataset"]))}
     table = table.assign(_d=table["dataset"].map(datasets),
                          _m=table["method"].map(order).fillna(len(order)))

@@ -47,9 +47,10 @@ def leaderboard_asset(partitions_def):
         if not stacked:
             context.log.warning("leaderboard: no partition has scores yet")
             table = leaderboard_table(pd.DataFrame(columns=[
-                "dataset", "hparams", "method", "mode", "output", "nrmse", "r2", "diverged"]))
+                "dataset", "hparams", "method", "mode", "output", "nrmse", "r2", "diverged"]),
+                list(METHODS))
         else:
-            table = leaderboard_table(pd.concat(stacked, ignore_index=True))
+            table = leaderboard_table(pd.concat(stacked, ignore_index=True), list(METHODS))
         text = leaderboard_markdown(table, missing)
         links = {}
         for dataset, rows in table.groupby("dataset", sort=False):
