@@ -24,13 +24,12 @@ def main() -> None:
     rows = []
     for machine in MACHINES:
         for seed in SEEDS:
-            train = make_machine(machine, N_TRAIN, N_SAMPLES, seed)
-            test = make_machine(machine, N_TEST, N_SAMPLES, seed, held_out=True)
+            data = make_machine(machine, N_TRAIN, N_SAMPLES, seed, n_test=N_TEST)
             for refit in (False, True):
-                model, seconds = fitted(PWARX.auto(na=2, nb=2, refit=refit), train.u,
-                                        train.y)
+                model, seconds = fitted(PWARX.auto(na=2, nb=2, refit=refit), data.u_train,
+                                        data.y_train)
                 rows.append({"machine": machine, "seed": seed, "refit": refit,
-                             "free_run_nrmse": free_run(model, test.u, test.y),
+                             "free_run_nrmse": free_run(model, data.u_test, data.y_test),
                              "fit_seconds": seconds})
                 print(rows[-1], flush=True)
     write_table(pd.DataFrame(rows), "auto_refit_tuning")

@@ -45,7 +45,8 @@ def measure(settings: PipelineSettings, data, name: str, repeats: int) -> dict:
             report = ss.stability()
         stability.append(t.seconds)
     return {
-        "set": name, "route": ss.source.get("route"), "fit_seconds": fit_seconds,
+        "set": name, "structures": "; ".join(dict.fromkeys(ss.source["structures"])),
+        "fit_seconds": fit_seconds,
         "modes": ss.n_modes, "states": ss.n_states, "inputs": ss.n_inputs,
         "outputs": ss.n_outputs, "dropped_modes": len(ss.dropped_modes),
         "export_seconds": statistics.median(export), "export_runs": export,
@@ -79,12 +80,12 @@ def main(argv=None) -> None:
         f"stability report `stability()`: wall-clock medians of {args.repeats} runs (the fit "
         f"is not timed). Targets: export ≤ {EXPORT_TARGET:g} s, stability ≤ "
         f"{STABILITY_TARGET:g} s.", "",
-        "| set | route | modes | states | inputs | export s | stability s | modes ρ ≥ 1 "
+        "| set | structures | modes | states | inputs | export s | stability s | modes ρ ≥ 1 "
         "(largest ρ) | certified | method |",
         "|---|---|---:|---:|---:|---:|---:|---:|---|---|"]
     for r in rows:
         lines.append(
-            f"| {r['set']} | {r['route']} | {r['modes']} | {r['states']} | {r['inputs']} | "
+            f"| {r['set']} | {r['structures']} | {r['modes']} | {r['states']} | {r['inputs']} | "
             f"{r['export_seconds']:.3f} | {r['stability_seconds']:.3f} | "
             f"{r['modes_with_radius_at_least_1']} ({r['max_spectral_radius']:.4f}) | "
             f"{'yes' if r['certified'] else 'no'} | {r['method']} |")

@@ -42,8 +42,8 @@ def simulation_report() -> list[dict]:
     hp = HParamsFile()
     rows = []
     for name in ("paper", "default"):
-        model = clone(hp.configuration(name, "hure_vasak").pwa).fit(data.u, data.y)
-        errs = mode_errors(model.thetas_, data.thetas)
+        model = clone(hp.configuration(name, "hure_vasak").pwa).fit(data.u_train[0], data.y_train[0])
+        errs = mode_errors(model.thetas_, data.truth.thetas)
         noise, eps = model.steps_["clustering"].noise_share_, model.steps_["clustering"].eps_
         rows.append({"setting": name, "n_submodels": model.n_submodels_,
                      "noise_share": noise, "eps": eps,

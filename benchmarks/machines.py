@@ -72,14 +72,13 @@ def fitted(model, u, y) -> tuple[object, float]:
 
 
 def one_seed(machine: str, seed: int, n_train: int, n_test: int, n_samples: int) -> list[dict]:
-    train = make_machine(machine, n_train, n_samples, seed)
-    test = make_machine(machine, n_test, n_samples, seed, held_out=True)
-    u, y = train.u, train.y
+    data = make_machine(machine, n_train, n_samples, seed, n_test=n_test)
+    u, y = data.u_train, data.y_train
     rows = []
 
     def record(method, model, seconds, **extra):
         rows.append({"machine": machine, "seed": seed, "method": method,
-                     "free_run_nrmse": free_run(model, test.u, test.y), "fit_seconds": seconds,
+                     "free_run_nrmse": free_run(model, data.u_test, data.y_test), "fit_seconds": seconds,
                      **extra})
 
     auto, seconds = fitted(PWARX.auto(na=2, nb=2), u, y)

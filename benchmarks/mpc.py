@@ -34,15 +34,15 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     load = MachineLoad()
     train = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=5)
-    ss = PWARX(na=1, nb=1).fit(train.u, train.y).to_state_space()
+    ss = PWARX(na=1, nb=1).fit(train.u_train[0], train.y_train[0]).to_state_space()
     with Timer() as build:
         mpc = HybridMPC(ss, horizon=args.horizon)
     fresh = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=6)
-    states = ss.states(fresh.u, fresh.y)
-    inside = np.flatnonzero(ss.in_envelope(states, fresh.u[1:]))
+    states = ss.states(fresh.u_train[0], fresh.y_train[0])
+    inside = np.flatnonzero(ss.in_envelope(states, fresh.u_train[0][1:]))
     picks = inside[np.linspace(0, len(inside) - 1, args.solves).astype(int)]
     rng = np.random.default_rng(6)
-    y_lo, y_hi = train.y.min(axis=0), train.y.max(axis=0)
+    y_lo, y_hi = train.y_train[0].min(axis=0), train.y_train[0].max(axis=0)
     middle = (y_lo + y_hi) / 2, (y_hi - y_lo) / 4
     seconds, cpu, optimal, modes_used = [], [], 0, []
     for k in picks:

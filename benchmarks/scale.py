@@ -64,7 +64,7 @@ def worker(case: str, size: int, out: str) -> None:
 
     if case == "simulated":
         data = make_hure_vasak(n_samples=size, snr_db=30.0, seed=0)
-        u, y, dataset = data.u, data.y, "hure_vasak"
+        u, y, dataset = data.u_train[0], data.y_train[0], "hure_vasak"
     else:
         robot = load_kuka()
         u, y, dataset = robot.u_train * size, robot.y_train * size, "kuka_robot"

@@ -54,7 +54,7 @@ def sim_30db():
 @pytest.fixture(scope="session")
 def default_30db(sim_30db):
     """The default PWARX fitted on :func:`sim_30db` (read-only: tests must not refit it)."""
-    return PWARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
+    return PWARX(na=1, nb=1).fit(sim_30db.u_train[0], sim_30db.y_train[0])
 
 
 @pytest.fixture(scope="session")

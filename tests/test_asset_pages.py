@@ -13,7 +13,7 @@ import pytest
 
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.datasets import Dataset
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.orchestration.assets.identification import REGIONS, SWITCHING, model_output
 from pwa_pipeline.orchestration.definitions import build_definitions
@@ -101,8 +101,8 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     carry their units."""
     record = make_hure_vasak(n_samples=2400, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=600, snr_db=30, seed=1000)
-    data = Dataset("hure_vasak", np.split(record.u, 4), np.split(record.y, 4), [test.u],
-                   [test.y], record.u_names, record.y_names, units={"y1": "V"})
+    data = Dataset("hure_vasak", np.split(record.u_train[0], 4), np.split(record.y_train[0], 4), [test.u_train[0]],
+                   [test.y_train[0]], record.u_names, record.y_names, units={"y1": "V"})
     path = tmp_path / "h.toml"
     path.write_text('[select.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
                     'outputs = "decoupled"\nscheduling.switch = "select"\n')

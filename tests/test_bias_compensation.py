@@ -73,9 +73,9 @@ def test_residual_regions_refits_compensated_given_the_output_lags():
 
 def test_the_default_compensates_and_the_paper_setting_does_not():
     data = make_hure_vasak(n_samples=2000, snr_db=30, seed=3)
-    default = PWARX(na=1, nb=1).fit(data.u, data.y)
+    default = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
     plain = PWARX(na=1, nb=1, regions=ResidualRegions(compensate_bias=False)).fit(
-        data.u, data.y)
+        data.u_train[0], data.y_train[0])
     assert default.regions_.n_uncompensated_ == 0
     assert not np.allclose(default.thetas_, plain.thetas_, atol=1e-3)
     paper = PWARX.paper(1, 1, n_rho=20, eps=0.3, min_pts=5)

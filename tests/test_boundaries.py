@@ -77,11 +77,11 @@ def test_bad_residual_arguments_are_named():
 
 
 def test_the_estimator_passes_the_sub_models_and_uses_the_refitted_ones(sim_30db):
-    model = PWARX(na=1, nb=1).fit(sim_30db.u[:1500], sim_30db.y[:1500])
+    model = PWARX(na=1, nb=1).fit(sim_30db.u_train[0][:1500], sim_30db.y_train[0][:1500])
     assert isinstance(model.regions_, ResidualRegions) and model.regions_.n_gate_iter_ > 0
     assert model.thetas_ is model.regions_.thetas_ is model.steps_["regions"].thetas_
     plain = PWARX(na=1, nb=1, regions=ResidualRegions(denoise=False)).fit(
-        sim_30db.u[:1500], sim_30db.y[:1500])
+        sim_30db.u_train[0][:1500], sim_30db.y_train[0][:1500])
     assert not np.allclose(plain.regions_.coef_, model.regions_.coef_)  # experiments passed
     paper = PWARX.paper(1, 1, n_rho=12, eps=0.3, min_pts=8)
     assert type(paper.step_objects()["regions"]) is SVMRegions
@@ -106,7 +106,7 @@ def test_step_6_fits_its_gate_with_blas_on_one_thread(monkeypatch):
 
     monkeypatch.setattr(boundaries, "mixture_of_experts", spy)
     sim, reg, _, _ = _hure_vasak_regressors()
-    ResidualRegions().fit(reg.phi, sim.modes[1:], 4, target=reg.target,
+    ResidualRegions().fit(reg.phi, sim.truth.modes_train[0][1:], 4, target=reg.target,
                           thetas=HURE_VASAK_THETAS)
     assert seen == [{1}]
     assert blas_threads() != {1}  # the limit ends with the fit
@@ -119,15 +119,15 @@ def test_previous_rows_stop_at_each_experiment():
 
 def _hure_vasak_regressors(seed=0):
     sim = make_hure_vasak(4000, 30.0, seed=seed)
-    reg = build_regressors([(sim.u, sim.y)], 1, 1, False)
-    clean = build_regressors([(sim.u, sim.y_clean)], 1, 1, False).phi
+    reg = build_regressors([(sim.u_train[0], sim.y_train[0])], 1, 1, False)
+    clean = build_regressors([(sim.u_train[0], sim.truth.y_clean_train[0])], 1, 1, False).phi
     return sim, reg, clean, output_lag_columns(2, 1, 4)
 
 
 def test_denoised_output_lags_are_closer_to_the_noise_free_outputs():
     sim, reg, clean, lags = _hure_vasak_regressors()
-    post = np.eye(4)[sim.modes[1:]]
-    sigma2 = (sim.y - sim.y_clean).var(axis=0)
+    post = np.eye(4)[sim.truth.modes_train[0][1:]]
+    sigma2 = (sim.y_train[0] - sim.truth.y_clean_train[0]).var(axis=0)
     denoised = denoised_regressors(reg.phi, reg.target, HURE_VASAK_THETAS, post, sigma2, lags,
                                    previous_rows(reg.experiment), reg.phi)
     ratio = ((denoised - clean)[:, :2] ** 2).mean(axis=0) / (
@@ -139,7 +139,7 @@ def test_denoised_output_lags_are_closer_to_the_noise_free_outputs():
 
 def test_the_gate_sees_denoised_lags_only_with_the_experiments():
     sim, reg, _, lags = _hure_vasak_regressors(seed=1)
-    modes = sim.modes[1:]
+    modes = sim.truth.modes_train[0][1:]
     fits = {key: ResidualRegions(denoise=key[0]).fit(
         reg.phi, modes, 4, target=reg.target, thetas=HURE_VASAK_THETAS, output_lags=lags,
         experiment=reg.experiment if key[1] else None)
@@ -147,8 +147,8 @@ def test_the_gate_sees_denoised_lags_only_with_the_experiments():
     np.testing.assert_array_equal(fits[True, False].coef_, fits[False, True].coef_)
     assert not np.allclose(fits[True, True].coef_, fits[True, False].coef_)
     fresh = make_hure_vasak(4000, None, seed=101)
-    phi = build_regressors([(fresh.u, fresh.y)], 1, 1, False).phi
-    accuracy = {k: np.mean(r.predict(phi) == fresh.modes[1:]) for k, r in fits.items()}
+    phi = build_regressors([(fresh.u_train[0], fresh.y_train[0])], 1, 1, False).phi
+    accuracy = {k: np.mean(r.predict(phi) == fresh.truth.modes_train[0][1:]) for k, r in fits.items()}
     assert accuracy[True, True] > accuracy[True, False]  # measured 99.52 % against 99.45 %
     with pytest.raises(ValueError, match=r"experiment must have one entry per row of phi"):
         ResidualRegions().fit(reg.phi, modes, 4, target=reg.target, thetas=HURE_VASAK_THETAS,

@@ -90,8 +90,8 @@ def services(system_package, tmp_path_factory) -> Iterator[dict]:
         registry = DatasetRegistry(Path(env["PWA_DATASETS"]))
         for seed, name in enumerate(("m1", "m2")):
             d = make_hure_vasak(n_samples=600, seed=20 + seed)
-            pd.DataFrame({"u1": d.u[:, 0], "u2": d.u[:, 1], "y1": d.y[:, 0],
-                          "y2": d.y[:, 1]}).to_csv(folder / f"{name}.csv", index=False)
+            pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                          "y2": d.y_train[0][:, 1]}).to_csv(folder / f"{name}.csv", index=False)
             registry.add(UserDataset(name=name, path=str(folder / f"{name}.csv"),
                                      u=("u1", "u2"), y=("y1", "y2")))
         processes = []

@@ -60,7 +60,7 @@ def _two_axes(n_exp: int = 3, n: int = 300, seed: int = 0):
 
 def _paper_system():
     data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=2)
-    return data.u, data.y
+    return data.u_train[0], data.y_train[0]
 
 
 def _random_in_envelope(ss: PWAStateSpace, n: int, seed: int = 0) -> np.ndarray:
@@ -76,7 +76,7 @@ def _closed_membership(ss: PWAStateSpace, z: np.ndarray) -> np.ndarray:
 # --- dynamics ---------------------------------------------------------------------------
 
 def test_state_space_simulates_as_the_default_model(default_30db, default_ss, sim_30db):
-    u, y = sim_30db.u, sim_30db.y
+    u, y = sim_30db.u_train[0], sim_30db.y_train[0]
     assert default_ss.n_modes == default_30db.n_submodels_ == 4
     assert default_ss.state_names == ["y1(k-1)", "y2(k-1)", "u1(k-1)", "u2(k-1)"]
     np.testing.assert_allclose(default_ss.simulate(u, y[:10]), default_30db.simulate(u, y[:10]),
@@ -111,7 +111,7 @@ def test_linear_arx_is_one_mode_that_simulates_as_the_model():
 
 def test_step_is_the_one_step_prediction_and_the_shift_of_the_state(default_30db, default_ss,
                                                                      sim_30db):
-    u, y = sim_30db.u[:500], sim_30db.y[:500]
+    u, y = sim_30db.u_train[0][:500], sim_30db.y_train[0][:500]
     x = default_ss.states(u, y)
     x_next, y_hat = default_ss.step(x, u[1:])
     np.testing.assert_allclose(y_hat, default_30db.predict(u, y)[1:], rtol=0, atol=1e-12)
@@ -139,14 +139,14 @@ def test_states_and_regressors_are_aligned_with_the_data():
 
 
 def test_leaving_the_envelope_is_refused_or_extrapolated(default_30db, default_ss, sim_30db):
-    u, y = 3 * sim_30db.u[:200], sim_30db.y[:200]
+    u, y = 3 * sim_30db.u_train[0][:200], sim_30db.y_train[0][:200]
     with pytest.raises(ValueError, match="leaves the data envelope at sample 1 .*u1"):
         default_ss.simulate(u, y[:1])
     assert default_ss.mode_of(default_ss.states(u, y), u[1:]).min() == -1
     with pytest.raises(ValueError, match="outside the data envelope"):
         default_ss.step(np.zeros(4), np.array([100.0, 0.0]))
     # a linear model has one mode: extrapolating it is the model's own simulation
-    linear = LinearARX(na=1, nb=1).fit(sim_30db.u, sim_30db.y)
+    linear = LinearARX(na=1, nb=1).fit(sim_30db.u_train[0], sim_30db.y_train[0])
     ls = linear.to_state_space()
     np.testing.assert_allclose(ls.simulate(u, y[:1], outside="nearest"),
                                linear.simulate(u, y[:1]), rtol=0, atol=1e-8)
@@ -155,9 +155,9 @@ def test_leaving_the_envelope_is_refused_or_extrapolated(default_30db, default_s
 # --- regions ------------------------------------------------------------------------------
 
 def test_mode_of_is_the_models_region_on_every_training_row(default_30db, default_ss, sim_30db):
-    x = default_ss.states(sim_30db.u, sim_30db.y)
-    phi = default_ss.regressors(sim_30db.u, sim_30db.y)
-    mode = default_ss.mode_of(x, sim_30db.u[1:])
+    x = default_ss.states(sim_30db.u_train[0], sim_30db.y_train[0])
+    phi = default_ss.regressors(sim_30db.u_train[0], sim_30db.y_train[0])
+    mode = default_ss.mode_of(x, sim_30db.u_train[0][1:])
     assert mode.min() >= 0
     np.testing.assert_array_equal(default_ss.mode_regions[mode, 0],
                                   default_30db.regions_.predict(phi))
@@ -239,14 +239,14 @@ def test_a_sign_tie_goes_to_bit_zero_as_the_model_does():
 
 def test_decoupled_outputs_take_the_product_partition():
     data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=2)
-    model = PWARX(na=1, nb=1, form="velocity", outputs="decoupled").fit(data.u, data.y)
+    model = PWARX(na=1, nb=1, form="velocity", outputs="decoupled").fit(data.u_train[0], data.y_train[0])
     ss = model.to_state_space()
     sizes = [o.n_regions for o in model.structure_fit_.outputs]
     assert ss.n_modes + len(ss.dropped_modes) == np.prod(sizes)
-    np.testing.assert_allclose(ss.simulate(data.u, data.y[:5]), model.simulate(data.u, data.y[:5]),
+    np.testing.assert_allclose(ss.simulate(data.u_train[0], data.y_train[0][:5]), model.simulate(data.u_train[0], data.y_train[0][:5]),
                                rtol=0, atol=1e-8)
-    x, phi = ss.states(data.u, data.y), ss.regressors(data.u, data.y)
-    mode = ss.mode_of(x, data.u[2:])
+    x, phi = ss.states(data.u_train[0], data.y_train[0]), ss.regressors(data.u_train[0], data.y_train[0])
+    mode = ss.mode_of(x, data.u_train[0][2:])
     for j, out in enumerate(model.structure_fit_.outputs):
         np.testing.assert_array_equal(ss.mode_regions[mode, j], out.regions(phi))
     z = _random_in_envelope(ss, 5000, seed=1)
@@ -290,14 +290,14 @@ def test_structured_and_refined_routes_convert_exactly(make, data):
 
 def test_the_envelope_is_the_padded_training_range(default_30db, default_ss, sim_30db):
     lower, upper = default_ss.envelope
-    y_lo, y_hi = sim_30db.y.min(axis=0), sim_30db.y.max(axis=0)
-    u_lo, u_hi = sim_30db.u.min(axis=0), sim_30db.u.max(axis=0)
+    y_lo, y_hi = sim_30db.y_train[0].min(axis=0), sim_30db.y_train[0].max(axis=0)
+    u_lo, u_hi = sim_30db.u_train[0].min(axis=0), sim_30db.u_train[0].max(axis=0)
     # z = [y1(k-1), y2(k-1), u1(k-1), u2(k-1), u1(k), u2(k)]: each lag its channel's range
     u_lower = u_lo - 0.05 * (u_hi - u_lo)
     np.testing.assert_allclose(lower, np.concatenate([y_lo - 0.05 * (y_hi - y_lo), u_lower,
                                                       u_lower]))
     np.testing.assert_allclose(upper[:2], y_hi + 0.05 * (y_hi - y_lo))
-    from_data = default_30db.to_state_space(sim_30db.u, sim_30db.y)
+    from_data = default_30db.to_state_space(sim_30db.u_train[0], sim_30db.y_train[0])
     np.testing.assert_array_equal(from_data.envelope[0], lower)
     wider = default_30db.to_state_space(padding=0.2)
     assert np.all(wider.envelope[0] < lower) and np.all(wider.envelope[1] > upper)
@@ -335,7 +335,7 @@ class _Intervals(BaseRegions):
 def test_a_region_learner_of_ones_own_exports_and_a_wrong_one_is_refused(sim_30db):
     """Any region step that writes its regions as halfspaces converts exactly; one whose
     halfspaces do not describe its predict is refused, naming it, not exported wrong."""
-    u, y = sim_30db.u[:1500], sim_30db.y[:1500]
+    u, y = sim_30db.u_train[0][:1500], sim_30db.y_train[0][:1500]
     model = PWARX(na=1, nb=1, submodels=ClusterCentres(), regions=_Intervals()).fit(u, y)
     ss = model.to_state_space()
     assert ss.n_modes == model.n_submodels_ >= 2
@@ -371,7 +371,7 @@ def test_json_round_trip_is_exact(default_ss, sim_30db, tmp_path):
         np.testing.assert_array_equal(back.mode_regions, default_ss.mode_regions)
         assert back.state_names == default_ss.state_names
         assert back.source == default_ss.source
-    u, y = sim_30db.u[:300], sim_30db.y[:300]
+    u, y = sim_30db.u_train[0][:300], sim_30db.y_train[0][:300]
     np.testing.assert_array_equal(back.simulate(u, y[:1]), default_ss.simulate(u, y[:1]))
 
 

@@ -12,8 +12,8 @@ from pwa_pipeline.scoring.conventions import CONVENTIONS, convention_scores, sin
 def fitted():
     train = make_hure_vasak(n_samples=1500, seed=3)
     test = [make_hure_vasak(n_samples=400, seed=s) for s in (11, 12)]
-    model = LinearARX(na=1, nb=1).fit(train.u, train.y)
-    return model, [t.u for t in test], [t.y for t in test]
+    model = LinearARX(na=1, nb=1).fit(train.u_train[0], train.y_train[0])
+    return model, [t.u_train[0] for t in test], [t.y_train[0] for t in test]
 
 
 def test_single_run_joins_the_experiments_and_scores_after_the_warmup(fitted):

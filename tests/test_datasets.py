@@ -2,31 +2,31 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pwa_pipeline.datasets import load_kuka, load_table, make_hure_vasak
+from pwa_pipeline.datasets import Dataset, load_kuka, load_table, make_hure_vasak
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, hure_vasak_mode
 
 
 def test_simulation_follows_eq_11_to_14(sim_30db):
     d = sim_30db
-    assert d.u.shape == d.y.shape == (4000, 2)
-    assert d.u[:, 0].min() >= -4 and d.u[:, 0].max() <= 6
-    assert d.u[:, 1].min() >= -2 and d.u[:, 1].max() <= 4
+    assert d.u_train[0].shape == d.y_train[0].shape == (4000, 2)
+    assert d.u_train[0][:, 0].min() >= -4 and d.u_train[0][:, 0].max() <= 6
+    assert d.u_train[0][:, 1].min() >= -2 and d.u_train[0][:, 1].max() <= 4
     # noise-free dynamics: y(k) = θ_λᵀ φ(k), λ from y(k-1) (eq. 12)
-    phi = np.column_stack([d.y_clean[:-1], d.u[:-1]])
-    np.testing.assert_array_equal(d.modes[1:], hure_vasak_mode(d.y_clean[:-1]))
-    pred = np.einsum("nd,ndm->nm", phi, HURE_VASAK_THETAS[d.modes[1:]])
-    np.testing.assert_allclose(pred, d.y_clean[1:], atol=1e-12)
+    phi = np.column_stack([d.truth.y_clean_train[0][:-1], d.u_train[0][:-1]])
+    np.testing.assert_array_equal(d.truth.modes_train[0][1:], hure_vasak_mode(d.truth.y_clean_train[0][:-1]))
+    pred = np.einsum("nd,ndm->nm", phi, HURE_VASAK_THETAS[d.truth.modes_train[0][1:]])
+    np.testing.assert_allclose(pred, d.truth.y_clean_train[0][1:], atol=1e-12)
     # eq. (14) holds exactly per output
-    e = d.y - d.y_clean
-    snr = 10 * np.log10((d.y_clean**2).sum(0) / (e**2).sum(0))
+    e = d.y_train[0] - d.truth.y_clean_train[0]
+    snr = 10 * np.log10((d.truth.y_clean_train[0]**2).sum(0) / (e**2).sum(0))
     np.testing.assert_allclose(snr, [30.0, 30.0])
-    assert set(np.unique(d.modes)) == {0, 1, 2, 3}
+    assert set(np.unique(d.truth.modes_train[0])) == {0, 1, 2, 3}
 
 
 def test_simulation_is_seeded():
     a, b = make_hure_vasak(200, seed=3), make_hure_vasak(200, seed=3)
-    np.testing.assert_array_equal(a.y, b.y)
-    assert not np.array_equal(a.y, make_hure_vasak(200, seed=4).y)
+    np.testing.assert_array_equal(a.y_train[0], b.y_train[0])
+    assert not np.array_equal(a.y_train[0], make_hure_vasak(200, seed=4).y_train[0])
 
 
 def test_missing_robot_file_names_path_and_download(tmp_path):
@@ -47,9 +47,11 @@ def test_user_tables_round_trip(tmp_path, suffix):
                        "pos": [1.0, 2.0, 3.0, 4.0, 5.0]})
     path = tmp_path / f"data{suffix}"
     df.to_csv(path, index=False) if suffix == ".csv" else df.to_parquet(path)
-    u, y = load_table(path, ["force"], ["pos"], experiment_column="run")
-    assert [a.shape for a in u] == [(3, 1), (2, 1)]
-    np.testing.assert_array_equal(y[1][:, 0], [4.0, 5.0])
+    data = load_table(path, ["force"], ["pos"], experiment_column="run")
+    assert isinstance(data, Dataset) and (data.name, data.u_names, data.y_names) == (
+        "data", ["force"], ["pos"])
+    assert [a.shape for a in data.u_train] == [(3, 1), (2, 1)] and data.u_test == []
+    np.testing.assert_array_equal(data.y_train[1][:, 0], [4.0, 5.0])
     with pytest.raises(ValueError, match=r"no column\(s\) \['speed'\]"):
         load_table(path, ["speed"], ["pos"])
     with pytest.raises(ValueError, match="unsupported file type '.txt'"):
@@ -63,7 +65,7 @@ def test_a_data_sets_digest_changes_with_any_part_of_it_and_travels_with_it():
     import dataclasses
     import pickle
 
-    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.datasets import load_dataset
 
     data = load_dataset("hure_vasak")
     same = pickle.loads(pickle.dumps(dataclasses.replace(data)))

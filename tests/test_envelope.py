@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pwa_pipeline import PWARX, LinearARX, SubspaceSS, make_hure_vasak
-from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.datasets import Dataset
 from pwa_pipeline.envelope import PADDING, channel_bounds, regressor_bounds
 from pwa_pipeline.orchestration.reporting import score_metrics
 from pwa_pipeline.plotting import PredictionDisplay
@@ -66,7 +66,7 @@ def paper():
     """The paper's system (2 outputs, 2 inputs): the default PWARX and a held-out record."""
     train = make_hure_vasak(n_samples=1500, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=1500, snr_db=30, seed=1000)
-    return PWARX(na=1, nb=1).fit(train.u, train.y), train, test
+    return PWARX(na=1, nb=1).fit(train.u_train[0], train.y_train[0]), train, test
 
 
 def test_inputs_three_times_the_training_range_are_flagged(input_only):
@@ -120,14 +120,14 @@ def test_the_flags_match_a_brute_force_check_of_phi_against_the_padded_box(make,
     (the inputs are scaled apart), so a lag given another channel's bounds is caught."""
     _, train, test = paper
     scale = np.array([1.0, 4.0])
-    model = make().fit(train.u * scale, train.y)
+    model = make().fit(train.u_train[0] * scale, train.y_train[0])
     lags = model.output_lags_
-    u = test.u * scale * np.where(np.arange(1500) % 300 < 60, 1.6, 1.0)[:, None]
-    y = test.y
+    u = test.u_train[0] * scale * np.where(np.arange(1500) % 300 < 60, 1.6, 1.0)[:, None]
+    y = test.y_train[0]
     # the range the fit recorded is the training data's own
     np.testing.assert_array_equal(model.signal_range_, np.vstack([
-        np.hstack([train.y, train.u * scale]).min(axis=0),
-        np.hstack([train.y, train.u * scale]).max(axis=0)]))
+        np.hstack([train.y_train[0], train.u_train[0] * scale]).min(axis=0),
+        np.hstack([train.y_train[0], train.u_train[0] * scale]).max(axis=0)]))
     one = model.outside_envelope(u, y)
     np.testing.assert_array_equal(one, _brute_force(u, y, model.signal_range_, lags, model.nb))
     assert 0.05 < one.mean() < 0.5
@@ -141,19 +141,19 @@ def test_predict_and_simulate_answer_in_kind_and_the_flags_come_apart(paper):
     """One experiment in, one array out; a list in, a list out; the envelope's flags from
     outside_envelope, never beside the numbers."""
     model, _, test = paper
-    u = test.u * 2.0
-    us, ys = [u[:700], u[700:]], [test.y[:700], test.y[700:]]
+    u = test.u_train[0] * 2.0
+    us, ys = [u[:700], u[700:]], [test.y_train[0][:700], test.y_train[0][700:]]
     pred = model.predict(us, ys, n_init=20)
     assert isinstance(pred, list) and [p.shape for p in pred] == [(700, 2), (800, 2)]
     for p, ue, ye in zip(pred, us, ys, strict=True):
         np.testing.assert_array_equal(p, model.predict(ue, ye, n_init=20))
         flags = model.outside_envelope(ue, ye)
         assert flags.shape == (ue.shape[0],) and flags.any()
-    assert isinstance(model.predict(u, test.y), np.ndarray)
+    assert isinstance(model.predict(u, test.y_train[0]), np.ndarray)
     sims = model.simulate(us, [y[:5] for y in ys])
-    assert isinstance(sims, list) and isinstance(model.simulate(u, test.y[:5]), np.ndarray)
+    assert isinstance(sims, list) and isinstance(model.simulate(u, test.y_train[0][:5]), np.ndarray)
     with pytest.raises(TypeError, match="return_outside"):
-        model.simulate(u, test.y[:5], return_outside=True)
+        model.simulate(u, test.y_train[0][:5], return_outside=True)
 
 
 def test_a_diverged_free_run_is_outside_from_where_it_is_not_finite():
@@ -203,17 +203,17 @@ def test_a_model_without_its_training_range_has_no_envelope(paper):
     bare = copy.copy(fitted)
     del bare.signal_range_
     with pytest.raises(ValueError, match="does not record the range of its training data"):
-        bare.outside_envelope(test.u, test.y)
-    ev = evaluate(bare, test.u, test.y, warmup=WARMUP)
+        bare.outside_envelope(test.u_train[0], test.y_train[0])
+    ev = evaluate(bare, test.u_train[0], test.y_train[0], warmup=WARMUP)
     assert ev.outside is None and ev.table["outside_share"].isna().all()
     assert not any("outside" in k for k in score_metrics(ev))
 
 
 def test_evaluate_reports_the_share_per_mode_and_mlflow_logs_it(paper):
     model, _, test = paper
-    u = test.u.copy()
+    u = test.u_train[0].copy()
     u[300:500] *= 3
-    us, ys = [u[:800], u[800:]], [test.y[:800], test.y[800:]]
+    us, ys = [u[:800], u[800:]], [test.y_train[0][:800], test.y_train[0][800:]]
     ev = evaluate(model, us, ys, warmup=WARMUP, output_names=["a", "b"])
     assert set(ev.outside) == {"one_step", "free_run"}
     one = [model.outside_envelope(ue, ye) for ue, ye in zip(us, ys, strict=True)]
@@ -240,13 +240,13 @@ def test_the_subspace_model_flags_samples_whose_past_left_its_training_range():
     """The state-space baseline has no regressor; its envelope is the channels' padded
     training range, tested on the past sample's inputs and outputs."""
     data = make_hure_vasak(n_samples=600, snr_db=30, seed=5)
-    model = SubspaceSS(order=2).fit(data.u, data.y)
-    u = data.u * np.where(np.arange(600) % 200 < 40, 3.0, 1.0)[:, None]
-    flags = model.outside_envelope(u, data.y)
+    model = SubspaceSS(order=2).fit(data.u_train[0], data.y_train[0])
+    u = data.u_train[0] * np.where(np.arange(600) % 200 < 40, 3.0, 1.0)[:, None]
+    flags = model.outside_envelope(u, data.y_train[0])
     lower, upper = channel_bounds(model.signal_range_)
-    past = np.hstack([data.y, u])[:-1]
+    past = np.hstack([data.y_train[0], u])[:-1]
     np.testing.assert_array_equal(flags[1:], ((past < lower) | (past > upper)).any(axis=1))
-    ev = evaluate(model, u, data.y, warmup=WARMUP)
+    ev = evaluate(model, u, data.y_train[0], warmup=WARMUP)
     expected = float(np.mean(flags[WARMUP:]))
     assert ev.outside_share("one_step") == pytest.approx(expected) and 0 < expected < 1
 
@@ -263,11 +263,11 @@ def _hatched(ax, label: str) -> list:
 
 def test_the_prediction_figure_hatches_the_stretches_outside_the_training_data(paper):
     model, train, test = paper
-    u = test.u.copy()
+    u = test.u_train[0].copy()
     u[200:260] *= 3
-    data = Dataset("hure_vasak", [train.u], [train.y], [u], [test.y], train.u_names,
+    data = Dataset("hure_vasak", [train.u_train[0]], [train.y_train[0]], [u], [test.y_train[0]], train.u_names,
                    train.y_names)
-    ev = evaluate(model, u, test.y, warmup=WARMUP, output_names=train.y_names)
+    ev = evaluate(model, u, test.y_train[0], warmup=WARMUP, output_names=train.y_names)
     fig = PredictionDisplay.from_evaluation(ev, data, WARMUP, context="hure_vasak | set s | PWA").figure_
     for mode, label in (("one_step", "one-step"), ("free_run", "free run")):
         mask = ev.outside[mode][0][:606]

@@ -14,7 +14,7 @@ from pwa_pipeline import PWARX
 from pwa_pipeline._arrays import column_rms
 from pwa_pipeline._validation import as_experiments
 from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets.registry import Dataset
+from pwa_pipeline.datasets import Dataset
 from pwa_pipeline.orchestration.images import to_markdown, to_png
 from pwa_pipeline.plotting import (
     ParameterClustersDisplay,
@@ -39,14 +39,13 @@ WARMUP = 10
 @pytest.fixture(scope="module")
 def fit():
     """PWARX(na=1, nb=1) on 1,500 samples at 30 dB, scored on a fresh record."""
-    train = make_hure_vasak(n_samples=1500, snr_db=30, seed=0)
-    test = make_hure_vasak(n_samples=1500, snr_db=30, seed=1000)
-    model = PWARX(na=1, nb=1).fit(train.u, train.y)
-    data = Dataset("hure_vasak", [train.u], [train.y], [test.u], [test.y], train.u_names,
-                   train.y_names)
-    ev = evaluate(model, test.u, test.y, warmup=WARMUP, output_names=train.y_names)
-    reg = build_regressors(as_experiments(train.u, train.y), 1, 1, False)
-    names = regressor_names(train.y_names, train.u_names, 1, 1, False)
+    data = make_hure_vasak(n_samples=1500, n_test=1500, snr_db=30, seed=0)
+    model = PWARX(na=1, nb=1).fit(data.u_train, data.y_train)
+    test = SimpleNamespace(u=data.u_test[0], y=data.y_test[0], modes=data.truth.modes_test[0],
+                           thetas=data.truth.thetas)
+    ev = evaluate(model, data.u_test, data.y_test, warmup=WARMUP, output_names=data.y_names)
+    reg = build_regressors(as_experiments(data.u_train, data.y_train), 1, 1, False)
+    names = regressor_names(data.y_names, data.u_names, 1, 1, False)
     return SimpleNamespace(model=model, data=data, ev=ev, reg=reg, names=names, test=test)
 
 
@@ -438,16 +437,17 @@ def robot_like():
     from pwa_pipeline.pwa.scheduling import SignScheduling
 
     rng = np.random.default_rng(3)
-    records = [make_hure_vasak(n_samples=900, snr_db=30, seed=s) for s in (0, 1000)]
-    ys = [np.hstack([r.y, 3 * r.y + rng.normal(0, 0.1, r.y.shape),
-                     -2 * r.y + rng.normal(0, 0.1, r.y.shape)]) for r in records]
+    record = make_hure_vasak(n_samples=900, n_test=900, snr_db=30, seed=0)
+    us = [record.u_train[0], record.u_test[0]]
+    ys = [np.hstack([y, 3 * y + rng.normal(0, 0.1, y.shape), -2 * y + rng.normal(0, 0.1, y.shape)])
+          for y in (record.y_train[0], record.y_test[0])]
     units = {**{f"q{i}": "deg" for i in range(1, 7)}, "tau1": "N·m", "tau2": "N·m"}
-    data = Dataset("robot_like", [records[0].u], [ys[0]], [records[1].u], [ys[1]],
+    data = Dataset("robot_like", [us[0]], [ys[0]], [us[1]], [ys[1]],
                    ["tau1", "tau2"], [f"q{i}" for i in range(1, 7)], units=units)
-    model = LinearARX(na=1, nb=1).fit(records[0].u, ys[0])
-    ev = evaluate(model, records[1].u, ys[1], warmup=WARMUP, output_names=data.y_names)
+    model = LinearARX(na=1, nb=1).fit(us[0], ys[0])
+    ev = evaluate(model, us[1], ys[1], warmup=WARMUP, output_names=data.y_names)
     moving = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
-                   scheduling=SignScheduling(switch="all")).fit(records[0].u, ys[0])
+                   scheduling=SignScheduling(switch="all")).fit(us[0], ys[0])
     return SimpleNamespace(data=data, ev=ev, structured=moving)
 
 
@@ -565,7 +565,7 @@ def test_axes_of_regions_and_regressors_carry_units(fit):
 
 
 def test_the_robots_channels_carry_their_units(robot):
-    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.datasets import load_dataset
 
     data = load_dataset("kuka_robot")
     assert [data.label(n) for n in data.y_names] == [f"q{i} [deg]" for i in range(1, 7)]

@@ -16,25 +16,25 @@ def _paper():
 
 @pytest.fixture(scope="module")
 def clean_model(sim_clean):
-    return PWARX(na=1, nb=1).fit(sim_clean.u, sim_clean.y)
+    return PWARX(na=1, nb=1).fit(sim_clean.u_train[0], sim_clean.y_train[0])
 
 
 def test_noise_free_parameters_and_regions_are_recovered(sim_clean, clean_model):
     m = clean_model
     assert m.n_submodels_ == 4
     assert m.thetas_.shape == (4, 4, 2)
-    assert max_param_error(m.thetas_, sim_clean.thetas) < 1e-8
-    phi = np.column_stack([sim_clean.y[:-1], sim_clean.u[:-1]])
+    assert max_param_error(m.thetas_, sim_clean.truth.thetas) < 1e-8
+    phi = np.column_stack([sim_clean.y_train[0][:-1], sim_clean.u_train[0][:-1]])
     # map estimated sub-models to true modes by parameters, then score the regions
-    mode_of = match_submodels(m.thetas_, sim_clean.thetas)[0]
-    accuracy = np.mean(mode_of[m.regions_.predict(phi)] == sim_clean.modes[1:])
+    mode_of = match_submodels(m.thetas_, sim_clean.truth.thetas)[0]
+    accuracy = np.mean(mode_of[m.regions_.predict(phi)] == sim_clean.truth.modes_train[0][1:])
     assert accuracy > 0.98
 
 
 def test_default_recovers_the_four_modes_at_30db(sim_30db, default_30db):
     m = default_30db
     assert m.n_submodels_ == 4
-    assert max_param_error(m.thetas_, sim_30db.thetas) < 0.03
+    assert max_param_error(m.thetas_, sim_30db.truth.thetas) < 0.03
     resolved = m.resolved_params()
     assert 0 < resolved["clustering__eps"] < 1 and resolved["local_models__n_rho"] == 12
     assert resolved["clustering__min_pts"] == 8 and m.get_params()["clustering"] is None
@@ -43,7 +43,7 @@ def test_default_recovers_the_four_modes_at_30db(sim_30db, default_30db):
 
 
 def test_paper_setting_reproduces_the_papers_method(sim_30db):
-    m = _paper().fit(sim_30db.u, sim_30db.y)
+    m = _paper().fit(sim_30db.u_train[0], sim_30db.y_train[0])
     # NOTES.md: with raw regressors the paper's values find 2 of 4 modes, ~81 % noise
     assert m.n_submodels_ == 2
     assert 0.7 < m.steps_["clustering"].noise_share_ < 0.9
@@ -64,7 +64,7 @@ def test_default_and_paper_constructors_spell_out_the_steps():
 
 
 def test_predict_and_simulate_shapes_and_initial_rows(sim_clean, clean_model):
-    u, y = sim_clean.u[:300], sim_clean.y[:300]
+    u, y = sim_clean.u_train[0][:300], sim_clean.y_train[0][:300]
     yhat = clean_model.predict(u, y)
     assert yhat.shape == y.shape
     np.testing.assert_array_equal(yhat[:1], y[:1])
@@ -118,7 +118,7 @@ def test_bad_fit_input(kwargs, u, y, message):
 
 
 def test_bad_prediction_input(sim_clean, clean_model):
-    u, y = sim_clean.u[:50], sim_clean.y[:50]
+    u, y = sim_clean.u_train[0][:50], sim_clean.y_train[0][:50]
     with pytest.raises(ValueError, match="u has 3 input.*fitted with 2"):
         clean_model.simulate(np.zeros((50, 3)), y[:1])
     with pytest.raises(ValueError, match="warm-up too short: y_init has 0 row"):
@@ -142,12 +142,12 @@ def test_scikit_learn_conventions():
 @pytest.mark.parametrize("seed", [3, 7, 12])
 def test_default_finds_every_mode_on_fixed_seeds(seed):
     data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=seed)
-    m = PWARX(na=1, nb=1).fit(data.u, data.y)
+    m = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
     assert m.n_submodels_ == 4
-    assert max_param_error(m.thetas_, data.thetas) < 0.05
-    phi = np.column_stack([data.y[:-1], data.u[:-1]])
-    mode_of = match_submodels(m.thetas_, data.thetas)[0]
-    assert np.mean(mode_of[m.regions_.predict(phi)] == data.modes[1:]) > 0.95
+    assert max_param_error(m.thetas_, data.truth.thetas) < 0.05
+    phi = np.column_stack([data.y_train[0][:-1], data.u_train[0][:-1]])
+    mode_of = match_submodels(m.thetas_, data.truth.thetas)[0]
+    assert np.mean(mode_of[m.regions_.predict(phi)] == data.truth.modes_train[0][1:]) > 0.95
 
 
 @pytest.mark.slow
@@ -156,10 +156,10 @@ def test_default_on_twenty_seeds_meets_the_targets():
     found, errors = 0, []
     for seed in range(20):
         data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=seed)
-        m = PWARX(na=1, nb=1).fit(data.u, data.y)
+        m = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
         if m.n_submodels_ == 4:
             found += 1
-            errors.append(max_param_error(m.thetas_, data.thetas))
+            errors.append(max_param_error(m.thetas_, data.truth.thetas))
     assert found >= 19 and np.median(errors) <= 0.02
 
 

@@ -247,13 +247,13 @@ def test_a_long_record_fits_the_same_model_from_a_subset_of_local_models():
     from pwa_pipeline.scoring.metrics import match_submodels
 
     data = make_hure_vasak(n_samples=12_000, seed=3)
-    some = PWARX.default().fit(data.u, data.y)
-    every = PWARX.default().set_params(local_models__max_sets=None).fit(data.u, data.y)
+    some = PWARX.default().fit(data.u_train[0], data.y_train[0])
+    every = PWARX.default().set_params(local_models__max_sets=None).fit(data.u_train[0], data.y_train[0])
     assert some.steps_["local_models"].n_estimated_ == 5000
     assert every.steps_["local_models"].n_estimated_ == len(every.steps_["submodels"].labels_)
     assert some.n_submodels_ == every.n_submodels_ == 4
     assert match_submodels(some.thetas_, every.thetas_)[1].max() < 2e-3
-    assert match_submodels(some.thetas_, data.thetas)[1].max() < 0.03
+    assert match_submodels(some.thetas_, data.truth.thetas)[1].max() < 0.03
     assert np.mean(some.steps_["submodels"].labels_ == every.steps_["submodels"].labels_) > 0.995
 
 

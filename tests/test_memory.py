@@ -19,7 +19,7 @@ def test_a_fit_beyond_the_available_memory_fails_before_any_step(monkeypatch):
 
     monkeypatch.setattr(LocalLeastSquares, "fit", never)
     with pytest.raises(FitMemoryError, match=r"needs an estimated \d+\.\d\d GiB") as err:
-        PWARX().fit(data.u, data.y)
+        PWARX().fit(data.u_train[0], data.y_train[0])
     assert "available" in str(err.value) and "lower " in str(err.value)
     assert isinstance(err.value, MemoryError)
 
@@ -42,10 +42,10 @@ def test_the_message_names_the_setting_of_the_largest_step(monkeypatch):
 
 def test_enough_memory_fits_as_usual(monkeypatch):
     data = make_hure_vasak(n_samples=600, snr_db=None, seed=0)
-    usual = PWARX().fit(data.u, data.y)
+    usual = PWARX().fit(data.u_train[0], data.y_train[0])
     need = max(fit_memory(599, 4, 2, PWARX.default().step_objects()).values()) + 599 * 6 * 8
     monkeypatch.setattr(memory, "available_memory", lambda: need)  # just enough
-    np.testing.assert_array_equal(PWARX().fit(data.u, data.y).thetas_, usual.thetas_)
+    np.testing.assert_array_equal(PWARX().fit(data.u_train[0], data.y_train[0]).thetas_, usual.thetas_)
 
 
 def test_estimates_grow_with_the_record_and_the_machine_reports_memory():

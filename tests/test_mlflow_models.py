@@ -9,7 +9,7 @@ def test_the_training_dataset_is_mlflows_with_a_digest_of_every_sample():
     import mlflow
     import numpy as np
 
-    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.datasets import load_dataset
     from pwa_pipeline.orchestration.mlflow_models import training_dataset
     from pwa_pipeline.orchestration.reporting import training_table
 
@@ -35,13 +35,13 @@ def test_the_logged_simulator_keeps_what_simulation_needs_and_not_the_fit_record
 
     train = make_hure_vasak(n_samples=1500, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=300, snr_db=30, seed=1)
-    model = PWARX.paper(1, 1, n_rho=18, eps=0.1, min_pts=20).fit(train.u, train.y)
+    model = PWARX.paper(1, 1, n_rho=18, eps=0.1, min_pts=20).fit(train.u_train[0], train.y_train[0])
     simulator = Simulator(model, train.u_names, train.y_names)
     data = pickle.dumps(simulator)
     back = pickle.loads(data)
     assert back.model.steps_ == {} and not hasattr(back.model, "timings_")
     assert "local_models" in model.steps_  # the fitted model itself is left whole
-    table = example_table(test.u, test.y, train.u_names, train.y_names, 10, rows=300)
+    table = example_table(test.u_train[0], test.y_train[0], train.u_names, train.y_names, 10, rows=300)
     np.testing.assert_array_equal(back.predict(None, table).to_numpy(),
                                   simulator.predict(None, table).to_numpy())
     assert len(data) < 0.1 * len(pickle.dumps(model))
@@ -67,8 +67,8 @@ def test_a_model_logged_by_a_run_purged_since_is_linked_all_the_same(
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
     tracker = MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     data = make_hure_vasak(n_samples=300, snr_db=30, seed=0)
-    model = LinearARX(na=1, nb=1).fit(data.u, data.y)
-    table = example_table(data.u, data.y, data.u_names, data.y_names, 5)
+    model = LinearARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
+    table = example_table(data.u_train[0], data.y_train[0], data.u_names, data.y_names, 5)
     to_log = ModelToLog(Simulator(model, data.u_names, data.y_names), table,
                         mlflow.data.from_pandas(table, name="training"))
 
@@ -108,7 +108,7 @@ def test_models_that_predict_alike_share_a_fingerprint_and_others_do_not(default
     other.timings_ = {"local_models": 99.0}
     stripped = without_fit_record(other)
     assert not any(g.steps for g in stripped.groups_) and not hasattr(stripped, "timings_")
-    u, y = sim_30db.u[:300], sim_30db.y[:300]
+    u, y = sim_30db.u_train[0][:300], sim_30db.y_train[0][:300]
     np.testing.assert_array_equal(stripped.simulate(u, y[:5]), model.simulate(u, y[:5]))
     np.testing.assert_array_equal(stripped.predict(u, y), model.predict(u, y))
     assert predictor_fingerprint(other, *names) == predictor_fingerprint(model, *names)

@@ -261,8 +261,8 @@ def test_closed_loop_tracks_a_reachable_reference(default_30db, sim_30db, tmp_pa
     mode, u_eq = _equilibrium_input(ss, y_ref)
     mpc = HybridMPC(ss, horizon=6)
     assert np.all(u_eq > mpc.u_min) and np.all(u_eq < mpc.u_max)
-    x0 = ss.states(sim_30db.u, sim_30db.y)[0]
-    assert ss.mode_of(x0, sim_30db.u[1]) != mode  # the loop has to switch modes
+    x0 = ss.states(sim_30db.u_train[0], sim_30db.y_train[0])[0]
+    assert ss.mode_of(x0, sim_30db.u_train[0][1]) != mode  # the loop has to switch modes
     run = mpc.closed_loop(x0, y_ref, steps=25)
     assert run.y.shape == (25, 2) and run.u.shape == (25, 2) and run.x.shape == (26, 4)
     np.testing.assert_allclose(run.y[-5:], np.tile(y_ref, (5, 1)), atol=1e-5)
@@ -284,7 +284,7 @@ def test_infeasible_input_bounds_name_the_bound(default_30db, sim_30db):
     ss = default_30db.to_state_space()
     top = ss.envelope[1][ss.n_states:]
     mpc = HybridMPC(ss, 10, u_min=top, u_max=top)
-    x0 = ss.states(sim_30db.u, sim_30db.y)[0]
+    x0 = ss.states(sim_30db.u_train[0], sim_30db.y_train[0])[0]
     with pytest.raises(ValueError, match=r"infeasible \(HiGHS status 2.*input bounds.*u_min"):
         mpc.solve(x0, [1.0, 1.0])
 

@@ -24,9 +24,9 @@ def test_refinement_removes_the_least_squares_bias_under_output_noise():
 
 def test_pwarx_refinement_keeps_regions_and_lowers_the_training_free_run_error():
     data = make_hure_vasak(n_samples=1500, seed=4)
-    plain = PWARX(na=1, nb=1).fit(data.u, data.y)
+    plain = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
     refined = PWARX(na=1, nb=1, refinement=OutputErrorRefinement(max_iter=5)).fit(
-        data.u, data.y)
+        data.u_train[0], data.y_train[0])
     np.testing.assert_array_equal(refined.steps_["regions"].thetas_, plain.thetas_)  # step 6's
     np.testing.assert_array_equal(refined.regions_.coef_, plain.regions_.coef_)
     assert refined.steps_["refinement"].cost_ < refined.steps_["refinement"].cost_start_

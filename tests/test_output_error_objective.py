@@ -18,10 +18,10 @@ def _weighted_objective(route: str):
     from pwa_pipeline.pwa.scheduling import SignScheduling
 
     data = make_hure_vasak(n_samples=600, seed=2)
-    u, y = [data.u[:300], data.u[300:]], [data.y[:300], data.y[300:]]
+    u, y = [data.u_train[0][:300], data.u_train[0][300:]], [data.y_train[0][:300], data.y_train[0][300:]]
     rng = np.random.default_rng(0)
     if route == "level":
-        model = PWARX(na=2, nb=1).fit(data.u, data.y)
+        model = PWARX(na=2, nb=1).fit(data.u_train[0], data.y_train[0])
         runs = FreeRuns(u, y, 2, 1, False, 2)
         x0 = model.thetas_
         errors = RefinementErrors(

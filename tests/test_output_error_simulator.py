@@ -9,8 +9,8 @@ from pwa_pipeline.pwa.output_error.simulator import FreeRuns
 
 def test_the_propagated_jacobian_matches_finite_differences_with_regions():
     data = make_hure_vasak(n_samples=600, seed=2)
-    model = PWARX(na=2, nb=1).fit(data.u, data.y)
-    runs = FreeRuns([data.u[:300], data.u[300:]], [data.y[:300], data.y[300:]], 2, 1, False, 2)
+    model = PWARX(na=2, nb=1).fit(data.u_train[0], data.y_train[0])
+    runs = FreeRuns([data.u_train[0][:300], data.u_train[0][300:]], [data.y_train[0][:300], data.y_train[0][300:]], 2, 1, False, 2)
     theta = model.thetas_
     cost, _, jtr = runs.simulate(theta, model.regions_.predict, sensitivities=True)
     gradient = 2 * jtr / runs.n_scored
@@ -42,8 +42,8 @@ def test_the_free_run_of_experiments_of_unequal_length_is_the_loop_over_each():
     """Experiments of different lengths simulated in lockstep give each one's own free run:
     the cost is the sum over both written-out loops per scored sample and output."""
     data = make_hure_vasak(n_samples=700, seed=3)
-    model = PWARX(na=2, nb=1).fit(data.u, data.y)
-    u, y = [data.u[:400], data.u[400:]], [data.y[:400], data.y[400:]]
+    model = PWARX(na=2, nb=1).fit(data.u_train[0], data.y_train[0])
+    u, y = [data.u_train[0][:400], data.u_train[0][400:]], [data.y_train[0][:400], data.y_train[0][400:]]
     runs = FreeRuns(u, y, 2, 1, False, 5)
     cost, jtj, jtr = runs.simulate(model.thetas_, model.regions_.predict, False)
     assert jtj is None and jtr is None

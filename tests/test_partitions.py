@@ -45,7 +45,7 @@ def defs(tmp_path, monkeypatch):
     monkeypatch.setenv("PWA_HPARAMS", str(tmp_path / "hp.toml"))
     (tmp_path / "hp.toml").write_text(HPARAMS)
     d = make_hure_vasak(n_samples=300, seed=3)
-    pd.DataFrame({"u1": d.u[:, 0], "u2": d.u[:, 1], "y1": d.y[:, 0], "y2": d.y[:, 1]}
+    pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]}
                  ).to_csv(tmp_path / "mill.csv", index=False)
     assert main(["add-dataset", "mill", str(tmp_path / "mill.csv"), "--u", "u1", "u2",
                  "--y", "y1", "y2", "--na", "2"]) == 0

@@ -285,7 +285,7 @@ def test_cached_scores_are_those_of_the_same_model_on_the_same_held_out_data(tmp
     scored again, and gives other scores."""
     import dataclasses
 
-    from pwa_pipeline.datasets.registry import load_dataset
+    from pwa_pipeline.datasets import load_dataset
     from pwa_pipeline.orchestration.caches import SignedMemory
 
     data = load_dataset("hure_vasak")

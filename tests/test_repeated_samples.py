@@ -54,7 +54,7 @@ def test_too_few_distinct_samples_is_a_clear_error():
 def test_a_tiled_record_is_clustered_as_the_record_once(sim_30db, step):
     from pwa_pipeline.regressors import build_regressors
 
-    reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
+    reg = build_regressors([(sim_30db.u_train[0], sim_30db.y_train[0])], 1, 1, False)
     once = LocalLeastSquares().fit(reg.phi, reg.target)
     tiled = LocalLeastSquares().fit(np.tile(reg.phi, (3, 1)), np.tile(reg.target, (3, 1)))
     a = step.fit(once, reg.target)
@@ -68,8 +68,8 @@ def test_a_tiled_record_is_clustered_as_the_record_once(sim_30db, step):
 
 def test_a_record_given_ten_times_gives_the_sub_models_of_the_record_once():
     data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=3)
-    once = PWARX(na=1, nb=1).fit(data.u, data.y)
-    tiled = PWARX(na=1, nb=1).fit([data.u] * 10, [data.y] * 10)
+    once = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
+    tiled = PWARX(na=1, nb=1).fit([data.u_train[0]] * 10, [data.y_train[0]] * 10)
     assert tiled.n_submodels_ == once.n_submodels_ == 4
     np.testing.assert_array_equal(tiled.steps_["clustering"].labels_,
                                   np.tile(once.steps_["clustering"].labels_, 10))
@@ -86,7 +86,7 @@ def test_the_missed_mode_search_sizes_its_local_sets_by_distinct_rows(sim_30db):
     from pwa_pipeline.pwa.steps.submodels.refined import _missed_mode_clusters, _search_steps
     from pwa_pipeline.regressors import build_regressors
 
-    reg = build_regressors([(sim_30db.u, sim_30db.y)], 1, 1, False)
+    reg = build_regressors([(sim_30db.u_train[0], sim_30db.y_train[0])], 1, 1, False)
     local = LocalLeastSquares().fit(reg.phi, reg.target)
     clustering = DBSCANClustering().fit(local, reg.target)
     assert local.n_rho_ > 10

@@ -37,7 +37,7 @@ def data():
 def fitted(request, data):
     train, _ = data
     return request.param, clone(ROUTES[request.param]).fit(
-        [train.u[:600], train.u[600:]], [train.y[:600], train.y[600:]])
+        [train.u_train[0][:600], train.u_train[0][600:]], [train.y_train[0][:600], train.y_train[0][600:]])
 
 
 def test_every_route_has_the_same_fitted_shape(fitted, data):
@@ -60,21 +60,21 @@ def test_every_route_has_the_same_fitted_shape(fitted, data):
     # the model as eq. (1) predicts as the groups do
     from pwa_pipeline.regressors import lagged_matrix
 
-    phi = lagged_matrix(test.u, test.y, model.output_lags_, model.nb, model.affine)
+    phi = lagged_matrix(test.u_train[0], test.y_train[0], model.output_lags_, model.nb, model.affine)
     modes = model.regions_.predict(phi)
     np.testing.assert_allclose(np.einsum("nd,ndm->nm", phi, model.thetas_[modes]),
-                               model.predict(test.u, test.y)[model.n_initial_:], atol=1e-10)
+                               model.predict(test.u_train[0], test.y_train[0])[model.n_initial_:], atol=1e-10)
 
 
 def test_every_route_answers_in_kind(fitted, data):
     """One experiment in, an ndarray (N, m) out; a list in, a list out; the same numbers."""
     name, model = fitted
     _, test = data
-    one = model.predict(test.u, test.y)
-    free = model.simulate(test.u, test.y[:10])
-    assert isinstance(one, np.ndarray) and one.shape == test.y.shape
-    assert isinstance(free, np.ndarray) and free.shape == test.y.shape
-    us, ys = [test.u[:150], test.u[150:]], [test.y[:150], test.y[150:]]
+    one = model.predict(test.u_train[0], test.y_train[0])
+    free = model.simulate(test.u_train[0], test.y_train[0][:10])
+    assert isinstance(one, np.ndarray) and one.shape == test.y_train[0].shape
+    assert isinstance(free, np.ndarray) and free.shape == test.y_train[0].shape
+    us, ys = [test.u_train[0][:150], test.u_train[0][150:]], [test.y_train[0][:150], test.y_train[0][150:]]
     many = model.predict(us, ys)
     runs = model.simulate(us, [y[:10] for y in ys])
     assert isinstance(many, list) and isinstance(runs, list) and len(many) == len(runs) == 2
@@ -82,7 +82,7 @@ def test_every_route_answers_in_kind(fitted, data):
     np.testing.assert_array_equal(runs[1], model.simulate(us[1], ys[1][:10]))
     flags = model.outside_envelope(us, runs)
     assert isinstance(flags, list) and flags[0].dtype == bool
-    assert isinstance(model.score(test.u, test.y), float)
+    assert isinstance(model.score(test.u_train[0], test.y_train[0]), float)
 
 
 def test_every_route_exports_a_state_space_form_that_simulates_as_the_model(fitted, data):
@@ -90,20 +90,20 @@ def test_every_route_exports_a_state_space_form_that_simulates_as_the_model(fitt
     _, test = data
     ss = model.to_state_space()
     assert ss.n_modes >= 1 and ss.source["structures"] == model.structures_
-    u, y = test.u[:150], test.y[:150]
+    u, y = test.u_train[0][:150], test.y_train[0][:150]
     np.testing.assert_allclose(ss.simulate(u, y[:10], outside="nearest"),
                                model.simulate(u, y[:10]), rtol=0, atol=1e-8)
 
 
 def test_the_subspace_baseline_shares_the_interface(data):
     train, test = data
-    model = SubspaceSS(order=4).fit(train.u, train.y)
-    assert isinstance(model.predict(test.u, test.y), np.ndarray)
-    assert isinstance(model.simulate([test.u], [test.y[:10]]), list)
-    assert -1 < model.score(test.u, test.y) <= 1
-    flags = model.outside_envelope(test.u * 100, test.y)
+    model = SubspaceSS(order=4).fit(train.u_train[0], train.y_train[0])
+    assert isinstance(model.predict(test.u_train[0], test.y_train[0]), np.ndarray)
+    assert isinstance(model.simulate([test.u_train[0]], [test.y_train[0][:10]]), list)
+    assert -1 < model.score(test.u_train[0], test.y_train[0]) <= 1
+    flags = model.outside_envelope(test.u_train[0] * 100, test.y_train[0])
     assert not flags[0] and flags[1:].all()
-    assert not model.outside_envelope(train.u, train.y).any()
+    assert not model.outside_envelope(train.u_train[0], train.y_train[0]).any()
     assert model.timings_["fit"] > 0
 
 

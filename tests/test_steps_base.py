@@ -40,15 +40,15 @@ class _RecordingRegions(SVMRegions):
 def test_a_region_step_is_given_the_outputs_sub_models_output_lags_and_experiments():
     data = make_hure_vasak(n_samples=1500, snr_db=30.0, seed=0)
     _RecordingRegions.calls = []
-    model = PWARX(na=1, nb=1, regions=_RecordingRegions()).fit(data.u, data.y)
+    model = PWARX(na=1, nb=1, regions=_RecordingRegions()).fit(data.u_train[0], data.y_train[0])
     # step 5 fits the region step on its own too (with the labels alone); step 6 is last
     given = _RecordingRegions.calls[-1]
     assert not any(_RecordingRegions.calls[:-1])
     assert set(given) == {"target", "thetas", "output_lags", "experiment"}
     np.testing.assert_array_equal(given["thetas"], model.steps_["submodels"].thetas_)
     np.testing.assert_array_equal(given["output_lags"], output_lag_columns(2, 1, 4))
-    assert given["target"].shape == (len(data.y) - 1, 2)
-    np.testing.assert_array_equal(given["experiment"], np.zeros(len(data.y) - 1, int))
+    assert given["target"].shape == (len(data.y_train[0]) - 1, 2)
+    np.testing.assert_array_equal(given["experiment"], np.zeros(len(data.y_train[0]) - 1, int))
 
 
 def test_the_svm_regions_ignore_what_only_residual_regions_use():
@@ -81,7 +81,7 @@ class _KMeansClustering(BaseClustering):
 def test_a_step_of_ones_own_that_implements_the_interface_is_used_by_pwarx():
     data = make_hure_vasak(n_samples=2000, snr_db=None, seed=1)
     model = PWARX(na=1, nb=1, clustering=_KMeansClustering(), submodels=ClusterCentres(),
-                  regions=SVMRegions()).fit(data.u, data.y)
+                  regions=SVMRegions()).fit(data.u_train[0], data.y_train[0])
     assert isinstance(model.steps_["clustering"], _KMeansClustering)
     assert model.get_params()["clustering__n_clusters"] == 4
     assert model.n_submodels_ == 4 and np.isfinite(model.thetas_).all()

@@ -15,10 +15,10 @@ def test_default_sub_models_are_refitted_on_their_rows(sim_30db, default_30db):
     """Step 5's θ_i are least squares on their rows; the model's are step 6's, refitted
     with the regions (ResidualRegions)."""
     model = default_30db
-    phi = np.column_stack([sim_30db.y[:-1], sim_30db.u[:-1]])
+    phi = np.column_stack([sim_30db.y_train[0][:-1], sim_30db.u_train[0][:-1]])
     for i in range(model.n_submodels_):
         rows = model.steps_["submodels"].labels_ == i
-        ls = np.linalg.lstsq(phi[rows], sim_30db.y[1:][rows], rcond=None)[0]
+        ls = np.linalg.lstsq(phi[rows], sim_30db.y_train[0][1:][rows], rcond=None)[0]
         np.testing.assert_allclose(model.steps_["submodels"].thetas_[i], ls, atol=1e-10)
     assert model.thetas_ is model.regions_.thetas_
 
@@ -109,7 +109,7 @@ def test_the_settle_tolerance_reaches_every_sweep_with_regions(monkeypatch, sim_
 
     monkeypatch.setattr(refined, "refine", spy)
     monkeypatch.setattr(split_search, "refine", spy)
-    PWARX.default(1, 1).set_params(submodels__settle_tol=0.7).fit(sim_30db.u, sim_30db.y)
+    PWARX.default(1, 1).set_params(submodels__settle_tol=0.7).fit(sim_30db.u_train[0], sim_30db.y_train[0])
     with_regions = {settle for has_regions, settle in calls if has_regions}
     alone = {settle for has_regions, settle in calls if not has_regions}
     assert with_regions == {0.7} and alone == {0.0}

@@ -36,7 +36,7 @@ HOLD = 20
 def main() -> None:
     start = time.perf_counter()
     data = make_hure_vasak(n_samples=4000, snr_db=30.0, seed=0)
-    model = PWARX(na=1, nb=1).fit(data.u, data.y)
+    model = PWARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "hure_vasak_pwa.json"
         model.to_state_space().to_json(path)
@@ -44,7 +44,7 @@ def main() -> None:
 
     mpc = HybridMPC(ss, horizon=10)
     y_ref = np.repeat(np.array(TARGETS), HOLD, axis=0)
-    x0 = ss.states(data.u, data.y)[0]
+    x0 = ss.states(data.u_train[0], data.y_train[0])[0]
     run = mpc.closed_loop(x0, y_ref, steps=len(y_ref))
 
     t = np.arange(len(run.y))

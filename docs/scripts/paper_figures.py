@@ -56,7 +56,7 @@ def simulated() -> None:
         "default": PWARX(na=1, nb=1),
     }
     for model in models.values():
-        model.fit(train.u, train.y)
+        model.fit(train.u_train[0], train.y_train[0])
 
     # Fig. 2: θ_k's coefficient of y1(k−1) in output 1 against that of y2(k−1) in output 2,
     # the two entries that tell the four modes apart (0.9/0.7 and 0.6/0.8, eq. 11).
@@ -72,7 +72,7 @@ def simulated() -> None:
         for c in np.unique(labels[~noise]):
             sel = labels == c
             ax.scatter(theta[rows[sel], 0, 0], theta[rows[sel], 1, 1], s=3, label=f"cluster {c + 1}")
-        ax.scatter(train.thetas[:, 0, 0], train.thetas[:, 1, 1], marker="x", s=80, c="k",
+        ax.scatter(train.truth.thetas[:, 0, 0], train.truth.thetas[:, 1, 1], marker="x", s=80, c="k",
                    label="true modes")
         ax.set_title(f"{name}: {model.n_submodels_} sub-models", fontsize=10)
         ax.set_xlabel("θ_k, output 1, coefficient of y1(k−1)")
@@ -86,18 +86,18 @@ def simulated() -> None:
 
     # Fig. 4: free runs on a fresh record, samples 1–300.
     k = np.arange(1, 301)
-    runs = {name: model.simulate(test.u, test.y[:1]) for name, model in models.items()}
+    runs = {name: model.simulate(test.u_train[0], test.y_train[0][:1]) for name, model in models.items()}
     fig, axes = plt.subplots(2, 2, figsize=(10, 5.5), sharex=True,
                              gridspec_kw={"height_ratios": [3, 1]})
     default = runs["default"]
     for j in range(2):
         ax = axes[0, j]
-        ax.plot(k, test.y[k, j], "k", lw=1.2, label="measured")
+        ax.plot(k, test.y_train[0][k, j], "k", lw=1.2, label="measured")
         for (name, y_sim), style in zip(runs.items(), ("C1--", "C0")):
             ax.plot(k, y_sim[k, j], style, lw=1, label=name.split(" (")[0])
         ax.set_title(f"output y{j + 1}", fontsize=10)
         ax.legend(fontsize=7)
-        axes[1, j].plot(k, test.y[k, j] - default[k, j], "C0", lw=0.8)
+        axes[1, j].plot(k, test.y_train[0][k, j] - default[k, j], "C0", lw=0.8)
         axes[1, j].set_ylabel("error, default", fontsize=8)
         axes[1, j].set_xlabel("sample")
     fig.suptitle("Free run on a fresh record (the paper's Fig. 4)")
@@ -106,13 +106,13 @@ def simulated() -> None:
 
     # Fig. 5: true mode against the region each model selects from the measured regressors,
     # its sub-models paired with the true modes by parameters.
-    phi = np.column_stack([test.y[:-1], test.u[:-1]])          # eq. (13), samples 1..N−1
-    true_mode = test.modes[1:]
+    phi = np.column_stack([test.y_train[0][:-1], test.u_train[0][:-1]])          # eq. (13), samples 1..N−1
+    true_mode = test.truth.modes_train[0][1:]
     fig, axes = plt.subplots(3, 1, figsize=(10, 5), sharex=True)
     axes[0].step(k, true_mode[k - 1] + 1, "k", where="mid", lw=1)
     axes[0].set_ylabel("true")
     for ax, (name, model) in zip(axes[1:], models.items()):
-        mode_of = match_submodels(model.thetas_, test.thetas)[0]
+        mode_of = match_submodels(model.thetas_, test.truth.thetas)[0]
         region = model.regions_.predict(phi)
         paired = np.where(mode_of[region] >= 0, mode_of[region] + 1, 0)
         agree = np.mean(paired == true_mode + 1)

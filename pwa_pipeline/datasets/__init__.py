@@ -1,20 +1,14 @@
 """Data: the paper's simulated system, the KUKA KR300 robot, simulated machines with switching
-physics, and users' own tables."""
+physics, and users' own tables, every one returned as a :class:`Dataset`."""
 
-from .kuka import RobotData, default_kuka_path, load_kuka
-from .machines import (
-    MACHINES,
-    MachineData,
-    make_dc_motor,
-    make_machine,
-    make_two_link_arm,
-    make_two_tank,
-)
-from .registry import DATASETS, Dataset, GroundTruth, load_dataset
-from .simulated import SimulatedPWA, make_hure_vasak
+from .builtin import DATASETS, load_dataset
+from .dataset import Dataset, GroundTruth
+from .kuka import default_kuka_path, load_kuka
+from .machines import MACHINES, make_dc_motor, make_machine, make_two_link_arm, make_two_tank
+from .simulated import make_hure_vasak
 from .tables import load_table
+from .user import UserDataset
 
-__all__ = ["DATASETS", "MACHINES", "Dataset", "GroundTruth", "MachineData", "RobotData",
-           "SimulatedPWA", "default_kuka_path", "load_dataset", "load_kuka", "load_table",
-           "make_dc_motor", "make_hure_vasak", "make_machine", "make_two_link_arm",
-           "make_two_tank"]
+__all__ = ["DATASETS", "MACHINES", "Dataset", "GroundTruth", "UserDataset",
+           "default_kuka_path", "load_dataset", "load_kuka", "load_table", "make_dc_motor",
+           "make_hure_vasak", "make_machine", "make_two_link_arm", "make_two_tank"]

@@ -2,12 +2,12 @@
 configured path; the data are never part of this repository."""
 
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .._typing import Float2D
+from .dataset import Dataset
 
 KUKA_SEGMENT = 606
 KUKA_DOWNLOAD = (
@@ -22,33 +22,6 @@ KUKA_CHANNELS = 6
 #: torques in newton metres.
 KUKA_UNITS = {**{f"q{i}": "deg" for i in range(1, KUKA_CHANNELS + 1)},
               **{f"tau{i}": "N·m" for i in range(1, KUKA_CHANNELS + 1)}}
-
-
-@dataclass(frozen=True)
-class RobotData:
-    """KUKA KR300 forward identification data as separate 606-sample experiments.
-
-    Attributes
-    ----------
-    u_train, y_train : lists of ndarrays of shape (≤606, 6)
-        Motor torques (N·m) and joint positions (degrees) of the training record.
-    u_test, y_test : lists of ndarrays of shape (606, 6)
-        The held-out test record.
-    path : Path
-    u_names, y_names : list of str
-        ``tau1`` … ``tau6`` and ``q1`` … ``q6``.
-    units : dict of str to str
-        :data:`KUKA_UNITS`: the unit of each channel, for figure axes.
-    """
-
-    u_train: list[Float2D]
-    y_train: list[Float2D]
-    u_test: list[Float2D]
-    y_test: list[Float2D]
-    path: Path
-    u_names: list[str] = field(default_factory=lambda: [f"tau{i}" for i in range(1, 7)])
-    y_names: list[str] = field(default_factory=lambda: [f"q{i}" for i in range(1, 7)])
-    units: dict[str, str] = field(default_factory=lambda: dict(KUKA_UNITS))
 
 
 def default_kuka_path() -> Path:
@@ -88,8 +61,19 @@ def find_kuka(path: str | os.PathLike | None = None) -> Path | None:
     return next((c for c in _candidates(base) if c.is_file()), None)
 
 
-def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT) -> RobotData:
+#: Seconds between samples (10 Hz).
+KUKA_SAMPLE_TIME = 0.1
+
+
+def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT) -> Dataset:
     """Load the KUKA KR300 forward identification benchmark, cut into experiments.
+
+    Returns
+    -------
+    Dataset
+        ``kuka_robot``: the training record and the held-out test record as experiments of
+        ``segment`` samples (the last training one shorter), motor torques ``tau1`` …
+        ``tau6`` (N·m) in and joint positions ``q1`` … ``q6`` (degrees) out.
 
     Parameters
     ----------
@@ -126,10 +110,9 @@ def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT
     if missing:
         raise ValueError(f"{found} lacks the benchmark variable(s) {', '.join(missing)}")
     arrays = {k: _samples_by_channels(mat[k], k, found) for k in KUKA_VARIABLES}
-    return RobotData(
-        u_train=_split(arrays["u_train"], segment),
-        y_train=_split(arrays["y_train"], segment),
-        u_test=_split(arrays["u_test"], segment),
-        y_test=_split(arrays["y_test"], segment),
-        path=found,
-    )
+    return Dataset(
+        "kuka_robot", _split(arrays["u_train"], segment), _split(arrays["y_train"], segment),
+        _split(arrays["u_test"], segment), _split(arrays["y_test"], segment),
+        u_names=[f"tau{i}" for i in range(1, KUKA_CHANNELS + 1)],
+        y_names=[f"q{i}" for i in range(1, KUKA_CHANNELS + 1)], units=dict(KUKA_UNITS),
+        sample_time=KUKA_SAMPLE_TIME)

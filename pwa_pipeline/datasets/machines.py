@@ -11,7 +11,7 @@ than its sampling period and sampled with a zero-order hold on the input:
 - :func:`make_dc_motor`: a DC motor driving an inertia through a gear with backlash, behind
   an amplifier with a dead zone, voltage in, motor and load speed out.
 
-Every generator returns a :class:`MachineData` of several experiments (lists of arrays, one
+Every generator returns a :class:`~.dataset.Dataset` of several experiments (lists of arrays, one
 per experiment), each experiment drawn from its own random stream, the input a filtered
 random multi-level signal that crosses the machine's switching surfaces, the measured
 outputs corrupted by Gaussian sensor noise of a realistic size.
@@ -19,7 +19,7 @@ outputs corrupted by Gaussian sensor noise of a realistic size.
 Seeds. The same ``seed`` gives the same data, bit for bit. Seeds ``0 … 999``
 (:data:`TUNING_SEEDS`) are for tuning estimators and their defaults; seeds from ``1000``
 (:data:`REPORTING_FIRST_SEED`) are for reported figures only and are never used while
-tuning. Held-out experiments of a seed (``held_out=True``) come from a random stream
+tuning. Held-out experiments of a seed (``n_test``) come from a random stream
 independent of its training experiments, so the two never share an input or a noise draw.
 None of these data come from, or are calibrated on, the KUKA KR300 test record.
 """
@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._typing import Float2D
+from .dataset import Dataset, GroundTruth
 
 #: Seeds for tuning estimators on the machines (never reported as results).
 TUNING_SEEDS = range(0, 1000)
@@ -39,44 +40,20 @@ GRAVITY = 9.81  # m/s²
 
 
 @dataclass(frozen=True)
-class MachineData:
-    """Experiments of one simulated machine, with its noise-free outputs and switching flags.
+class _Part:
+    """The training or held-out experiments of one machine, as a generator simulates them:
+    inputs, measured and noise-free outputs, switching flags (lists, one array per
+    experiment)."""
 
-    Attributes
-    ----------
-    name : str
-        The machine's key in :data:`MACHINES`.
-    u, y : lists of ndarrays of shape (n_samples, r) and (n_samples, m)
-        Recorded inputs and measured (noisy) outputs, one array per experiment.
-    y_clean : list of ndarrays of shape (n_samples, m)
-        The outputs without measurement noise.
-    flags : dict of str to list of ndarrays of shape (n_samples,) of bool
-        Which switching regime each sample is in (e.g. ``"q1_dot>0"``, ``"overflow"``), as
-        the state at the sampling instant; the generator's docstring defines each flag.
-    sample_time : float
-        Sampling period in seconds.
-    noise_std : ndarray of shape (m,)
-        Standard deviation of the output noise, in the outputs' units.
-    seed : int
-    held_out : bool
-        Whether these are the seed's held-out experiments (an independent random stream).
-    u_names, y_names : list of str
-    units : dict of str to str
-        The unit of each channel, for figure axes.
-    """
-
-    name: str
     u: list[Float2D]
     y: list[Float2D]
     y_clean: list[Float2D]
     flags: dict[str, list[np.ndarray]]
     sample_time: float
     noise_std: np.ndarray
-    seed: int
-    held_out: bool
-    u_names: list[str] = field(default_factory=list)
-    y_names: list[str] = field(default_factory=list)
-    units: dict[str, str] = field(default_factory=dict)
+    u_names: list[str]
+    y_names: list[str]
+    units: dict[str, str]
 
 
 def _check(n_experiments: int, n_samples: int, noise_std) -> None:
@@ -130,16 +107,29 @@ def _noisy(clean: np.ndarray, std: np.ndarray, rng: np.random.Generator) -> np.n
     return clean + rng.standard_normal(clean.shape) * std
 
 
-def _package(name: str, u: np.ndarray, y_clean: np.ndarray, flags: dict[str, np.ndarray],
-             noise_std: np.ndarray, rng: np.random.Generator, sample_time: float, seed: int,
-             held_out: bool, u_names: list[str], y_names: list[str],
-             units: dict[str, str]) -> MachineData:
+def _package(u: np.ndarray, y_clean: np.ndarray, flags: dict[str, np.ndarray],
+             noise_std: np.ndarray, rng: np.random.Generator, sample_time: float,
+             u_names: list[str], y_names: list[str], units: dict[str, str]) -> _Part:
     y = _noisy(y_clean, noise_std, rng)
-    return MachineData(
-        name=name, u=list(u), y=list(y), y_clean=list(y_clean),
-        flags={k: list(v) for k, v in flags.items()}, sample_time=sample_time,
-        noise_std=np.asarray(noise_std, dtype=float), seed=int(seed), held_out=bool(held_out),
-        u_names=u_names, y_names=y_names, units=units)
+    return _Part(u=list(u), y=list(y), y_clean=list(y_clean),
+                 flags={k: list(v) for k, v in flags.items()}, sample_time=sample_time,
+                 noise_std=np.asarray(noise_std, dtype=float), u_names=u_names,
+                 y_names=y_names, units=units)
+
+
+def _dataset(name: str, simulate: Callable[..., _Part], n_experiments: int, n_test: int,
+             **kwargs) -> Dataset:
+    """A machine's :class:`~.dataset.Dataset`: ``n_experiments`` training experiments from
+    the seed's training stream and ``n_test`` held-out ones from its independent held-out
+    stream (none with ``n_test=0``)."""
+    train = simulate(n_experiments=n_experiments, held_out=False, **kwargs)
+    test = simulate(n_experiments=n_test, held_out=True, **kwargs) if n_test else None
+    truth = GroundTruth(
+        y_clean_train=train.y_clean, y_clean_test=test.y_clean if test else [],
+        flags_train=train.flags, flags_test=test.flags if test else {},
+        noise_std=train.noise_std)
+    return Dataset(name, train.u, train.y, test.u if test else [], test.y if test else [],
+                   train.u_names, train.y_names, truth, train.units, train.sample_time)
 
 
 # --------------------------------------------------------------------------- two-link arm
@@ -176,8 +166,8 @@ def _arm_acceleration(q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> np.ndar
 
 
 def make_two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
-                      noise_std: float | None = 0.05, held_out: bool = False,
-                      burn_in: int = 20) -> MachineData:
+                      noise_std: float | None = 0.05, n_test: int = 0,
+                      burn_in: int = 20) -> Dataset:
     """A two-link planar arm in a vertical plane: joint torques in, joint angles out, 10 Hz.
 
     Physics (SI units; q1 from the horizontal, q2 relative to link 1, so (−90°, 0°) hangs
@@ -223,19 +213,27 @@ def make_two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int =
     noise_std : float or None, default 0.05
         Output noise standard deviation in degrees; None or 0: noise-free outputs (the
         recorded torques stay noisy).
-    held_out : bool, default False
-        The seed's held-out experiments, from a random stream independent of its training
-        experiments.
+    n_test : int, default 0
+        Held-out experiments, from the seed's held-out random stream, independent of its
+        training experiments (0: none).
     burn_in : int, default 20
 
     Returns
     -------
-    MachineData
+    Dataset
         Inputs ``tau1, tau2`` [N·m], outputs ``q1, q2`` [deg]; flags ``"q1_dot>0"``,
         ``"q1_dot<0"``, ``"q2_dot>0"``, ``"q2_dot<0"``: the joint moves faster than v_s in
         that direction at the sampling instant, so its Coulomb friction is −F_c or +F_c
         (neither: the joint sticks, friction within ±F_c).
     """
+    return _dataset("two_link_arm", _two_link_arm, n_experiments, n_test, n_samples=n_samples, seed=seed,
+                    noise_std=noise_std, burn_in=burn_in)
+
+
+def _two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
+                  noise_std: float | None = 0.05, held_out: bool = False,
+                      burn_in: int = 20) -> _Part:
+    """The experiments of :func:`make_two_link_arm` from the seed's training or held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = ARM, 0.1, 20
@@ -258,10 +256,10 @@ def make_two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int =
     tau_measured = _noisy(tau, p["torque_noise"], rng)[:, burn_in:]
     angles, rates = np.degrees(angles[:, burn_in:]), rates[:, burn_in:]
     std = np.zeros(2) if noise_std is None else np.full(2, float(noise_std))
-    return _package("two_link_arm", tau_measured, angles,
+    return _package(tau_measured, angles,
                     {f"q{j + 1}_dot{sign}": (rates[..., j] if sign == ">0" else -rates[..., j])
                      > p["v_smooth"] for j in range(2) for sign in (">0", "<0")},
-                    std, rng, dt, seed, held_out, ["tau1", "tau2"], ["q1", "q2"],
+                    std, rng, dt, ["tau1", "tau2"], ["q1", "q2"],
                     {"tau1": "N·m", "tau2": "N·m", "q1": "deg", "q2": "deg"})
 
 
@@ -275,8 +273,8 @@ TANK = {
 
 
 def make_two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
-                  noise_std: float | None = 0.002, held_out: bool = False,
-                  burn_in: int = 100) -> MachineData:
+                  noise_std: float | None = 0.002, n_test: int = 0,
+                  burn_in: int = 100) -> Dataset:
     """Two cascaded tanks with a saturating inlet valve and an overflowing upper tank.
 
     Physics (Torricelli outflow; SI units)::
@@ -307,15 +305,24 @@ def make_two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
         Tuning seeds are 0–999, reporting seeds 1000 and above (module docstring).
     noise_std : float or None, default 0.002
         Level noise standard deviation in metres; None or 0: noise-free.
-    held_out : bool, default False
+    n_test : int, default 0
+        Held-out experiments (0: none), from the seed's held-out random stream.
     burn_in : int, default 100
 
     Returns
     -------
-    MachineData
+    Dataset
         Input ``u`` [V], outputs ``h1, h2`` [m]; flags ``"valve_saturated"`` (command
         outside (u_shut, u_open)) and ``"overflow"`` (upper tank at its rim and spilling).
     """
+    return _dataset("two_tank", _two_tank, n_experiments, n_test, n_samples=n_samples, seed=seed,
+                    noise_std=noise_std, burn_in=burn_in)
+
+
+def _two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
+              noise_std: float | None = 0.002, held_out: bool = False,
+                  burn_in: int = 100) -> _Part:
+    """The experiments of :func:`make_two_tank` from the seed's training or held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = TANK, 2.0, 20
@@ -345,9 +352,9 @@ def make_two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
     saturated = (u[..., 0] <= p["u_shut"]) | (u[..., 0] >= p["u_open"])
     std = np.zeros(2) if noise_std is None else np.full(2, float(noise_std))
     b = slice(burn_in, None)
-    return _package("two_tank", u[:, b], levels[:, b],
+    return _package(u[:, b], levels[:, b],
                     {"valve_saturated": saturated[:, b], "overflow": over[:, b]},
-                    std, rng, dt, seed, held_out, ["u"], ["h1", "h2"],
+                    std, rng, dt, ["u"], ["h1", "h2"],
                     {"u": "V", "h1": "m", "h2": "m"})
 
 
@@ -362,8 +369,8 @@ MOTOR = {
 
 
 def make_dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
-                  noise_std: tuple[float, float] | float | None = (1.0, 0.05),
-                  held_out: bool = False, burn_in: int = 20) -> MachineData:
+                  noise_std: tuple[float, float] | float | None = (1.0, 0.05), n_test: int = 0,
+                  burn_in: int = 20) -> Dataset:
     """A DC motor behind a dead-zone amplifier, driving an inertia through a gear with
     backlash: voltage in, motor and load speed out, 50 Hz.
 
@@ -400,16 +407,25 @@ def make_dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
         Tuning seeds are 0–999, reporting seeds 1000 and above (module docstring).
     noise_std : float, pair of floats or None, default (1.0, 0.05)
         Noise standard deviation of (ω_m, ω_l) in rad/s; None or 0: noise-free.
-    held_out : bool, default False
+    n_test : int, default 0
+        Held-out experiments (0: none), from the seed's held-out random stream.
     burn_in : int, default 20
 
     Returns
     -------
-    MachineData
+    Dataset
         Input ``u`` [V], outputs ``w_motor, w_load`` [rad/s]; flags ``"dead_zone"`` (|u| ≤
         v_dz: no voltage reaches the motor) and ``"backlash_gap"`` (|δ| ≤ α: no torque
         through the gear).
     """
+    return _dataset("dc_motor", _dc_motor, n_experiments, n_test, n_samples=n_samples, seed=seed,
+                    noise_std=noise_std, burn_in=burn_in)
+
+
+def _dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
+              noise_std: tuple[float, float] | float | None = (1.0, 0.05),
+              held_out: bool = False, burn_in: int = 20) -> _Part:
+    """The experiments of :func:`make_dc_motor` from the seed's training or held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = MOTOR, 0.02, 20
@@ -439,14 +455,14 @@ def make_dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
     std = np.zeros(2) if noise_std is None else np.broadcast_to(
         np.asarray(noise_std, dtype=float), (2,)).copy()
     b = slice(burn_in, None)
-    return _package("dc_motor", u[:, b], speeds[:, b],
+    return _package(u[:, b], speeds[:, b],
                     {"dead_zone": np.abs(u[:, b, 0]) <= p["dead_zone"], "backlash_gap": gap[:, b]},
-                    std, rng, dt, seed, held_out, ["u"], ["w_motor", "w_load"],
+                    std, rng, dt, ["u"], ["w_motor", "w_load"],
                     {"u": "V", "w_motor": "rad/s", "w_load": "rad/s"})
 
 
-#: The machines by name: ``MACHINES[name](n_experiments, n_samples, seed, noise_std, held_out)``.
-MACHINES: dict[str, Callable[..., MachineData]] = {
+#: The machines by name: ``MACHINES[name](n_experiments, n_samples, seed, noise_std, n_test)``.
+MACHINES: dict[str, Callable[..., Dataset]] = {
     "two_link_arm": make_two_link_arm,
     "two_tank": make_two_tank,
     "dc_motor": make_dc_motor,
@@ -454,7 +470,7 @@ MACHINES: dict[str, Callable[..., MachineData]] = {
 
 
 def make_machine(name: str, n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
-                 held_out: bool = False, **kwargs) -> MachineData:
+                 n_test: int = 0, **kwargs) -> Dataset:
     """One machine of :data:`MACHINES` by name, with its default noise unless ``kwargs``
     override it.
 
@@ -466,4 +482,4 @@ def make_machine(name: str, n_experiments: int = 40, n_samples: int = 600, seed:
     if name not in MACHINES:
         raise ValueError(f"unknown machine {name!r}; known: {', '.join(MACHINES)}")
     return MACHINES[name](n_experiments=n_experiments, n_samples=n_samples, seed=seed,
-                          held_out=held_out, **kwargs)
+                          n_test=n_test, **kwargs)

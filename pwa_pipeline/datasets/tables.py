@@ -8,6 +8,7 @@ import numpy as np
 
 from .._typing import Float2D
 from .._validation import MAX_MAGNITUDE
+from .dataset import Dataset
 
 
 def _shown(cell: object) -> str:
@@ -186,14 +187,19 @@ def load_table(
     u_columns: list[str],
     y_columns: list[str],
     experiment_column: str | None = None,
-) -> tuple[list[Float2D], list[Float2D]]:
-    """Inputs and outputs of a CSV or Parquet table, one array per experiment.
+    time_column: str | None = None,
+) -> Dataset:
+    """A CSV or Parquet table as a data set: every experiment (one per id of
+    ``experiment_column``, else the whole table) for training, none held out (split it with
+    :class:`~.user.UserDataset`, or pass ``u_train[:k]``).
 
     See :func:`read_table` for the parameters and the errors.
 
     Returns
     -------
-    u, y : lists of ndarrays, one per experiment
+    Dataset
+        Named after the file, its channels after the columns.
     """
-    table = read_table(path, u_columns, y_columns, experiment_column)
-    return table.u, table.y
+    table = read_table(path, u_columns, y_columns, experiment_column, time_column)
+    return Dataset(Path(path).stem, table.u, table.y, [], [], list(u_columns),
+                   list(y_columns))

@@ -1,29 +1,22 @@
-"""Users' own data sets: a CSV or Parquet file registered by name, with its columns, its
-split into training and held-out experiments, and its model orders.
-
-A :class:`DatasetRegistry` keeps them in one JSON file; the pipeline's ``dataset`` partitions
-are the built-in data sets and the names in that file. Registration reads and checks the
-whole file first and registers nothing when anything is wrong.
+"""Users' own data sets: a CSV or Parquet file described by name, with its columns, its
+split into training and held-out experiments, and its model orders (:class:`UserDataset`,
+which loads as a :class:`~.dataset.Dataset`). The pipeline keeps such descriptions in its
+registry of data sets (:mod:`pwa_pipeline.orchestration.registry`).
 """
 
-import json
 import math
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-
-from filelock import FileLock
 
 from .._validation import check_name
 from ..regressors import n_initial, regressor_dim
 from ..scoring.evaluation import WARMUP
-from .registry import DATASETS, Dataset
+from .builtin import DATASETS
+from .dataset import Dataset
 from .tables import Table, read_table
 
 #: Share of the data held out for testing when no split is given.
 DEFAULT_TEST_FRACTION = 0.25
-#: Version of the registry file's layout.
-REGISTRY_VERSION = 1
 
 
 def parse_units(pairs: list[str] | None) -> dict[str, str]:
@@ -221,84 +214,3 @@ class UserDataset:
         (``u1=N·m y1=deg``), or ``none``."""
         return " ".join(f"{c}={self.units[c]}" for c in (*self.u, *self.y)
                         if c in self.units) or "none"
-
-
-class DatasetRegistry:
-    """The user's data sets, kept in one JSON file.
-
-    Parameters
-    ----------
-    path : path-like
-        The registry file; it need not exist yet (no data sets).
-    """
-
-    def __init__(self, path: str | os.PathLike):
-        self.path = Path(path).resolve()
-
-    def _read(self) -> dict[str, dict]:
-        if not self.path.is_file():
-            return {}
-        try:
-            content = json.loads(self.path.read_text())
-            return dict(content["datasets"])
-        except (json.JSONDecodeError, KeyError, TypeError) as exc:
-            raise ValueError(f"the data-set registry {self.path} is unreadable ({exc}); fix "
-                             f"or delete it") from None
-
-    def _write(self, entries: dict[str, dict]) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps({"version": REGISTRY_VERSION, "datasets": entries},
-                                  indent=2, sort_keys=True) + "\n")
-        os.replace(tmp, self.path)
-
-    def _lock(self) -> FileLock:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        return FileLock(str(self.path) + ".lock", timeout=30)
-
-    def names(self) -> list[str]:
-        """The registered names, sorted."""
-        return sorted(self._read())
-
-    def get(self, name: str) -> UserDataset:
-        """The registration of ``name`` (KeyError naming the known ones); an entry written
-        before units existed has none."""
-        entries = self._read()
-        if name not in entries:
-            raise KeyError(f"no data set {name!r} in {self.path}; registered: {sorted(entries)}")
-        entry = entries[name]
-        return UserDataset(**{**entry, "u": tuple(entry["u"]), "y": tuple(entry["y"]),
-                              "test_experiments": tuple(entry["test_experiments"])})
-
-    def add(self, spec: UserDataset, replace: bool = False) -> Dataset:
-        """Check ``spec`` by loading its file, then register it.
-
-        Returns
-        -------
-        Dataset
-            The loaded data set.
-
-        Raises
-        ------
-        FileNotFoundError, ValueError
-            From :meth:`UserDataset.load`, or the name is taken and ``replace`` is false.
-            Nothing is written then.
-        """
-        data = spec.load()
-        with self._lock():
-            entries = self._read()
-            if spec.name in entries and not replace:
-                raise ValueError(f"data set {spec.name!r} is already registered in "
-                                 f"{self.path}; remove it first or replace it")
-            entries[spec.name] = spec.describe()
-            self._write(entries)
-        return data
-
-    def remove(self, name: str) -> UserDataset:
-        """Unregister ``name`` (its file and results stay); KeyError if unknown."""
-        with self._lock():
-            spec = self.get(name)
-            entries = self._read()
-            del entries[name]
-            self._write(entries)
-        return spec

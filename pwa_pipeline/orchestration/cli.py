@@ -183,7 +183,8 @@ def add_dataset(args: argparse.Namespace) -> int:
     """Check a CSV/Parquet file and register it as a data set (nothing is registered when
     the check fails)."""
     from ..config import HParamsFile
-    from ..datasets.user import DatasetRegistry, UserDataset, parse_units
+    from ..datasets.user import UserDataset, parse_units
+    from .registry import DatasetRegistry
 
     registry = DatasetRegistry(default_datasets_path())
     spec = UserDataset(
@@ -217,7 +218,7 @@ def list_datasets(args: argparse.Namespace) -> int:
     """Print the registered data sets with their columns, split, orders and units."""
     from pathlib import Path
 
-    from ..datasets.user import DatasetRegistry
+    from .registry import DatasetRegistry
 
     registry = DatasetRegistry(default_datasets_path())
     names = registry.names()
@@ -235,7 +236,7 @@ def list_datasets(args: argparse.Namespace) -> int:
 
 def remove_dataset(args: argparse.Namespace) -> int:
     """Unregister a data set; its file and any results already computed stay."""
-    from ..datasets.user import DatasetRegistry
+    from .registry import DatasetRegistry
 
     registry = DatasetRegistry(default_datasets_path())
     spec = registry.remove(args.name)

@@ -6,12 +6,12 @@ import dagster as dg
 
 from ..config import HParamsFile
 from ..datasets import DATASETS
-from ..datasets.user import DatasetRegistry
 from .assets import build_assets
 from .io_manager import PartitionedFileIOManager
 from .jobs import build_jobs, build_sensors
 from .partitions import build_partitions
 from .paths import default_datasets_path
+from .registry import DatasetRegistry
 from .schedules import build_sweep
 from .settings import PipelineSettings
 from .tracking import MLflowTracker

@@ -52,7 +52,7 @@ def default_storage_dir() -> UPath:
 
 def default_datasets_path() -> Path:
     """``$PWA_DATASETS``, else ``<project>/storage/datasets.json``: the user's registered data
-    sets (:class:`~pwa_pipeline.datasets.user.DatasetRegistry`). A local file whatever
+    sets (:class:`~pwa_pipeline.orchestration.registry.DatasetRegistry`). A local file whatever
     ``$PWA_STORAGE`` says, as the files it registers are: on several machines, point
     ``$PWA_DATASETS`` at a file they share."""
     env = os.environ.get("PWA_DATASETS")

@@ -6,10 +6,10 @@ import dagster as dg
 from upath import UPath
 
 from ..config import Configuration, HParamsFile
-from ..datasets import Dataset, load_dataset
-from ..datasets.user import DatasetRegistry
+from ..datasets import DATASETS, Dataset, load_dataset
 from .files import store_root
 from .paths import default_datasets_path, default_storage_dir
+from .registry import DatasetRegistry
 
 
 class PipelineSettings(dg.ConfigurableResource):
@@ -79,7 +79,13 @@ class PipelineSettings(dg.ConfigurableResource):
     def dataset(self, name: str) -> Dataset:
         """The named data set (raises FileNotFoundError naming the path if its file is
         absent)."""
-        return load_dataset(name, kuka_path=self.kuka_path or None, registry=self.registry())
+        if name in DATASETS:
+            return load_dataset(name, kuka_path=self.kuka_path or None)
+        registry = self.registry()
+        if name not in registry.names():
+            raise ValueError(f"unknown data set {name!r}; known: "
+                             f"{[*DATASETS, *registry.names()]}")
+        return registry.get(name).load()
 
     def configuration(self, hparams: str, dataset: str) -> Configuration:
         """The resolved configuration of one partition; a registered data set brings its

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..datasets.registry import with_unit
+from ..datasets.dataset import with_unit
 from .style import DIVERGED, MAX_HEIGHT, MAX_SAMPLES, MAX_WIDTH, figure, legend_below, suptitle
 
 if TYPE_CHECKING:

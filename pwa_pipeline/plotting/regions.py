@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..datasets.registry import with_unit
+from ..datasets.dataset import with_unit
 from .style import MAX_WIDTH, colour, figure, suptitle
 
 #: Entries of a legend column (more fit beside the 5.2-inch axes).

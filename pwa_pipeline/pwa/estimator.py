@@ -143,10 +143,10 @@ class PWARX(ARXModelBase):
     >>> import numpy as np
     >>> from pwa_pipeline import PWARX, make_hure_vasak
     >>> data = make_hure_vasak(n_samples=2000, snr_db=None, seed=0)
-    >>> model = PWARX(na=1, nb=1).fit(data.u, data.y)
+    >>> model = PWARX(na=1, nb=1).fit(data.u_train, data.y_train)
     >>> model.n_submodels_
     4
-    >>> bool(np.allclose(np.sort(model.thetas_, axis=0), np.sort(data.thetas, axis=0)))
+    >>> bool(np.allclose(np.sort(model.thetas_, axis=0), np.sort(data.truth.thetas, axis=0)))
     True
     >>> PWARX.default(na=1, nb=1).set_params(clustering__eps=0.2).get_params()["clustering__eps"]
     0.2

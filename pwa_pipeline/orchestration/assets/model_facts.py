@@ -2,8 +2,7 @@
 the comparison with a simulated system's ground truth, and the key its scores and figures
 are cached by."""
 
-from ...datasets import Dataset
-from ...datasets.registry import GroundTruth
+from ...datasets import Dataset, GroundTruth
 from ...plotting import context_title
 from ...pwa import PWARX
 from ...regressors import regressor_names
@@ -18,9 +17,10 @@ def phi_names(pwa: PWARX, data: Dataset) -> list[str]:
 
 
 def ground_truth(model: PWARX, data: Dataset) -> GroundTruth | None:
-    """The data set's ground truth when it has one and the model has its structure."""
+    """The data set's ground truth when it is a PWARX system's and the model has its
+    regressor."""
     truth = data.truth
-    if truth is None or (model.output_lags_, model.nb, model.affine) != (
+    if truth is None or truth.thetas is None or (model.output_lags_, model.nb, model.affine) != (
             truth.na, truth.nb, truth.affine):
         return None
     return truth
@@ -29,7 +29,7 @@ def ground_truth(model: PWARX, data: Dataset) -> GroundTruth | None:
 def truth_metadata(model: PWARX, data: Dataset) -> dict:
     """Parameter error and region accuracy on the held-out data against the true system
     (simulated data sets), or why they are not given."""
-    if data.truth is None:
+    if data.truth is None or data.truth.thetas is None:
         return {}
     truth = ground_truth(model, data)
     if truth is None:
