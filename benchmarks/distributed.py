@@ -62,7 +62,8 @@ def data_files(folder: Path) -> tuple[dict[str, str], list[str]]:
     names = [f"sim{i:02d}" for i in range(N_DATASETS)]
     for i, name in enumerate(names):
         d = make_hure_vasak(n_samples=N_SAMPLES, seed=100 + i)
-        pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]}
+        pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                      "y2": d.y_train[0][:, 1]}
                      ).to_csv(folder / f"{name}.csv", index=False)
         registry.add(UserDataset(name=name, path=str(folder / f"{name}.csv"), u=("u1", "u2"),
                                  y=("y1", "y2")))

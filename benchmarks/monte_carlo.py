@@ -41,7 +41,8 @@ def one_run(setting: str, n: int, snr: float, seed: int) -> dict:
                 data.u_train[0], data.y_train[0])
     except ValueError as exc:  # e.g. no cluster found
         return {**row, "n_submodels": 0, "error": str(exc)}
-    truth = ground_truth_scores(model, data.truth.thetas, data.u_train[0], data.y_train[0], data.truth.modes_train[0])
+    truth = ground_truth_scores(model, data.truth.thetas, data.u_train[0], data.y_train[0],
+                                data.truth.modes_train[0])
     ev = evaluate(model, fresh.u_train[0], fresh.y_train[0], warmup=10)
     return {**row, "n_submodels": model.n_submodels_,
             "max_param_error": truth["max_param_error"] if model.n_submodels_ == 4 else np.nan,

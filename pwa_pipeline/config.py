@@ -24,6 +24,7 @@ parameters checked when the file is read, so a bad value fails before any run, w
 set and data set in the message.
 """
 
+import functools
 import os
 import tomllib
 from dataclasses import dataclass, field
@@ -283,3 +284,28 @@ class HParamsFile:
                            + ("" if orders is None else
                               f' and no [{hparams}."*"] table for registered data sets'))
         return self._configs[hparams, dataset]
+
+
+def load_hparams(path: str | os.PathLike | None = None) -> HParamsFile:
+    """The hyper-parameter file (default :func:`default_hparams_path`), read and checked once
+    per process and read again when it changes (its modification time or size): the
+    definitions, the command line and every partition's ``configuration`` share one
+    reading.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        As :class:`HParamsFile`.
+    """
+    resolved = Path(path).resolve() if path is not None else default_hparams_path()
+    if not resolved.is_file():
+        return HParamsFile(resolved)  # (raises, naming the path)
+    stat = resolved.stat()
+    return _read(resolved, (stat.st_mtime_ns, stat.st_size))
+
+
+@functools.lru_cache(maxsize=16)
+def _read(path: Path, stamp: tuple[int, int]) -> HParamsFile:
+    """:class:`HParamsFile` of ``path`` as it was at ``stamp`` (its modification time and
+    size, the cache's key)."""
+    return HParamsFile(path)

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from pwa_pipeline.config import HParamsFile
-from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets import Dataset
+from pwa_pipeline.datasets import Dataset, make_hure_vasak
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.orchestration.assets.identification import REGIONS, SWITCHING, model_output
 from pwa_pipeline.orchestration.definitions import build_definitions
@@ -101,18 +100,19 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     carry their units."""
     record = make_hure_vasak(n_samples=2400, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=600, snr_db=30, seed=1000)
-    data = Dataset("hure_vasak", np.split(record.u_train[0], 4), np.split(record.y_train[0], 4), [test.u_train[0]],
+    data = Dataset("hure_vasak", np.split(record.u_train[0], 4), np.split(record.y_train[0], 4),
+                   [test.u_train[0]],
                    [test.y_train[0]], record.u_names, record.y_names, units={"y1": "V"})
     path = tmp_path / "h.toml"
     path.write_text('[select.hure_vasak]\nna = 1\nnb = 1\naffine = true\nform = "velocity"\n'
                     'outputs = "decoupled"\nscheduling.switch = "select"\n')
-    model = HParamsFile(path).configuration("select", "hure_vasak").pwa.fit(data.u_train,
-                                                                           data.y_train)
+    configuration = HParamsFile(path).configuration("select", "hure_vasak")
+    model = configuration.pwa.fit(data.u_train, data.y_train)
     context = SimpleNamespace(log=logging.getLogger(__name__), partition_key="hure_vasak|select")
     phi = build_regressors(list(zip(data.u_train, data.y_train, strict=True)),
                            model.output_lags_, model.nb, model.affine).phi
-    output = model_output(context, PipelineSettings(cache_dir=str(tmp_path / "cache")), model,
-                          data, cached=set(), phi=phi)
+    output = model_output(context, PipelineSettings(cache_dir=str(tmp_path / "cache")),
+                          configuration, model, data, cached=set(), phi=phi)
     structure = output.metadata["structure per output"].value
     assert _header(structure) == ["output", "structure", "group"]
     table = output.metadata["candidates"].value

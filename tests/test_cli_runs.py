@@ -28,7 +28,8 @@ def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
     monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
     d = make_hure_vasak(n_samples=1200, seed=7)
-    frame = pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]})
+    frame = pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                          "y2": d.y_train[0][:, 1]})
     for name in ("plant", "mill", "gone"):
         frame.to_csv(tmp_path / f"{name}.csv", index=False)
         assert main(["add-dataset", name, str(tmp_path / f"{name}.csv"), "--u", "u1", "u2",

@@ -243,7 +243,8 @@ def test_decoupled_outputs_take_the_product_partition():
     ss = model.to_state_space()
     sizes = [o.n_regions for o in model.structure_fit_.outputs]
     assert ss.n_modes + len(ss.dropped_modes) == np.prod(sizes)
-    np.testing.assert_allclose(ss.simulate(data.u_train[0], data.y_train[0][:5]), model.simulate(data.u_train[0], data.y_train[0][:5]),
+    np.testing.assert_allclose(ss.simulate(data.u_train[0], data.y_train[0][:5]),
+                               model.simulate(data.u_train[0], data.y_train[0][:5]),
                                rtol=0, atol=1e-8)
     x, phi = ss.states(data.u_train[0], data.y_train[0]), ss.regressors(data.u_train[0], data.y_train[0])
     mode = ss.mode_of(x, data.u_train[0][2:])

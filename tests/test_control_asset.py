@@ -22,9 +22,10 @@ class _Unconvertible(PWARX):
 
 def test_a_model_that_does_not_convert_is_reported_with_a_warning_check(tmp_path):
     context = dg.build_asset_context(partition_key="hure_vasak|paper")
+    settings = PipelineSettings(cache_dir=str(tmp_path / "c"))
     events = list(_control_asset()(context=context, raw_benchmark=load_dataset("hure_vasak"),
-                                   pwa_model=_Unconvertible(na=1, nb=1),
-                                   settings=PipelineSettings(cache_dir=str(tmp_path / "c"))))
+                                   pwa_model=_Unconvertible(na=1, nb=1), settings=settings,
+                                   configuration=settings.configuration("paper", "hure_vasak")))
     output, check = events
     assert output.value is None and output.metadata["exported"].value is False
     assert "KMeansRegions" in output.metadata["reason"].value
@@ -38,7 +39,8 @@ def test_a_model_is_written_to_its_files_with_its_verdict(tmp_path):
     model = settings.configuration("paper", "hure_vasak").pwa.fit(data.u_train, data.y_train)
     context = dg.build_asset_context(partition_key="hure_vasak|paper")
     output, check = _control_asset()(context=context, raw_benchmark=data, pwa_model=model,
-                                     settings=settings)
+                                     settings=settings,
+                                     configuration=settings.configuration("paper", "hure_vasak"))
     ss, report = output.value.state_space, output.value.stability
     assert check.passed and ss.n_modes == model.n_submodels_ == 2
     assert output.metadata["n_modes"].value == 2

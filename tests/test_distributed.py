@@ -107,7 +107,8 @@ def _data_files(folder: Path) -> dict[str, str]:
     registry = DatasetRegistry(folder / "datasets.json")
     for seed, name in enumerate(DATASETS):
         d = make_hure_vasak(n_samples=600, seed=10 + seed)
-        pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]}
+        pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                      "y2": d.y_train[0][:, 1]}
                      ).to_csv(folder / f"{name}.csv", index=False)
         registry.add(UserDataset(name=name, path=str(folder / f"{name}.csv"), u=("u1", "u2"),
                                  y=("y1", "y2")))

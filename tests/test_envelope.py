@@ -265,7 +265,8 @@ def test_the_prediction_figure_hatches_the_stretches_outside_the_training_data(p
     model, train, test = paper
     u = test.u_train[0].copy()
     u[200:260] *= 3
-    data = Dataset("hure_vasak", [train.u_train[0]], [train.y_train[0]], [u], [test.y_train[0]], train.u_names,
+    data = Dataset("hure_vasak", [train.u_train[0]], [train.y_train[0]], [u], [test.y_train[0]],
+                   train.u_names,
                    train.y_names)
     ev = evaluate(model, u, test.y_train[0], warmup=WARMUP, output_names=train.y_names)
     fig = PredictionDisplay.from_evaluation(ev, data, WARMUP, context="hure_vasak | set s | PWA").figure_

@@ -13,8 +13,7 @@ from matplotlib.contour import ContourSet
 from pwa_pipeline import PWARX
 from pwa_pipeline._arrays import column_rms
 from pwa_pipeline._validation import as_experiments
-from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets import Dataset
+from pwa_pipeline.datasets import Dataset, make_hure_vasak
 from pwa_pipeline.orchestration.images import to_markdown, to_png
 from pwa_pipeline.plotting import (
     ParameterClustersDisplay,

@@ -10,7 +10,8 @@ from pwa_pipeline.pwa.output_error.simulator import FreeRuns
 def test_the_propagated_jacobian_matches_finite_differences_with_regions():
     data = make_hure_vasak(n_samples=600, seed=2)
     model = PWARX(na=2, nb=1).fit(data.u_train[0], data.y_train[0])
-    runs = FreeRuns([data.u_train[0][:300], data.u_train[0][300:]], [data.y_train[0][:300], data.y_train[0][300:]], 2, 1, False, 2)
+    runs = FreeRuns([data.u_train[0][:300], data.u_train[0][300:]], [data.y_train[0][:300],
+                                                                     data.y_train[0][300:]], 2, 1, False, 2)
     theta = model.thetas_
     cost, _, jtr = runs.simulate(theta, model.regions_.predict, sensitivities=True)
     gradient = 2 * jtr / runs.n_scored

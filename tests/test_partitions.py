@@ -5,7 +5,7 @@ import pytest
 
 from pwa_pipeline.datasets import DATASETS, make_hure_vasak
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.partitions import all_keys, check_keys, split_key
+from pwa_pipeline.orchestration.partitions import PartitionKey, all_keys, check_keys
 
 HPARAMS = """
 [paper.hure_vasak]
@@ -45,7 +45,8 @@ def defs(tmp_path, monkeypatch):
     monkeypatch.setenv("PWA_HPARAMS", str(tmp_path / "hp.toml"))
     (tmp_path / "hp.toml").write_text(HPARAMS)
     d = make_hure_vasak(n_samples=300, seed=3)
-    pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]}
+    pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                  "y2": d.y_train[0][:, 1]}
                  ).to_csv(tmp_path / "mill.csv", index=False)
     assert main(["add-dataset", "mill", str(tmp_path / "mill.csv"), "--u", "u1", "u2",
                  "--y", "y1", "y2", "--na", "2"]) == 0
@@ -65,7 +66,8 @@ def test_every_offered_partition_builds_its_configuration(defs):
     settings = defs.resources["settings"]
     keys = all_keys(partitions_of(defs))
     for key in keys:
-        dataset, hparams = split_key(key)
+        part = PartitionKey.parse(key)
+        dataset, hparams = part.dataset, part.hparams
         config = settings.configuration(hparams, dataset)
         assert (config.dataset, config.hparams) == (dataset, hparams)
         assert set(config.estimators) == {"pwa", "linear_arx", "subspace"}
@@ -78,8 +80,9 @@ def test_every_partition_of_the_bundled_file_builds_its_configuration(monkeypatc
     monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
     defs = build_definitions()
     keys = all_keys(partitions_of(defs))
-    assert {split_key(k)[0] for k in keys} == set(DATASETS)
+    assert {PartitionKey.parse(k).dataset for k in keys} == set(DATASETS)
     assert "hure_vasak|robot" not in keys and "kuka_robot|robot" in keys
     for key in keys:
-        dataset, hparams = split_key(key)
+        part = PartitionKey.parse(key)
+        dataset, hparams = part.dataset, part.hparams
         assert defs.resources["settings"].configuration(hparams, dataset).dataset == dataset

@@ -18,17 +18,16 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.control import PWAStateSpace
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.methods import METHODS
-from pwa_pipeline.orchestration import images
-from pwa_pipeline.orchestration.assets import model_facts
+from pwa_pipeline.orchestration import images, model_facts
 from pwa_pipeline.orchestration.assets import scores as score_assets
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.mlflow_models import example_table
 from pwa_pipeline.orchestration.partitions import (
+    PartitionKey,
     all_keys,
     check_keys,
     runnable_keys,
-    split_key,
 )
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
@@ -101,7 +100,11 @@ def test_schedule_requests_every_partition_once():
 
 
 def test_partition_keys_parse_and_reject_typos():
-    assert split_key("kuka_robot|paper") == ("kuka_robot", "paper")
+    key = PartitionKey.parse("kuka_robot|paper")
+    assert (key.dataset, key.hparams, str(key)) == ("kuka_robot", "paper", "kuka_robot|paper")
+    for typo in ("kuka_robot", "a|b|c", "|paper"):
+        with pytest.raises(ValueError, match=r"is not of the form 'dataset\|hparams'"):
+            PartitionKey.parse(typo)
     with pytest.raises(ValueError, match=r"unknown partition 'kuka\|paper'; the partitions are "
                                          r"\['hure_vasak\|paper', "):
         check_keys(partitions_of(defs), ["hure_vasak|paper", "kuka|paper"])

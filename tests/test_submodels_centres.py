@@ -7,7 +7,8 @@ from pwa_pipeline.pwa.steps.submodels.centres import ClusterCentres, cluster_cen
 
 
 def test_paper_sub_models_are_the_cluster_means(sim_30db):
-    model = HParamsFile().configuration("paper", "hure_vasak").pwa.fit(sim_30db.u_train[0], sim_30db.y_train[0])
+    model = HParamsFile().configuration("paper", "hure_vasak").pwa.fit(sim_30db.u_train[0],
+                                                                       sim_30db.y_train[0])
     theta, labels = model.steps_["local_models"].theta_, model.steps_["clustering"].labels_
     assert model.n_submodels_ == labels.max() + 1 >= 2
     for i in range(model.n_submodels_):

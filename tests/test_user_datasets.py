@@ -10,10 +10,10 @@ import pytest
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import UserDataset
-from pwa_pipeline.orchestration.registry import DatasetRegistry
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.partitions import all_keys, runnable_keys
+from pwa_pipeline.orchestration.registry import DatasetRegistry
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
 
@@ -24,8 +24,9 @@ COLUMNS = dict(u=("u1", "u2"), y=("y1", "y2"))
 def table():
     """The paper's system (N = 1200) as a user's table: four experiments of 300 rows."""
     d = make_hure_vasak(n_samples=1200, seed=7)
+    u, y = d.u_train[0], d.y_train[0]
     return pd.DataFrame({"t": np.arange(1200) * 0.01, "run": np.repeat(list("abcd"), 300),
-                         "u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]})
+                         "u1": u[:, 0], "u2": u[:, 1], "y1": y[:, 0], "y2": y[:, 1]})
 
 
 @pytest.fixture()

@@ -161,7 +161,8 @@ def robot() -> None:
     fig, axes = plt.subplots(3, 2, figsize=(10, 8), sharex=True)
     for j, ax in enumerate(axes.flat):
         ax.plot(k, y_t[:, j], "k", lw=1.2, label="measured")
-        ax.plot(k, one_step[:, j], "C1--", lw=1, label=f"PWA paper setting, one step ({paper.n_submodels_} sub-models)")
+        ax.plot(k, one_step[:, j], "C1--", lw=1,
+                label=f"PWA paper setting, one step ({paper.n_submodels_} sub-models)")
         ax.plot(k, free[:, j], "C0", lw=1, label=f"PWA default, free run ({default.n_submodels_} sub-model)")
         ax.plot(k, free_ss[:, j], "C2", lw=1, label="subspace, 12 states, free run")
         ax.set_title(data.y_names[j], fontsize=9)

@@ -25,7 +25,7 @@ None of these data come from, or are calibrated on, the KUKA KR300 test record.
 """
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

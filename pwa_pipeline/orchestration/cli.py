@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from .dask_sweep import step_failures
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
-    from .partitions import DEFAULT_SETS, check_keys, runnable_keys, split_key
+    from .partitions import DEFAULT_SETS, PartitionKey, check_keys, runnable_keys
     from .reporting import leaderboard_markdown
 
     defs = cli_definitions(args.tracking_uri)
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     tracker = resources["mlflow"]
     serve = "" if server else (f"  mlflow ui --backend-store-uri {uri} --workers 1          "
                                f"# serves {tracker.ui_base()}\n")
-    datasets = dict.fromkeys(split_key(key)[0] for key in keys)
+    datasets = dict.fromkeys(PartitionKey.parse(key).dataset for key in keys)
     try:
         tracker.check_reachable()  # at once, where a gone server's requests would retry
         links = "".join(f"     {dataset}: {url}\n" for dataset in datasets
@@ -182,7 +182,7 @@ def _summary(key: str, result, table, seconds: float) -> str:
 def add_dataset(args: argparse.Namespace) -> int:
     """Check a CSV/Parquet file and register it as a data set (nothing is registered when
     the check fails)."""
-    from ..config import HParamsFile
+    from ..config import load_hparams
     from ..datasets.user import UserDataset, parse_units
     from .registry import DatasetRegistry
 
@@ -192,7 +192,7 @@ def add_dataset(args: argparse.Namespace) -> int:
         experiment=args.experiment, time=args.time,
         test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
         na=args.na, nb=args.nb, affine=args.affine, units=parse_units(args.units))
-    hparams = HParamsFile()  # read and checked first: a broken file registers nothing
+    hparams = load_hparams()  # read and checked first: a broken file registers nothing
     data = registry.add(spec, replace=args.replace)
     sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
     others = [s for s in hparams.sets if s not in sets]

@@ -4,7 +4,7 @@ import os
 
 import dagster as dg
 
-from ..config import HParamsFile
+from ..config import load_hparams
 from ..datasets import DATASETS
 from .assets import build_assets
 from .io_manager import PartitionedFileIOManager
@@ -32,7 +32,7 @@ def build_definitions(hparams_path: str | os.PathLike | None = None,
     replace the defaults (``io_manager``, ``settings``, ``mlflow``); a replacement
     ``settings`` gets both paths set to these files.
     """
-    hparams = HParamsFile(hparams_path)
+    hparams = load_hparams(hparams_path)
     registry = DatasetRegistry(datasets_path or default_datasets_path())
     registered = registry.names()
     unknown = sorted(hparams.datasets - set(DATASETS) - set(registered))

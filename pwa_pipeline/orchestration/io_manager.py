@@ -19,7 +19,7 @@ from upath import UPath
 
 from .._validation import check_name
 from .files import atomic_write, inside, store_root, sweep_stale_tmp
-from .partitions import split_key
+from .partitions import PartitionKey
 from .paths import default_storage_dir
 from .signed_pickles import load_object, save_object, signing_key
 
@@ -47,7 +47,8 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         if partition_key is None:
             return {fmt: inside(self.root(), *asset[:-1], f"{asset[-1]}.{fmt}")
                     for fmt in ("parquet", "pkl")}
-        dataset, hparams = split_key(partition_key)
+        part = PartitionKey.parse(partition_key)
+        dataset, hparams = part.dataset, part.hparams
         check_name(dataset, "data set")
         check_name(hparams, "hyper-parameter set")
         return {fmt: inside(self.root(), *asset, dataset, f"{hparams}.{fmt}")

@@ -1,5 +1,7 @@
 """The partitions: the pairs of a data set and a hyper-parameter set that has values for it,
-keys like ``"kuka_robot|paper"``.
+keys like ``"kuka_robot|paper"`` (:class:`PartitionKey`, the one place a key is joined and
+split: the command line and the assets that receive Dagster's key parse it here once and pass
+the typed value, or the partition's :class:`~pwa_pipeline.config.Configuration`, on).
 
 Only pairs that can run are offered: a set's own table for the data set, or, for a data set
 a user registered, its ``[<set>."*"]`` table (see :mod:`pwa_pipeline.config`). The paper's
@@ -7,6 +9,7 @@ sets give values per data set and no rule, so ``hure_vasak|robot`` or ``<your da
 are not partitions.
 """
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import dagster as dg
@@ -20,23 +23,50 @@ from .settings import PipelineSettings
 DEFAULT_SETS = ("paper", "default", "auto")
 
 
+@dataclass(frozen=True)
+class PartitionKey:
+    """One partition: a data set and a hyper-parameter set.
+
+    Examples
+    --------
+    >>> key = PartitionKey.parse("kuka_robot|paper")
+    >>> key.dataset, key.hparams, str(key)
+    ('kuka_robot', 'paper', 'kuka_robot|paper')
+    """
+
+    dataset: str
+    hparams: str
+
+    #: Between the data set and the set in a key.
+    SEPARATOR = "|"
+
+    @classmethod
+    def parse(cls, key: object) -> "PartitionKey":
+        """The partition of a key such as ``"kuka_robot|paper"`` (Dagster's key, a string).
+
+        Raises
+        ------
+        ValueError
+            When the key is not of the form ``dataset|hparams``.
+        """
+        parts = str(key).split(cls.SEPARATOR)
+        if len(parts) != 2 or not all(parts):
+            raise ValueError(f"partition key {str(key)!r} is not of the form 'dataset|hparams'")
+        return cls(*parts)
+
+    def __str__(self) -> str:
+        return f"{self.dataset}{self.SEPARATOR}{self.hparams}"
+
+
 def build_partitions(hparams: HParamsFile, registered: list[str]
                      ) -> dg.StaticPartitionsDefinition:
     """``dataset|set`` for every data set (built-in, then the ``registered`` ones) and every
     set of ``hparams`` (the same file the ``settings`` resource reads) that has values for
     it, in that order."""
     return dg.StaticPartitionsDefinition([
-        f"{dataset}|{name}" for dataset, user in [*((d, False) for d in DATASETS),
+        str(PartitionKey(dataset, name)) for dataset, user in [*((d, False) for d in DATASETS),
                                                    *((d, True) for d in registered)]
         for name in hparams.sets if hparams.covers(name, dataset, registered=user)])
-
-
-def split_key(key: str) -> tuple[str, str]:
-    """(dataset, hparams) of a partition key such as ``"kuka_robot|paper"``."""
-    parts = str(key).split("|")
-    if len(parts) != 2:
-        raise ValueError(f"partition key {str(key)!r} is not of the form 'dataset|hparams'")
-    return parts[0], parts[1]
 
 
 def check_keys(partitions_def: dg.StaticPartitionsDefinition, keys: list[str]) -> None:
@@ -90,12 +120,13 @@ def runnable_keys(partitions_def: dg.StaticPartitionsDefinition, settings: Pipel
     hparams = settings.hparams()
     registered = set(settings.registry().names())
     skipped = unavailable_datasets(settings)
+    parsed = [PartitionKey.parse(k) for k in offered]
     keys = []
-    for dataset in dict.fromkeys(split_key(k)[0] for k in offered):
+    for dataset in dict.fromkeys(p.dataset for p in parsed):
         if dataset in skipped:
             continue
-        for name in sets or [split_key(k)[1] for k in offered if split_key(k)[0] == dataset]:
-            key = f"{dataset}|{name}"
+        for name in sets or [p.hparams for p in parsed if p.dataset == dataset]:
+            key = str(PartitionKey(dataset, name))
             if key in offered:
                 keys.append(key)
             elif name in hparams.sets:

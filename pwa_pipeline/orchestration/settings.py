@@ -5,7 +5,7 @@ import os
 import dagster as dg
 from upath import UPath
 
-from ..config import Configuration, HParamsFile
+from ..config import Configuration, HParamsFile, load_hparams
 from ..datasets import DATASETS, Dataset, load_dataset
 from .files import store_root
 from .paths import default_datasets_path, default_storage_dir
@@ -69,8 +69,9 @@ class PipelineSettings(dg.ConfigurableResource):
                              "datasets_path": str(datasets_path)})
 
     def hparams(self) -> HParamsFile:
-        """The hyper-parameter file, read and checked."""
-        return HParamsFile(self.hparams_path or None)
+        """The hyper-parameter file, read and checked (once while it is unchanged,
+        :func:`~pwa_pipeline.config.load_hparams`)."""
+        return load_hparams(self.hparams_path or None)
 
     def registry(self) -> DatasetRegistry:
         """The user's registered data sets."""

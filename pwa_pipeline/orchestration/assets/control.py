@@ -7,16 +7,16 @@ from dataclasses import dataclass
 import dagster as dg
 import numpy as np
 
+from ...config import Configuration
 from ...control import PWAStateSpace, StabilityReport
 from ...datasets import Dataset
-from ...plotting import PartitionDisplay
+from ...methods import METHODS
+from ...plotting import PartitionDisplay, context_title
 from ...pwa import PWARX
 from ..files import atomic_write, inside
 from ..images import to_markdown
-from ..partitions import split_key
 from ..reporting import rounded
 from ..settings import PipelineSettings
-from .model_facts import figure_context
 
 #: The files of each partition's state-space model, in ``<exports>/<dataset>/<set>/``.
 JSON_FILE, MPT3_FILE = "pwa_state_space.json", "pwa_system.m"
@@ -48,7 +48,7 @@ def control_model_asset(partitions_def):
                   "convert is said so here and by the check `exported`; the scores run "
                   "all the same."))
     def control_model(context: dg.AssetExecutionContext, settings: PipelineSettings,
-                      raw_benchmark: Dataset, pwa_model: PWARX):
+                      configuration: Configuration, raw_benchmark: Dataset, pwa_model: PWARX):
         data, t0 = raw_benchmark, time.perf_counter()
         try:
             ss = pwa_model.to_state_space(data.u_train, data.y_train,
@@ -63,8 +63,7 @@ def control_model_asset(partitions_def):
             return
         convert_seconds = time.perf_counter() - t0
         report = ss.stability()
-        dataset, hparams = split_key(context.partition_key)
-        folder = inside(settings.exports_root(), dataset, hparams)
+        folder = inside(settings.exports_root(), configuration.dataset, configuration.hparams)
         files = {JSON_FILE: ss.to_json(), MPT3_FILE: ss.to_mpt3()}
         for name, text in files.items():
             atomic_write(folder / name, lambda path, text=text: path.write_text(text))
@@ -73,7 +72,8 @@ def control_model_asset(partitions_def):
         fixed = np.median(np.hstack([np.vstack(states), np.vstack(inputs)]), axis=0)
         names = [data.label(name) for name in [*ss.state_names, *ss.input_names]]
         figure = PartitionDisplay.from_state_space(
-            ss, fixed, figure_context(context.partition_key, "PWA"), names).figure_
+            ss, fixed, context_title(configuration.dataset, configuration.hparams,
+                                     METHODS["pwa"].label), names).figure_
         context.log.info(f"control_model: {ss.n_modes} region(s) in {ss.n_states} states; "
                          f"{report.message}")
         yield dg.Output(ControlModel(ss, report, files), metadata=rounded({

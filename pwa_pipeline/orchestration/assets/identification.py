@@ -26,7 +26,12 @@ from ..._validation import as_experiments
 from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS
-from ...plotting import ParameterClustersDisplay, RegionsDisplay, SwitchingDisplay
+from ...plotting import (
+    ParameterClustersDisplay,
+    RegionsDisplay,
+    SwitchingDisplay,
+    context_title,
+)
 from ...pwa import PWARX
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
@@ -39,10 +44,10 @@ from ..checks import (
     sub_model_results,
 )
 from ..images import figures_fingerprint, to_markdown
-from ..partitions import split_key
+from ..model_facts import ground_truth, phi_names, prediction_key, truth_metadata
+from ..partitions import PartitionKey
 from ..reporting import markdown, params_table, regions_table, rounded, theta_table
 from ..settings import PipelineSettings
-from .model_facts import figure_context, ground_truth, phi_names, prediction_key, truth_metadata
 
 GROUP = "identification"
 #: The fitted steps the multi-asset shows, in the paper's order, by asset: the step's name in
@@ -152,18 +157,18 @@ def identification_assets(partitions_def) -> list:
     def configuration(context: dg.AssetExecutionContext,
                       settings: PipelineSettings) -> Configuration:
         """Every estimator of the partition, built from the hyper-parameter file once."""
-        dataset, hparams = split_key(context.partition_key)
-        cfg = settings.configuration(hparams, dataset)
+        part = PartitionKey.parse(context.partition_key)
+        cfg = settings.configuration(part.hparams, part.dataset)
         context.add_output_metadata({
             "source": dg.MetadataValue.path(str(cfg.source)), "warmup": cfg.warmup,
             **{f"{m} parameters": markdown(params_table(cfg.params(m))) for m in METHODS}})
         return cfg
 
     @dg.asset(**part, kinds={"numpy"})
-    def raw_benchmark(context: dg.AssetExecutionContext, settings: PipelineSettings) -> Dataset:
+    def raw_benchmark(context: dg.AssetExecutionContext, settings: PipelineSettings,
+                      configuration: Configuration) -> Dataset:
         """Training and held-out experiments of the partition's data set."""
-        dataset, _ = split_key(context.partition_key)
-        data = settings.dataset(dataset)
+        data = settings.dataset(configuration.dataset)
         context.add_output_metadata({
             "train_samples": data.n_train, "test_samples": data.n_test,
             "train_experiments": len(data.u_train), "test_experiments": len(data.u_test),
@@ -205,7 +210,7 @@ def identification_assets(partitions_def) -> list:
         steps, outputs = shown_steps(model)
         for asset, name in STEP_ASSETS.items():
             events = _step_events(asset, steps.get(name), model, raw_benchmark, outputs,
-                                  partition, name in cached)
+                                  partition, name in cached, configuration)
             for event in events:
                 if isinstance(event, dg.Output):
                     if asset in selected:
@@ -215,9 +220,15 @@ def identification_assets(partitions_def) -> list:
                     if event.check_name == "noise_share_below_limit" and not event.passed:
                         return  # (a blocking check: the model is not stored)
         if "pwa_model" in selected:
-            yield model_output(context, settings, model, raw_benchmark, cached, reg.phi)
+            yield model_output(context, settings, configuration, model, raw_benchmark, cached,
+                               reg.phi)
 
     return [configuration, raw_benchmark, pwa_fit]
+
+
+def _title(configuration: Configuration) -> str:
+    """The first line of the PWA model's figures: data set, set and method."""
+    return context_title(configuration.dataset, configuration.hparams, METHODS["pwa"].label)
 
 
 def _described(model: PWARX, data: Dataset) -> list[str]:
@@ -240,7 +251,7 @@ def _not_fitted(model: PWARX, asset: str) -> str:
 
 
 def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[int, ...],
-                 partition: str, cached: bool):
+                 partition: str, cached: bool, configuration: Configuration):
     """The output of one step asset (the fitted step, or None and why; ``cached``: its
     cache answered) and its checks."""
     checks = {"clusters": CLUSTER_CHECKS, "sub_models": SUB_MODEL_CHECKS}.get(asset, [])
@@ -259,7 +270,7 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
                                model.affine)
         local = next(g.steps["local_models"] for g in model.groups_ if g.steps)
         figure = None if where else ParameterClustersDisplay.from_steps(
-            local, step, reg.target, context=figure_context(partition, METHODS["pwa"].label)
+            local, step, reg.target, context=_title(configuration)
         ).figure_
         meta = {"n_clusters": step.n_clusters_, "eps": step.eps_,
                 "eps_from_data": step.eps_auto_, "min_pts": step.min_pts_,
@@ -290,12 +301,13 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
 
 
 def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
-                 model: PWARX, data: Dataset, cached: set[str], phi: np.ndarray) -> dg.Output:
+                 configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
+                 phi: np.ndarray) -> dg.Output:
     """``pwa_model`` with its page: resolved parameters, each output's structure, the
     structure search's report or the structured fit's candidates, the ground truth when
     comparable, and the switching and regions figures (their numbers cached by what the
     model predicts with, drawn titled with this partition's set)."""
-    title = figure_context(str(context.partition_key), METHODS["pwa"].label)
+    title = _title(configuration)
     memory = SignedMemory(settings.cache_root(), "model_figures",
                           warn=context.log.warning, salt=figures_fingerprint())
     compute = memory.cache(model_figure_inputs, ignore=["model", "data", "phi"]) \

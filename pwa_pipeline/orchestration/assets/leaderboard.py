@@ -8,7 +8,7 @@ from ...methods import METHODS
 from ...scoring.comparison import leaderboard as leaderboard_table
 from ..io_manager import ALL_PARTITIONS
 from ..jobs import LEADERBOARD
-from ..partitions import split_key
+from ..partitions import PartitionKey
 from ..reporting import (
     leaderboard_markdown,
 )
@@ -37,11 +37,11 @@ def leaderboard_asset(partitions_def):
                 partitions_def.get_partition_keys(dynamic_partitions_store=context.instance)]
         stacked, missing = [], {}
         for key in keys:
-            dataset, hparams = split_key(key)
+            part = PartitionKey.parse(key)
             absent = [m for m in METHODS if key not in scores[f"{m}_scores"]]
             if absent:
                 missing[key] = absent
-            stacked += [scores[f"{m}_scores"][key].assign(dataset=dataset, hparams=hparams,
+            stacked += [scores[f"{m}_scores"][key].assign(dataset=part.dataset, hparams=part.hparams,
                                                           method=m)
                         for m in METHODS if m not in absent]
         if not stacked:
@@ -58,7 +58,7 @@ def leaderboard_asset(partitions_def):
             run = mlflow.log_run(
                 dataset=dataset, hparams="all", method=LEADERBOARD, run_name=LEADERBOARD,
                 params={"partitions": ", ".join(dict.fromkeys(
-                    f"{dataset}|{h}" for h in rows["hparams"]))},
+                    str(PartitionKey(dataset, h)) for h in rows["hparams"]))},
                 metrics={"rows": len(rows), "best_free_run_nrmse":
                          float(f"{scored.min():.4g}") if len(scored) else None},
                 tags={"dagster_run_id": context.run.run_id},

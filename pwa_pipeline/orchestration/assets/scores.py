@@ -11,7 +11,6 @@ from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS, Method
 from ...plotting import PredictionDisplay, context_title
-from ...pwa import PWARX
 from ...scoring.comparison import mean_scores
 from ...scoring.evaluation import Evaluation, evaluate
 from ..caches import SignedMemory
@@ -26,18 +25,16 @@ from ..mlflow_models import (
     example_table,
     training_dataset,
 )
-from ..partitions import split_key
+from ..model_facts import prediction_key
 from ..reporting import (
     markdown,
-    model_metrics,
     nrmse_summary,
     rounded,
-    score_metrics,
 )
+from ..run_records import method_run
 from ..settings import PipelineSettings
-from ..tracking import MLflowTracker, model_description
+from ..tracking import MLflowTracker
 from .control import ControlModel
-from .model_facts import phi_names, prediction_key, truth_metadata
 
 
 def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluation:
@@ -69,7 +66,6 @@ def scores_asset(method: Method, partitions_def):
                ) -> pd.DataFrame:
         began = time.time()
         data = raw_benchmark
-        dataset, hparams = split_key(context.partition_key)
         # the scores are cached (shared by the sets whose models predict alike), the figure
         # drawn from them for this partition: its set in the title, the data's units
         memory = SignedMemory(settings.cache_root(), "scores", warn=context.log.warning)
@@ -77,57 +73,22 @@ def scores_asset(method: Method, partitions_def):
             else scored
         ev = score(model, data, configuration.warmup, prediction_key(model, data))
         figure = PredictionDisplay.from_evaluation(
-            ev, data, configuration.warmup, context=context_title(dataset, hparams, method.label)).figure_
+            ev, data, configuration.warmup, context=context_title(
+                configuration.dataset, configuration.hparams, method.label)).figure_
         png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
                          f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
-        fit_seconds = float(sum(getattr(model, "timings_", {}).values())) or float("nan")
-        facts, artifacts = {}, {}
-        if isinstance(model, PWARX):
-            steps = next((g.steps for g in model.groups_ if g.steps), {})
-            facts.update(n_submodels=model.n_submodels_, output_groups=len(model.groups_),
-                         **truth_metadata(model, data))
-            if "clustering" in steps:
-                facts.update(noise_share=steps["clustering"].noise_share_,
-                             eps=steps["clustering"].eps_)
-            names = phi_names(model, data)
-            artifacts["parameter_matrices.json"] = {
-                "regressors": names, "outputs": data.y_names,
-                "structures": model.structures_,
-                "groups": [{"outputs": [data.y_names[j] for j in g.outputs],
-                            "regions": g.n_regions, "theta": g.thetas.tolist()}
-                           for g in model.groups_]}
-            if (search := getattr(model, "structure_search_", None)) is not None:
-                # the columns a reader compares first, numbers to 4 significant digits
-                artifacts["structure_search.csv"] = search.table[
-                    ["stage", "outputs", "validation_nrmse", "outcome", "regions", "seconds",
-                     "structure"]].assign(validation_nrmse=lambda t: t.validation_nrmse.map(
-                         lambda v: float(f"{v:.4g}")))
-                facts.update(search_linear=float(search.linear),
-                             search_time_limited=float(search.time_limited),
-                             search_validation_nrmse=search.validation_nrmse,
-                             search_linear_nrmse=search.linear_nrmse,
-                             search_seconds=search.seconds)
-        if (exported := control.get("control_model")) is not None:
-            ss, report = exported.state_space, exported.stability
-            facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),
-                         max_spectral_radius=float(np.max(report.spectral_radius)))
-            artifacts.update({f"control/{name}": text for name, text in exported.files.items()})
-            artifacts["control/stability.json"] = report.to_dict()
-        metrics = {**score_metrics(ev), **model_metrics(facts),
-                   **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
-        params = {k: v for k, v in {**configuration.params(method.name),
-                                    **model.resolved_params()}.items()
-                  if k not in ("dataset", "hparams")}  # (tags of the run)
+        record = method_run(configuration, method.name, model, ev, data,
+                            control=control.get("control_model"),
+                            tags={"dagster_run_id": context.run.run_id,
+                                  "partition": str(context.partition_key)})
         t0 = time.perf_counter()
         run = mlflow.log_run(
-            dataset=dataset, hparams=hparams, method=method.name, params=params,
-            metrics=metrics, description=model_description(dataset, hparams, method.name,
-                                                           metrics),
+            dataset=record.dataset, hparams=record.hparams, method=record.method,
+            params=record.params, metrics=record.metrics, description=record.description,
             # the run spans the fit it scores (when the fit time was recorded)
-            started=began - (0.0 if np.isnan(fit_seconds) else fit_seconds),
-            tags={"dagster_run_id": context.run.run_id, "partition": str(context.partition_key)},
-            artifacts={"scores.csv": ev.table, "prediction.png": png, **artifacts},
+            started=began - (0.0 if np.isnan(record.fit_seconds) else record.fit_seconds),
+            tags=record.tags, artifacts={**record.artifacts, "prediction.png": png},
             model=ModelToLog(
                 simulator=Simulator(model, data.u_names, data.y_names),
                 input_example=example_table(data.u_test[0], data.y_test[0], data.u_names,

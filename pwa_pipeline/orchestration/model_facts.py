@@ -2,13 +2,11 @@
 the comparison with a simulated system's ground truth, and the key its scores and figures
 are cached by."""
 
-from ...datasets import Dataset, GroundTruth
-from ...plotting import context_title
-from ...pwa import PWARX
-from ...regressors import regressor_names
-from ...scoring.truth import ground_truth_scores
-from ..mlflow_models import predictor_fingerprint
-from ..partitions import split_key
+from ..datasets import Dataset, GroundTruth
+from ..pwa import PWARX
+from ..regressors import regressor_names
+from ..scoring.truth import ground_truth_scores
+from .mlflow_models import predictor_fingerprint
 
 
 def phi_names(pwa: PWARX, data: Dataset) -> list[str]:
@@ -38,14 +36,6 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
                                 f"affine) = {(model.output_lags_, model.nb, model.affine)}, "
                                 f"the system's {(t.na, t.nb, t.affine)}"}
     return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
-
-
-def figure_context(partition_key: str, method: str) -> str:
-    """The first line of a figure's title for the partition ``dataset|hparams`` and the
-    method labelled ``method`` (``pwa_pipeline.plotting.context_title``):
-    drawn by each set itself, never taken from a cache that sets share."""
-    dataset, hparams = split_key(partition_key)
-    return context_title(dataset, hparams, method)
 
 
 def prediction_key(model, data: Dataset) -> tuple[str, str]:

@@ -1,0 +1,103 @@
+"""What one MLflow run of a method records: its parameters, metrics, tags, artifacts and
+description, built in one place from the partition's configuration, the fitted model and
+its evaluation (:func:`method_run`)."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..config import Configuration
+from ..datasets import Dataset
+from ..pwa import PWARX
+from ..scoring.evaluation import Evaluation
+from .model_facts import phi_names, truth_metadata
+from .reporting import model_metrics, score_metrics
+from .tracking import model_description
+
+
+@dataclass(frozen=True)
+class MethodRun:
+    """The content of one method's MLflow run (:meth:`MLflowTracker.log_run
+    <.tracking.MLflowTracker.log_run>`'s arguments but the model)."""
+
+    dataset: str
+    hparams: str
+    method: str
+    params: dict
+    metrics: dict[str, float]
+    tags: dict[str, str]
+    artifacts: dict[str, object]
+    description: str
+    fit_seconds: float
+
+
+def method_run(configuration: Configuration, method: str, model, evaluation: Evaluation,
+               data: Dataset, *, control=None, tags: dict[str, str] | None = None
+               ) -> MethodRun:
+    """The run of ``method``'s fitted ``model`` scored by ``evaluation`` on ``data``.
+
+    Parameters are the model's own (``resolved_params()``: every parameter, the values the
+    fit chose filled in) and the evaluation's warm-up; metrics are the scores
+    (:func:`~.reporting.score_metrics`), what the model says of itself under ``model/``
+    (sub-models, output groups, ε and the noise share where the paper's clustering ran, the
+    ground truth's errors, the structure search's, the state-space export's) and the fit's
+    seconds, from the model (``timings_``); tags are the data set, set and method and
+    ``tags``.
+
+    Parameters
+    ----------
+    configuration : Configuration
+    method : str
+    model : fitted estimator
+    evaluation : Evaluation
+    data : Dataset
+    control : ControlModel, optional
+        The PWA model's state-space export and stability report, logged with it.
+    tags : dict, optional
+        More tags (the Dagster run, the partition).
+    """
+    fit_seconds = float(sum(getattr(model, "timings_", {}).values())) or float("nan")
+    facts, artifacts = {}, {}
+    if isinstance(model, PWARX):
+        facts.update(n_submodels=model.n_submodels_, output_groups=len(model.groups_),
+                     **truth_metadata(model, data))
+        if "clustering" in model.steps_:
+            facts.update(noise_share=model.steps_["clustering"].noise_share_,
+                         eps=model.steps_["clustering"].eps_)
+        artifacts["parameter_matrices.json"] = {
+            "regressors": phi_names(model, data), "outputs": data.y_names,
+            "structures": model.structures_,
+            "groups": [{"outputs": [data.y_names[j] for j in g.outputs],
+                        "regions": g.n_regions, "theta": g.thetas.tolist()}
+                       for g in model.groups_]}
+        if (search := getattr(model, "structure_search_", None)) is not None:
+            # the columns a reader compares first, numbers to 4 significant digits
+            artifacts["structure_search.csv"] = _search_table(search.table)
+            facts.update(search_linear=float(search.linear),
+                         search_time_limited=float(search.time_limited),
+                         search_validation_nrmse=search.validation_nrmse,
+                         search_linear_nrmse=search.linear_nrmse,
+                         search_seconds=search.seconds)
+    if control is not None:
+        ss, report = control.state_space, control.stability
+        facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),
+                     max_spectral_radius=float(np.max(report.spectral_radius)))
+        artifacts.update({f"control/{name}": text for name, text in control.files.items()})
+        artifacts["control/stability.json"] = report.to_dict()
+    metrics = {**score_metrics(evaluation), **model_metrics(facts),
+               **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
+    params = {**model.resolved_params(), "warmup": configuration.warmup}
+    ds, hp = configuration.dataset, configuration.hparams
+    return MethodRun(
+        dataset=ds, hparams=hp, method=method, params=params, metrics=metrics,
+        tags=dict(tags or {}), artifacts={"scores.csv": evaluation.table, **artifacts},
+        description=model_description(ds, hp, method, metrics), fit_seconds=fit_seconds)
+
+
+def _search_table(table: pd.DataFrame) -> pd.DataFrame:
+    """The search report's table as logged: its columns in reading order, NRMSE to 4
+    significant digits."""
+    return table[["stage", "outputs", "validation_nrmse", "outcome", "regions", "seconds",
+                  "structure"]].assign(validation_nrmse=lambda t: t.validation_nrmse.map(
+                      lambda v: float(f"{v:.4g}")))
