@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -194,3 +196,20 @@ def test_the_partitions_command_says_what_is_wrong_in_one_line(tmp_path, monkeyp
     err = capsys.readouterr().err
     assert err.startswith(f"pwa-pipeline partitions: error: {path}: s1 must be a table")
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_the_hyper_parameter_file_is_read_once_and_again_when_it_changes(tmp_path):
+    from pwa_pipeline.config import load_hparams
+
+    path = tmp_path / "h.toml"
+    path.write_text('[a.hure_vasak]\npreset = "default"\nna = 1\nnb = 1\n')
+    first = load_hparams(path)
+    assert load_hparams(path) is first  # unchanged: the same reading
+    path.write_text('[a.hure_vasak]\npreset = "default"\nna = 2\nnb = 1\n')
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 10**9))
+    changed = load_hparams(path)
+    assert changed is not first and changed.configuration("a", "hure_vasak").pwa.na == 2
+    path.write_text("[a.hure_vasak\n")
+    os.utime(path, ns=(path.stat().st_atime_ns, path.stat().st_mtime_ns + 2 * 10**9))
+    with pytest.raises(ValueError, match="is not valid TOML"):
+        load_hparams(path)
