@@ -377,7 +377,7 @@ def test_json_round_trip_is_exact(default_ss, sim_30db, tmp_path):
 
 
 @pytest.mark.parametrize("change, message", [
-    (lambda d: d.update(schema_version=2), "schema version 2 is not supported"),
+    (lambda d: d.update(schema_version=3), "schema version 3 is not supported"),
     (lambda d: d.update(schema="something-else"), "not a PWA state-space document"),
     (lambda d: d.pop("B"), r"lacks field\(s\) \['B'\]"),
     (lambda d: d.update(A=[a[:-1] for a in d["A"]]), r"A has shape \(4, 3, 4\)"),
@@ -584,3 +584,13 @@ def test_the_search_keeps_to_its_size_and_time_bounds():
     late = ss.stability(max_seconds=0.0)
     assert not late.certified and "(not searched: time)" in late.method
     assert "max_seconds" in late.message
+
+
+def test_a_version_1_document_is_still_read(default_ss):
+    """Documents written before the feedthrough D existed (version 1, no D) read as D = 0."""
+    doc = json.loads(default_ss.to_json())
+    doc["schema_version"] = 1
+    del doc["D"]
+    back = PWAStateSpace.from_json(json.dumps(doc))
+    np.testing.assert_array_equal(back.D, np.zeros_like(default_ss.D))
+    np.testing.assert_array_equal(back.A, default_ss.A)

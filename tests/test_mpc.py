@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import linprog
 
 from pwa_pipeline.control import HybridMPC, PWAStateSpace
-from pwa_pipeline.control.mpc import STATE_MARGIN, affine_range
+from pwa_pipeline.control.mpc.formulation import STATE_MARGIN, affine_range
 
 
 def _siso(theta, regions, y_range=(-2.0, 2.0), u_range=(-1.0, 1.0)) -> PWAStateSpace:
@@ -193,7 +193,7 @@ def test_big_m_constants_are_the_box_bounds(tiny, default_30db):
     for ss, kwargs in ((tiny, {"u_min": -0.8, "u_max": 0.9}),
                        (default_30db.to_state_space(), {})):
         mpc = HybridMPC(ss, 2, **kwargs)
-        lower, upper = mpc.box
+        lower, upper = mpc.program.box
         box = list(zip(lower, upper, strict=True))
         np.testing.assert_array_equal(lower[ss.n_states:], mpc.u_min)
         np.testing.assert_array_equal(upper[:ss.n_states], ss.envelope[1][:ss.n_states])
@@ -201,13 +201,13 @@ def test_big_m_constants_are_the_box_bounds(tiny, default_30db):
         def lp_max(a, b):
             return -linprog(-a, bounds=box, method="highs").fun + b
 
-        for (H, h), M in zip(ss.regions, mpc.region_big_m, strict=True):
+        for (H, h), M in zip(ss.regions, mpc.program.region_big_m, strict=True):
             expected = [lp_max(H[j], -h[j]) for j in range(len(h))]
             np.testing.assert_allclose(M, expected, rtol=1e-9, atol=1e-9)
-        low, high = mpc.expression_bounds
+        low, high = mpc.program.expression_bounds
         p = ss.n_states + ss.n_inputs
-        assert len(mpc.expressions) > 0
-        for e, expr in enumerate(mpc.expressions):
+        assert len(mpc.program.expressions) > 0
+        for e, expr in enumerate(mpc.program.expressions):
             for i in range(ss.n_modes):
                 a, b = expr[i, :p], expr[i, p]
                 np.testing.assert_allclose(high[e, i], lp_max(a, b), rtol=1e-9, atol=1e-9)
@@ -219,7 +219,7 @@ def test_big_m_constants_are_the_box_bounds(tiny, default_30db):
                                             ss.g[:, :, None]], axis=2)], axis=1)
         for t in range(E.shape[1]):
             if not np.all(E[:, t] == E[0, t]):
-                assert any(np.array_equal(E[:, t], expr) for expr in mpc.expressions)
+                assert any(np.array_equal(E[:, t], expr) for expr in mpc.program.expressions)
 
 
 def test_affine_range_is_the_extreme_over_the_corners():

@@ -107,6 +107,32 @@ def test_the_subspace_baseline_shares_the_interface(data):
     assert model.timings_["fit"] > 0
 
 
+def test_the_subspace_model_exports_a_state_space_form_with_its_feedthrough(data, tmp_path):
+    """One mode, the model's own state x1 … xn and D; simulated from the model's initial
+    state it is the model's free run; JSON keeps D and the state's names; an MPC plans on
+    it."""
+    from pwa_pipeline.control import HybridMPC, PWAStateSpace
+
+    train, test = data
+    model = SubspaceSS(order=4).fit(train.u_train, train.y_train)
+    ss = model.to_state_space(train.u_train, train.y_train)
+    assert (ss.n_modes, ss.n_states, ss.state_names[0]) == (1, 4, "x1")
+    np.testing.assert_array_equal(ss.D[0], model.D_)
+    u, y = test.u_train[0][:200], test.y_train[0][:200]
+    x0 = model.initial_state(u[:10], y[:10])
+    np.testing.assert_allclose(ss.simulate(u, x0=x0, outside="nearest")[10:],
+                               model.simulate(u, y[:10])[10:], rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="not made of past outputs"):
+        ss.simulate(u, y[:10])
+    back = PWAStateSpace.from_json(ss.to_json(tmp_path / "ss.json"))
+    np.testing.assert_array_equal(back.D, ss.D)
+    assert back.state_names == ss.state_names and back.output_lags is None
+    x = np.clip(x0, *(b[:4] for b in ss.envelope))
+    plan = HybridMPC(ss, horizon=5).solve(x, y_ref=np.median(y, axis=0),
+                                          u_prev=np.median(u, axis=0))
+    assert plan.optimal and plan.u.shape == (5, 2)
+
+
 def test_set_params_reaches_every_step_of_a_plain_pwarx():
     """PWARX(...) leaves its steps at None (the defaults, filled at fit); their parameters
     are settable all the same, and an option that is off says what to set first."""

@@ -28,6 +28,7 @@ from .._validation import (
     check_n_init,
     check_width,
 )
+from ..control.state_space import PWAStateSpace
 from ..envelope import PADDING, channel_bounds, outside_box, training_range
 from ..scoring.metrics import r2_score
 
@@ -234,14 +235,63 @@ class SubspaceSS(BaseEstimator):
         as_experiments(ue, ye)
         check_n_init(n_init, ye.shape[0])
         w = self.warmup if n_init is None else n_init
-        x = self.initial_state(ue[:w], ye[:w])
         out = ye.copy()
-        for k in range(ye.shape[0]):
-            yk = self.C_ @ x + self.D_ @ ue[k]
-            if k >= w:
-                out[k] = yk
-            x = self.A_ @ x + self.B_ @ ue[k] + self.K_ @ (ye[k] - yk)
+        out[w:] = self._predictor(ue, ye, w)[1][w:]
         return out
+
+    def _predictor(self, u: Float2D, y: Float2D, w: int) -> tuple[Float2D, Float2D]:
+        """The Kalman predictor's states x(k) and one-step outputs ŷ(k) of one experiment,
+        from x(0) fitted on its first ``w`` samples."""
+        x = self.initial_state(u[:w], y[:w])
+        states, out = np.empty((len(y), self.order_)), np.empty_like(y)
+        for k in range(y.shape[0]):
+            states[k] = x
+            out[k] = self.C_ @ x + self.D_ @ u[k]
+            x = self.A_ @ x + self.B_ @ u[k] + self.K_ @ (y[k] - out[k])
+        return states, out
+
+    def to_state_space(self, u: Signals, y: Signals, *, padding: float = PADDING,
+                       input_names: list[str] | None = None,
+                       output_names: list[str] | None = None) -> PWAStateSpace:
+        """The model as a state-space model of one mode, x⁺ = A x + B u, y = C x + D u
+        (:class:`~pwa_pipeline.control.PWAStateSpace`, state ``x1 … xn``), for controller
+        design beside the ARX models' forms.
+
+        Its envelope, where the model is said to be known, is the range of its states over
+        the data ``u``, ``y`` (the training data: the Kalman predictor's states, each
+        experiment started from its first ``warmup`` samples) and each input's training
+        range, widened by ``padding`` of each span. Its state is not made of past outputs,
+        so it is simulated from an initial state (``ss.simulate(u, x0=...)``, e.g.
+        :meth:`initial_state` of a warm-up).
+
+        Parameters
+        ----------
+        u, y : array-like or lists of them
+            The training data (the model keeps no state trajectory of its own).
+        padding : float, default :data:`~pwa_pipeline.envelope.PADDING`
+        input_names, output_names : list of str, optional
+
+        Returns
+        -------
+        PWAStateSpace
+        """
+        check_is_fitted(self)
+        pairs = [(ue, ye) for ue, ye in as_experiments(u, y) if len(ye) > self.warmup]
+        if not pairs:
+            raise ValueError(f"every experiment is shorter than the warm-up of {self.warmup} "
+                             f"samples: no state to bound the envelope with")
+        states = np.vstack([self._predictor(ue, ye, self.warmup)[0] for ue, ye in pairs])
+        x_lo, x_hi = channel_bounds(np.vstack([states.min(axis=0), states.max(axis=0)]),
+                                    padding)
+        u_lo, u_hi = (b[self.n_outputs_:] for b in channel_bounds(self.signal_range_, padding))
+        n, m, r = self.order_, self.n_outputs_, self.n_inputs_
+        return PWAStateSpace(
+            self.A_[None], self.B_[None], np.zeros((1, n)), self.C_[None], np.zeros((1, m)),
+            [(np.zeros((0, n + r)), np.zeros(0))], np.concatenate([x_lo, u_lo]),
+            np.concatenate([x_hi, u_hi]), output_lags=None, input_lags=None,
+            D=self.D_[None], input_names=input_names, output_names=output_names,
+            padding=padding, source={"model": type(self).__name__, "order": n,
+                                     "structures": ["linear state space"] * m})
 
     def simulate(self, u: Signals, y_init: Signals):
         """Free-run simulation from x(0) fitted on the warm-up window ``y_init``.

@@ -12,9 +12,10 @@ and scipy (and cvxpy for the Lyapunov search) are used here.
 """
 
 from .conversion import PADDING, to_state_space
+from .json_format import SCHEMA, SCHEMA_VERSION
 from .mpc import ClosedLoop, HybridMPC, MPCSolution
 from .stability import StabilityReport, stability_report
-from .state_space import SCHEMA, SCHEMA_VERSION, PWAStateSpace
+from .state_space import PWAStateSpace
 
 __all__ = ["PADDING", "SCHEMA", "SCHEMA_VERSION", "ClosedLoop", "HybridMPC", "MPCSolution",
            "PWAStateSpace", "StabilityReport", "stability_report", "to_state_space"]

@@ -18,21 +18,22 @@ slightly padded (:mod:`~pwa_pipeline.control.conversion`); outside it the model 
 extrapolation and :meth:`PWAStateSpace.mode_of` says so (−1).
 """
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from .._typing import Float2D, Signals
-from .._validation import _is_experiment_list, as_experiments, check_width, warmup_pairs
+from .._validation import (
+    _is_experiment_list,
+    as_experiments,
+    as_signal,
+    check_width,
+    warmup_pairs,
+)
 from ..envelope import PADDING, outside_box
 from ..regressors import lagged_matrix, n_initial, regressor_names
-
-#: Identifies the JSON document of :meth:`PWAStateSpace.to_json`.
-SCHEMA = "pwa-pipeline/pwa-state-space"
-
-#: The version of that document this code writes and reads.
-SCHEMA_VERSION = 1
+from .json_format import read_json, to_document, write_json
+from .mpt3 import mpt3_script
 
 #: Distance (in half-widths of the envelope, along a region row's unit normal) within which a
 #: point counts as on a region's boundary: such a point lies in several closed regions and
@@ -61,25 +62,32 @@ def _check_shape(arr: np.ndarray, expected: tuple, name: str, meaning: str) -> N
 
 
 class PWAStateSpace:
-    """A discrete-time PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i, valid
-    where z = [x; u] ∈ P_i = {z : H_i z ≤ h_i} (see the module doc).
+    """A discrete-time PWA state-space model x⁺ = A_i x + B_i u + f_i,
+    y = C_i x + D_i u + g_i, valid where z = [x; u] ∈ P_i = {z : H_i z ≤ h_i} (see the
+    module doc).
 
     Built by :func:`~pwa_pipeline.control.to_state_space` (``model.to_state_space()``) or
-    read by :meth:`from_json`. The state is the non-minimal one of eq. (2)–(3): the last L
-    outputs and nb inputs, so :meth:`simulate` from a warm-up of measured outputs gives the
-    fitted model's simulation.
+    read by :meth:`from_json`. An ARX model's state is the non-minimal one of eq. (2)–(3):
+    the last L outputs and nb inputs (``output_lags``, ``input_lags``), so :meth:`simulate`
+    from a warm-up of measured outputs gives the fitted model's simulation, and D = 0. A
+    state of another kind (the subspace baseline's, ``output_lags=None``) has its own names
+    and is simulated from a given initial state (``simulate(u, x0=...)``).
 
     Parameters
     ----------
     A, B, f, C, g : array-like
         Shapes (s, n, n), (s, n, r), (s, n), (s, m, n), (s, m).
+    D : array-like of shape (s, m, r), optional
+        Feedthrough of the current input to the output; default zero.
     regions : list of (H, h)
         One pair per mode, H of shape (k_i, n + r) and h of shape (k_i,).
     lower, upper : array-like of shape (n + r,)
         The data envelope, lower < upper.
-    output_lags, input_lags : int
+    output_lags, input_lags : int or None
         L and nb: the state holds y(k−1) … y(k−L) of each output, then u(k−1) … u(k−nb) of
-        each input, n = m·L + r·nb.
+        each input, n = m·L + r·nb. None for both: the state is not made of past values.
+    state_names : list of str, optional
+        The state's entries' names when it is not made of past values (default ``x1…``).
     affine : bool, default False
         φ ends in the constant 1 (eq. 2), for :meth:`regressors`.
     input_names, output_names : list of str, optional
@@ -112,9 +120,10 @@ class PWAStateSpace:
         others imply (the message names it and the expected shape).
     """
 
-    def __init__(self, A, B, f, C, g, regions, lower, upper, *, output_lags: int,
-                 input_lags: int, affine: bool = False, input_names: list[str] | None = None,
-                 output_names: list[str] | None = None, padding: float = PADDING,
+    def __init__(self, A, B, f, C, g, regions, lower, upper, *, output_lags: int | None,
+                 input_lags: int | None, affine: bool = False, D=None,
+                 input_names: list[str] | None = None, output_names: list[str] | None = None,
+                 state_names: list[str] | None = None, padding: float = PADDING,
                  mode_regions=None, dropped_modes=None, source: dict | None = None):
         self.A = _array(A, "A", 3)
         s, n = self.A.shape[0], self.A.shape[1]
@@ -132,15 +141,27 @@ class PWAStateSpace:
         _check_shape(self.C, (s, m, n), "C", "(modes, outputs, states)")
         self.g = _array(g, "g", 2)
         _check_shape(self.g, (s, m), "g", "(modes, outputs)")
-        for name, value in (("output_lags", output_lags), ("input_lags", input_lags)):
-            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
-                raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
-        self.output_lags, self.input_lags = int(output_lags), int(input_lags)
-        if m * self.output_lags + r * self.input_lags != n:
-            raise ValueError(
-                f"the state has {n} entries but {m} output(s) × {self.output_lags} lag(s) + "
-                f"{r} input(s) × {self.input_lags} lag(s) = "
-                f"{m * self.output_lags + r * self.input_lags}")
+        self.D = np.zeros((s, m, r)) if D is None else _array(D, "D", 3)
+        _check_shape(self.D, (s, m, r), "D", "(modes, outputs, inputs)")
+        if (output_lags is None) != (input_lags is None):
+            raise ValueError("give both output_lags and input_lags (a state of past values) "
+                             "or neither (a state of another kind)")
+        self.lagged = output_lags is not None
+        if self.lagged:
+            for name, value in (("output_lags", output_lags), ("input_lags", input_lags)):
+                if isinstance(value, bool) or not isinstance(value, int | np.integer) \
+                        or value < 0:
+                    raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+            if m * output_lags + r * input_lags != n:
+                raise ValueError(
+                    f"the state has {n} entries but {m} output(s) × {output_lags} lag(s) + "
+                    f"{r} input(s) × {input_lags} lag(s) = "
+                    f"{m * output_lags + r * input_lags}")
+            if np.any(self.D):
+                raise ValueError("a state of past values (output_lags, input_lags) has no "
+                                 "feedthrough: D must be zero")
+        self.output_lags = None if output_lags is None else int(output_lags)
+        self.input_lags = None if input_lags is None else int(input_lags)
         self.affine = bool(affine)
         self.input_names = [f"u{q + 1}" for q in range(r)] if input_names is None \
             else [str(v) for v in input_names]
@@ -152,6 +173,18 @@ class PWAStateSpace:
         if len(self.output_names) != m:
             raise ValueError(f"output_names has {len(self.output_names)} name(s); C has {m} "
                              f"output row(s)")
+        if self.lagged:
+            self.state_names = regressor_names(self.output_names, self.input_names,
+                                               self.output_lags, self.input_lags, affine=False)
+            if state_names is not None and list(state_names) != self.state_names:
+                raise ValueError(f"state_names {list(state_names)} do not match the orders "
+                                 f"and names, which give {self.state_names}")
+        else:
+            self.state_names = [f"x{i + 1}" for i in range(n)] if state_names is None \
+                else [str(v) for v in state_names]
+            if len(self.state_names) != n:
+                raise ValueError(f"state_names has {len(self.state_names)} name(s); A has {n} "
+                                 f"state(s)")
         if not isinstance(regions, list | tuple) or len(regions) != s:
             raise ValueError(f"regions must be a list of {s} (H, h) pairs, one per mode; got "
                              f"{len(regions) if isinstance(regions, list | tuple) else regions!r}")
@@ -222,14 +255,16 @@ class PWAStateSpace:
 
     @property
     def n_initial(self) -> int:
-        """Samples before the first state: max(L, nb)."""
+        """Samples before the first state: max(L, nb) (a state of past values only)."""
+        self._need_lags("n_initial")
         return n_initial(self.output_lags, self.input_lags)
 
-    @property
-    def state_names(self) -> list[str]:
-        """Names of the state's entries in order, e.g. ``y1(k-1)``, ``u2(k-2)``."""
-        return regressor_names(self.output_names, self.input_names, self.output_lags,
-                               self.input_lags, affine=False)
+    def _need_lags(self, what: str) -> None:
+        if not self.lagged:
+            raise ValueError(f"{what}: this model's state ({', '.join(self.state_names[:3])}"
+                             f"{'…' if self.n_states > 3 else ''}) is not made of past outputs "
+                             f"and inputs; simulate it from an initial state, "
+                             f"simulate(u, x0=...)")
 
     # --- modes -------------------------------------------------------------------------
 
@@ -296,8 +331,8 @@ class PWAStateSpace:
     # --- dynamics ----------------------------------------------------------------------
 
     def step(self, x, u) -> tuple[np.ndarray, np.ndarray]:
-        """One step from state x and input u: (x⁺, y) = (A_i x + B_i u + f_i, C_i x + g_i)
-        with i = :meth:`mode_of` (x, u).
+        """One step from state x and input u: (x⁺, y) = (A_i x + B_i u + f_i,
+        C_i x + D_i u + g_i) with i = :meth:`mode_of` (x, u).
 
         Parameters
         ----------
@@ -308,7 +343,7 @@ class PWAStateSpace:
         -------
         x_next : ndarray of shape (n,) or (N, n)
         y : ndarray of shape (m,) or (N, m)
-            The output at the current sample, y(k) = C_i x(k) + g_i.
+            The output at the current sample, y(k) = C_i x(k) + D_i u(k) + g_i.
 
         Raises
         ------
@@ -324,10 +359,12 @@ class PWAStateSpace:
         xs, us = z[:, :self.n_states], z[:, self.n_states:]
         x_next = (np.einsum("nij,nj->ni", self.A[mode], xs)
                   + np.einsum("nij,nj->ni", self.B[mode], us) + self.f[mode])
-        y = np.einsum("nij,nj->ni", self.C[mode], xs) + self.g[mode]
+        y = (np.einsum("nij,nj->ni", self.C[mode], xs)
+             + np.einsum("nij,nj->ni", self.D[mode], us) + self.g[mode])
         return (x_next[0], y[0]) if single else (x_next, y)
 
     def _pairs(self, u: Signals, y: Signals) -> list[tuple[Float2D, Float2D]]:
+        self._need_lags("states and regressors")
         pairs = as_experiments(u, y)
         for ue, ye in pairs:
             check_width(ue, self.n_inputs, "u", "input(s)")
@@ -366,19 +403,24 @@ class PWAStateSpace:
                for ue, ye in pairs]
         return out if _is_experiment_list(y) else out[0]
 
-    def simulate(self, u: Signals, y_init: Signals, outside: str = "raise"
-                 ) -> Float2D | list[Float2D]:
+    def simulate(self, u: Signals, y_init: Signals | None = None, outside: str = "raise", *,
+                 x0=None) -> Float2D | list[Float2D]:
         """Free-run simulation by the state equations, as the fitted model's ``simulate``.
 
         The state x(n_init) is built from the warm-up (the last L rows of ``y_init`` and the
-        nb inputs before sample n_init), then x(k+1) = A_i x(k) + B_i u(k) + f_i and
-        y(k) = C_i x(k) + g_i with i the mode of [x(k); u(k)].
+        nb inputs before sample n_init), or given (``x0``, at sample 0), then
+        x(k+1) = A_i x(k) + B_i u(k) + f_i and y(k) = C_i x(k) + D_i u(k) + g_i with i the
+        mode of [x(k); u(k)].
 
         Parameters
         ----------
         u : array-like of shape (N, r), or a list of such arrays
         y_init : array-like of shape (n_init, m) with n_init ≥ max(L, nb), or a list
-            Initial outputs (a warm-up window); simulation starts at sample n_init.
+            Initial outputs (a warm-up window); simulation starts at sample n_init. For a
+            state of past values.
+        x0 : array-like of shape (n,), or a list of them, optional
+            The state at sample 0, in place of ``y_init`` (any model; the only way for a
+            state that is not made of past values).
         outside : {"raise", "nearest"}, default "raise"
             When z(k) leaves the data envelope: ``"raise"`` a ValueError naming the sample;
             ``"nearest"`` go on in the region whose rows z violates least (an extrapolation:
@@ -399,21 +441,47 @@ class PWAStateSpace:
         """
         if outside not in OUTSIDE:
             raise ValueError(f"outside must be one of {OUTSIDE}, got {outside!r}")
-        pairs = warmup_pairs(u, y_init, self.n_inputs, self.n_outputs, self.n_initial)
-        out = [self._free_run(ue, ye, outside, i) for i, (ue, ye) in enumerate(pairs)]
+        if (y_init is None) == (x0 is None):
+            raise ValueError("give the warm-up outputs y_init or the initial state x0, one "
+                             "of them")
+        if x0 is None:
+            pairs = warmup_pairs(u, y_init, self.n_inputs, self.n_outputs, self.n_initial)
+            starts = [(ye.shape[0], self._initial_state(ue, ye, ye.shape[0]))
+                      for ue, ye in pairs]
+            us = [ue for ue, _ in pairs]
+        else:
+            us = [as_signal(ue, "u") for ue in (u if _is_experiment_list(u) else [u])]
+            states = list(x0) if _is_experiment_list(u) else [x0]
+            if len(states) != len(us):
+                raise ValueError(f"u has {len(us)} experiment(s) but x0 {len(states)}")
+            starts = []
+            for ue, x in zip(us, states, strict=True):
+                check_width(ue, self.n_inputs, "u", "input(s)")
+                x = np.asarray(x, dtype=float)
+                if x.shape != (self.n_states,) or not np.all(np.isfinite(x)):
+                    raise ValueError(f"x0 must hold {self.n_states} finite value(s) "
+                                     f"({', '.join(self.state_names)}), got shape {x.shape}")
+                starts.append((0, x))
+        out = []
+        for i, (ue, (k0, x)) in enumerate(zip(us, starts, strict=True)):
+            y = self._free_run(ue, x, k0, outside, i)
+            if x0 is None:
+                y[:k0] = pairs[i][1]
+            out.append(y)
         return out if _is_experiment_list(u) else out[0]
 
     def _initial_state(self, u: Float2D, y: Float2D, k: int) -> np.ndarray:
         L, nb = self.output_lags, self.input_lags
         return np.concatenate([y[k - L:k][::-1].T.ravel(), u[k - nb:k][::-1].T.ravel()])
 
-    def _free_run(self, u: Float2D, y_init: Float2D, outside: str, experiment: int) -> Float2D:
-        n_init, N = y_init.shape[0], u.shape[0]
+    def _free_run(self, u: Float2D, x: np.ndarray, n_init: int, outside: str,
+                  experiment: int) -> Float2D:
+        """The outputs from sample ``n_init`` on, from the state x there (rows before it
+        left for the caller)."""
+        N = u.shape[0]
         y = np.empty((N, self.n_outputs))
-        y[:n_init] = y_init
         if n_init == N:
             return y
-        x = self._initial_state(u, y_init, n_init)
         nearest = outside == "nearest"
         with np.errstate(over="ignore", invalid="ignore"):
             for k in range(n_init, N):
@@ -432,7 +500,7 @@ class PWAStateSpace:
                         f"(experiment {experiment}): {names[c]} = {z[0, c]:.6g} is outside "
                         f"[{lower[c]:.6g}, {upper[c]:.6g}]; the model is not defined there "
                         f"(outside='nearest' extrapolates)")
-                y[k] = self.C[i] @ x + self.g[i]
+                y[k] = self.C[i] @ x + self.D[i] @ u[k] + self.g[i]
                 x = self.A[i] @ x + self.B[i] @ u[k] + self.f[i]
         return y
 
@@ -449,187 +517,32 @@ class PWAStateSpace:
     # --- export ------------------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        """The JSON document of :meth:`to_json` as Python objects."""
-        lower, upper = self.envelope
-        return {
-            "schema": SCHEMA,
-            "schema_version": SCHEMA_VERSION,
-            "n_modes": self.n_modes, "n_states": self.n_states, "n_inputs": self.n_inputs,
-            "n_outputs": self.n_outputs,
-            "output_lags": self.output_lags, "input_lags": self.input_lags,
-            "affine": self.affine,
-            "state_names": self.state_names, "input_names": self.input_names,
-            "output_names": self.output_names,
-            "A": self.A.tolist(), "B": self.B.tolist(), "f": self.f.tolist(),
-            "C": self.C.tolist(), "g": self.g.tolist(),
-            "regions": [{"H": H.tolist(), "h": h.tolist()} for H, h in self.regions],
-            "envelope": {"lower": lower.tolist(), "upper": upper.tolist(),
-                         "padding": self.padding},
-            "mode_regions": self.mode_regions.tolist(),
-            "dropped_modes": self.dropped_modes.tolist(),
-            "source": self.source,
-        }
+        """The JSON document of :meth:`to_json` as Python objects
+        (:func:`~.json_format.to_document`)."""
+        return to_document(self)
 
     def to_json(self, path: str | Path | None = None) -> str:
-        """The model as a JSON document (schema :data:`SCHEMA`, version
-        :data:`SCHEMA_VERSION`).
-
-        The document is an object with
-
-        - ``schema`` (``"pwa-pipeline/pwa-state-space"``) and ``schema_version`` (1);
-        - ``n_modes`` s, ``n_states`` n, ``n_inputs`` r, ``n_outputs`` m, ``output_lags`` L,
-          ``input_lags`` nb, ``affine``;
-        - ``state_names`` (n), ``input_names`` (r), ``output_names`` (m);
-        - ``A`` (s × n × n), ``B`` (s × n × r), ``f`` (s × n), ``C`` (s × m × n), ``g``
-          (s × m), nested lists in row-major order;
-        - ``regions``: s objects ``{"H": k_i × (n + r), "h": k_i}``, P_i = {z : H z ≤ h}
-          over z = [x; u];
-        - ``envelope``: ``{"lower": n + r, "upper": n + r, "padding": share}``;
-        - ``mode_regions`` (s × m) and ``dropped_modes`` (k × m): each mode's, and each
-          dropped combination's, region of every output's sub-model in the fitted model;
-        - ``source``: what the model was converted from (for the record).
-
-        Numbers are written with 17 significant digits, so a round trip is exact.
-
-        Parameters
-        ----------
-        path : str or Path, optional
-            Also write the document there.
-
-        Returns
-        -------
-        str
-        """
-        text = json.dumps(self.to_dict(), indent=1)
-        if path is not None:
-            Path(path).write_text(text)
-        return text
+        """The model as a versioned JSON document (:mod:`~.json_format`, whose schema it
+        documents), also written to ``path`` when given."""
+        return write_json(self, path)
 
     @classmethod
     def from_json(cls, source: str | Path) -> "PWAStateSpace":
-        """Read a model written by :meth:`to_json`.
-
-        Parameters
-        ----------
-        source : str or Path
-            The JSON text, or the path of a file holding it.
+        """Read a model written by :meth:`to_json` (:func:`~.json_format.read_json`): the
+        JSON text or the path of a file holding it.
 
         Raises
         ------
         ValueError
-            If the document is not JSON, is of another schema or schema version, lacks a
-            field, or a field does not have the shape the others imply (the message names
-            the field).
+            If the document is not JSON, is of another schema or version, lacks a field, or
+            a field does not have the shape the others imply (the message names it).
         """
-        if isinstance(source, Path) or not str(source).lstrip().startswith("{"):
-            source = Path(source).read_text()
-        try:
-            doc = json.loads(source)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"not a JSON document: {exc}") from None
-        if not isinstance(doc, dict):
-            raise ValueError("the JSON document must be an object")
-        if doc.get("schema") != SCHEMA:
-            raise ValueError(f"not a PWA state-space document: schema is "
-                             f"{doc.get('schema')!r}, expected {SCHEMA!r}")
-        if doc.get("schema_version") != SCHEMA_VERSION:
-            raise ValueError(f"schema version {doc.get('schema_version')!r} is not supported: "
-                             f"this version of pwa-pipeline reads version {SCHEMA_VERSION}")
-        required = ("A", "B", "f", "C", "g", "regions", "envelope", "output_lags",
-                    "input_lags")
-        missing = [k for k in required if k not in doc]
-        if missing:
-            raise ValueError(f"the document lacks field(s) {missing}")
-        envelope = doc["envelope"]
-        if not isinstance(envelope, dict) or not {"lower", "upper"} <= set(envelope):
-            raise ValueError("envelope must be an object with 'lower' and 'upper'")
-        regions = doc["regions"]
-        if not isinstance(regions, list) or not all(
-                isinstance(r, dict) and {"H", "h"} <= set(r) for r in regions):
-            raise ValueError("regions must be a list of objects with 'H' and 'h'")
-        ss = cls(doc["A"], doc["B"], doc["f"], doc["C"], doc["g"],
-                 [(r["H"], r["h"]) for r in regions], envelope["lower"], envelope["upper"],
-                 output_lags=doc["output_lags"], input_lags=doc["input_lags"],
-                 affine=doc.get("affine", False), input_names=doc.get("input_names"),
-                 output_names=doc.get("output_names"),
-                 padding=envelope.get("padding"),
-                 mode_regions=doc.get("mode_regions"), dropped_modes=doc.get("dropped_modes"),
-                 source=doc.get("source"))
-        for key, expected in (("n_modes", ss.n_modes), ("n_states", ss.n_states),
-                              ("n_inputs", ss.n_inputs), ("n_outputs", ss.n_outputs)):
-            if key in doc and doc[key] != expected:
-                raise ValueError(f"{key} is {doc[key]!r} but the matrices give {expected}")
-        if "state_names" in doc and doc["state_names"] != ss.state_names:
-            raise ValueError(f"state_names {doc['state_names']} do not match the orders and "
-                             f"names, which give {ss.state_names}")
-        return ss
+        return read_json(source, cls)
 
     def to_mpt3(self, path: str | Path | None = None, Ts: float = 1.0) -> str:
-        """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``.
-
-        Each mode becomes ``LTISystem('A', A, 'B', B, 'C', C, 'D', D, 'f', f, 'g', g,
-        'Ts', Ts)`` (D = 0) with its domain set by ``setDomain('xu', Polyhedron('A', H,
-        'b', h))`` over (x, u), and ``pwa = PWASystem([sys1, …, sysS])`` joins them, as
-        MPT3's documentation of ``PWASystem`` builds a PWA system. The envelope is stored as
-        ``z_min`` and ``z_max``. Numbers are written with 17 significant digits.
-
-        Parameters
-        ----------
-        path : str or Path, optional
-            Also write the script there (e.g. ``model_pwa.m``).
-        Ts : float, default 1
-            Sampling time (the model counts samples).
-
-        Returns
-        -------
-        str
-        """
-        def mat(a: np.ndarray) -> str:
-            a = np.atleast_2d(a)
-            if a.size == 0:
-                return f"zeros({a.shape[0]}, {a.shape[1]})"
-            return "[" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in a) + "]"
-
-        lower, upper = self.envelope
-        source = ", ".join(f"{k}={v}" for k, v in self.source.items())
-        lines = [
-            "% PWA state-space model exported by pwa-pipeline (pwa_pipeline.control)"
-            + (f": {source}" if source else ""),
-            "%   x(k+1) = A_i x(k) + B_i u(k) + f_i,  y(k) = C_i x(k) + g_i,",
-            "%   valid where [x(k); u(k)] lies in {z : H_i z <= h_i}.",
-            f"% states x: {', '.join(self.state_names)}",
-            f"% inputs u: {', '.join(self.input_names)}",
-            f"% outputs y: {', '.join(self.output_names)}",
-            f"% {self.n_modes} mode(s); the regions are bounded by the data envelope "
-            f"z_min <= [x; u] <= z_max.",
-            f"Ts = {Ts:.17g};",
-            f"z_min = {mat(lower[:, None])};",
-            f"z_max = {mat(upper[:, None])};",
-        ]
-        D = np.zeros((self.n_outputs, self.n_inputs))
-        for i in range(self.n_modes):
-            H, h = self.regions[i]
-            k = i + 1
-            lines += [
-                f"% mode {k} (regions of the fitted model: {self.mode_regions[i].tolist()})",
-                f"A{k} = {mat(self.A[i])};",
-                f"B{k} = {mat(self.B[i])};",
-                f"f{k} = {mat(self.f[i][:, None])};",
-                f"C{k} = {mat(self.C[i])};",
-                f"D{k} = {mat(D)};",
-                f"g{k} = {mat(self.g[i][:, None])};",
-                f"H{k} = {mat(H) if len(h) else f'zeros(0, {H.shape[1]})'};",
-                f"h{k} = {mat(h[:, None]) if len(h) else 'zeros(0, 1)'};",
-                f"sys{k} = LTISystem('A', A{k}, 'B', B{k}, 'C', C{k}, 'D', D{k}, "
-                f"'f', f{k}, 'g', g{k}, 'Ts', Ts);",
-                f"sys{k}.setDomain('xu', Polyhedron('A', H{k}, 'b', h{k}));",
-            ]
-        lines.append("pwa = PWASystem([" + ", ".join(f"sys{i + 1}" for i in range(self.n_modes))
-                     + "]);")
-        text = "\n".join(lines) + "\n"
-        if path is not None:
-            Path(path).write_text(text)
-        return text
+        """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``
+        (:func:`~.mpt3.mpt3_script`, whose parameters these are)."""
+        return mpt3_script(self, path, Ts)
 
     def __repr__(self) -> str:
         return (f"PWAStateSpace(modes={self.n_modes}, states={self.n_states}, "

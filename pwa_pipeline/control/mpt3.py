@@ -1,0 +1,73 @@
+"""The PWA state-space model as an MPT3 script (MATLAB): :func:`mpt3_script`, what
+:meth:`PWAStateSpace.to_mpt3 <pwa_pipeline.control.PWAStateSpace.to_mpt3>` writes."""
+
+from pathlib import Path
+
+import numpy as np
+
+
+def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
+    """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``.
+
+        Each mode becomes ``LTISystem('A', A, 'B', B, 'C', C, 'D', D, 'f', f, 'g', g,
+        'Ts', Ts)`` with its domain set by ``setDomain('xu', Polyhedron('A', H,
+        'b', h))`` over (x, u), and ``pwa = PWASystem([sys1, …, sysS])`` joins them, as
+        MPT3's documentation of ``PWASystem`` builds a PWA system. The envelope is stored as
+        ``z_min`` and ``z_max``. Numbers are written with 17 significant digits.
+
+        Parameters
+        ----------
+        path : str or Path, optional
+            Also write the script there (e.g. ``model_pwa.m``).
+        Ts : float, default 1
+            Sampling time (the model counts samples).
+
+        Returns
+        -------
+        str
+    """
+    def mat(a: np.ndarray) -> str:
+        a = np.atleast_2d(a)
+        if a.size == 0:
+            return f"zeros({a.shape[0]}, {a.shape[1]})"
+        return "[" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in a) + "]"
+
+    lower, upper = ss.envelope
+    source = ", ".join(f"{k}={v}" for k, v in ss.source.items())
+    lines = [
+        "% PWA state-space model exported by pwa-pipeline (pwa_pipeline.control)"
+        + (f": {source}" if source else ""),
+        "%   x(k+1) = A_i x(k) + B_i u(k) + f_i,  y(k) = C_i x(k) + D_i u(k) + g_i,",
+        "%   valid where [x(k); u(k)] lies in {z : H_i z <= h_i}.",
+        f"% states x: {', '.join(ss.state_names)}",
+        f"% inputs u: {', '.join(ss.input_names)}",
+        f"% outputs y: {', '.join(ss.output_names)}",
+        f"% {ss.n_modes} mode(s); the regions are bounded by the data envelope "
+        f"z_min <= [x; u] <= z_max.",
+        f"Ts = {Ts:.17g};",
+        f"z_min = {mat(lower[:, None])};",
+        f"z_max = {mat(upper[:, None])};",
+    ]
+    for i in range(ss.n_modes):
+        H, h = ss.regions[i]
+        k = i + 1
+        lines += [
+            f"% mode {k} (regions of the fitted model: {ss.mode_regions[i].tolist()})",
+            f"A{k} = {mat(ss.A[i])};",
+            f"B{k} = {mat(ss.B[i])};",
+            f"f{k} = {mat(ss.f[i][:, None])};",
+            f"C{k} = {mat(ss.C[i])};",
+            f"D{k} = {mat(ss.D[i])};",
+            f"g{k} = {mat(ss.g[i][:, None])};",
+            f"H{k} = {mat(H) if len(h) else f'zeros(0, {H.shape[1]})'};",
+            f"h{k} = {mat(h[:, None]) if len(h) else 'zeros(0, 1)'};",
+            f"sys{k} = LTISystem('A', A{k}, 'B', B{k}, 'C', C{k}, 'D', D{k}, "
+            f"'f', f{k}, 'g', g{k}, 'Ts', Ts);",
+            f"sys{k}.setDomain('xu', Polyhedron('A', H{k}, 'b', h{k}));",
+        ]
+    lines.append("pwa = PWASystem([" + ", ".join(f"sys{i + 1}" for i in range(ss.n_modes))
+                 + "]);")
+    text = "\n".join(lines) + "\n"
+    if path is not None:
+        Path(path).write_text(text)
+    return text
