@@ -44,7 +44,8 @@ from benchmarks._cluster import (
 from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write_json
 from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
+from pwa_pipeline.datasets.user import UserDataset
+from pwa_pipeline.orchestration.registry import DatasetRegistry
 
 N_DATASETS, N_SAMPLES = 12, 1000
 SETS = ("default", "paper")

@@ -1,4 +1,4 @@
-"""A system shared by the output-error tests (tests/test_output_error_*.py)."""
+"""A system shared by the output-error tests (tests/pwa/output_error/test_output_error_*.py)."""
 
 import numpy as np
 

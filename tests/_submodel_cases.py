@@ -1,4 +1,4 @@
-"""Small hand-built cases shared by the step-5 tests (tests/test_submodels_*.py)."""
+"""Small hand-built cases shared by the step-5 tests (tests/pwa/steps/test_submodels_*.py)."""
 
 import numpy as np
 

@@ -2,6 +2,7 @@
 
 import os
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,6 +31,15 @@ def system_package():
         pytest.skip(message)
 
     return check
+
+
+def pytest_collection_modifyitems(config, items):
+    """Every test under ``tests/system`` (real services: chromium, PostgreSQL, a cluster) is
+    marked ``system``, so that ``-m "not system"`` runs the others alone."""
+    system = Path(__file__).parent / "system"
+    for item in items:
+        if system in Path(item.fspath).parents:
+            item.add_marker(pytest.mark.system)
 
 
 def pytest_configure(config):

@@ -42,7 +42,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     Σ_j (x_pj − x_qj)² ≤ ε² summed in feature order on the points as given, scikit-learn's
     k-d tree test bit for bit. The labels are then scikit-learn's, cluster numbers included,
     where it searches with its k-d tree (up to 15 dimensions; tested on ties in
-    ``tests/test_dbscan.py``), except for its shortcut that takes a whole tree node once the
+    ``tests/pwa/steps/test_dbscan.py``), except for its shortcut that takes a whole tree node once the
     node's bounding box lies within ``eps``. Above 15 dimensions it searches by brute force
     with ‖p‖² − 2 p·q + ‖q‖² rounded by BLAS (the rounding depends on its chunking of the
     matrix product and on which point is the query), so a pair within ~1e-13 relative of

@@ -8,7 +8,7 @@ from pwa_pipeline import PWARX
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares, RefinedSubModels, SVMRegions
 from pwa_pipeline.pwa.steps.submodels import refined, split_search
 
-from ._submodel_cases import _close_modes, _four_percent_mode, _InOrder
+from ..._submodel_cases import _close_modes, _four_percent_mode, _InOrder
 
 
 def test_default_sub_models_are_refitted_on_their_rows(sim_30db, default_30db):

@@ -179,7 +179,7 @@ def test_the_docs_example_registers_the_bundled_table(tmp_path, monkeypatch, cap
 
     from pwa_pipeline.orchestration.cli import main
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     readme = (root / "docs" / "your-data.md").read_text()
     start = readme.index("python -m pwa_pipeline add-dataset plant")
     command = readme[start:readme.index("\n", readme.index("\\\n", start) + 2)]

@@ -36,9 +36,10 @@ from benchmarks._cluster import (
 )
 from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
+from pwa_pipeline.datasets.user import UserDataset
 from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.registry import DatasetRegistry
 from pwa_pipeline.orchestration.signed_pickles import KEY_FILE, load_object, signing_key
 
 DATASETS = ("m1", "m2", "m3")
@@ -336,7 +337,7 @@ def test_the_pipeline_writes_and_reads_its_assets_and_caches_at_an_fsspec_url(mo
     from pwa_pipeline.definitions import defs
     from pwa_pipeline.orchestration.settings import PipelineSettings
 
-    from ._results import holding
+    from .._results import holding
 
     monkeypatch.setenv("PWA_STORAGE", "memory://pwa-test-store/assets")
     store = PartitionedFileIOManager()  # the store of $PWA_STORAGE
@@ -412,7 +413,7 @@ def test_the_compose_file_runs_the_services_as_the_docs_and_the_command_line_do(
 
     from pwa_pipeline.orchestration.instance import POSTGRES_YAML
 
-    deploy = Path(__file__).resolve().parents[1] / "deploy"
+    deploy = Path(__file__).resolve().parents[2] / "deploy"
     written = (deploy / "dagster.yaml").read_text()
     assert "\n".join(line for line in written.splitlines()
                      if not line.startswith("# ")) + "\n" == POSTGRES_YAML

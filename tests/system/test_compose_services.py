@@ -34,10 +34,11 @@ from benchmarks._cluster import (
 )
 from benchmarks._ui import free_port
 from pwa_pipeline.datasets import make_hure_vasak
-from pwa_pipeline.datasets.user import DatasetRegistry, UserDataset
+from pwa_pipeline.datasets.user import UserDataset
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
+from pwa_pipeline.orchestration.registry import DatasetRegistry
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 COMPOSE = ROOT / "deploy" / "compose.yaml"
 #: The services the test starts from the compose file, in order (postgres stands apart).
 STARTED = ("mlflow", "dask-scheduler", "dask-worker", "dagster-webserver", "dagster-daemon")

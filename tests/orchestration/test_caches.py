@@ -12,8 +12,8 @@ from pwa_pipeline.orchestration.caches import SignedMemory
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 
-from ._planted import Planted
-from ._results import holding, materialization
+from .._planted import Planted
+from .._results import holding, materialization
 
 IDENTIFICATION = ["configuration", "raw_benchmark", "regressors", "local_models"]
 

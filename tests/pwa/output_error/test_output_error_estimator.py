@@ -8,8 +8,8 @@ from pwa_pipeline import PWARX, LinearARX, make_hure_vasak
 from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.output_error.simulator import FreeRuns
 
-from ._output_error_cases import _output_noise_system
-from ._results import materialization
+from ..._output_error_cases import _output_noise_system
+from ..._results import materialization
 
 
 def test_refinement_removes_the_least_squares_bias_under_output_noise():

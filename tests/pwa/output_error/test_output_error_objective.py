@@ -8,7 +8,7 @@ from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.output_error.objective import OneStepError, RefinementErrors
 from pwa_pipeline.pwa.output_error.simulator import FreeRuns, OutputFreeRuns
 
-from ._output_error_cases import _output_noise_system
+from ..._output_error_cases import _output_noise_system
 
 
 def _weighted_objective(route: str):

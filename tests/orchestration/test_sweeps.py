@@ -18,7 +18,7 @@ from pwa_pipeline.orchestration.partitions import all_keys
 from pwa_pipeline.orchestration.reporting import leaderboard_markdown
 from pwa_pipeline.scoring.comparison import leaderboard
 
-from ._results import materialization
+from .._results import materialization
 
 KEYS = ["hure_vasak|paper", "hure_vasak|default"]
 

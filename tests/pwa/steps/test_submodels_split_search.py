@@ -8,7 +8,7 @@ from pwa_pipeline.pwa.steps.submodels import split_search
 from pwa_pipeline.pwa.steps.submodels.least_squares import least_squares
 from pwa_pipeline.pwa.steps.submodels.split_search import _axis_start, _kmeans_start, split_gain
 
-from ._submodel_cases import SIGMA, _close_modes, _curved_mode, _two_modes, _wide
+from ..._submodel_cases import SIGMA, _close_modes, _curved_mode, _two_modes, _wide
 
 
 def test_split_gain_tells_two_modes_from_one():

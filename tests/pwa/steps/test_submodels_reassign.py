@@ -8,7 +8,7 @@ from pwa_pipeline.pwa.steps.submodels import reassign
 from pwa_pipeline.pwa.steps.submodels.least_squares import refit
 from pwa_pipeline.pwa.steps.submodels.reassign import refine, theta_shift
 
-from ._submodel_cases import _two_modes
+from ..._submodel_cases import _two_modes
 
 
 def test_refinement_recovers_from_a_wrong_split():

@@ -6,7 +6,7 @@ from pwa_pipeline import PWARX, make_hure_vasak
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.scoring.metrics import match_submodels
 
-from .conftest import max_param_error
+from ..conftest import max_param_error
 
 
 def _paper():

@@ -2,7 +2,7 @@
 
 import os
 
-from ._fork_pool import fork_pool
+from .._fork_pool import fork_pool
 
 
 def _prepare(home):

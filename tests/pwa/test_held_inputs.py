@@ -8,7 +8,7 @@ from pwa_pipeline import PWARX
 from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS
 from pwa_pipeline.pwa import DBSCANClustering, LocalLeastSquares
 
-from .conftest import max_param_error
+from ..conftest import max_param_error
 
 
 @pytest.mark.parametrize("seed", [101, 102])  # not among the seeds the default was tuned on

@@ -13,7 +13,7 @@ from pwa_pipeline.orchestration.signed_pickles import (
     signing_key,
 )
 
-from ._planted import Planted
+from .._planted import Planted
 
 
 def test_signed_files_round_trip_and_damage_is_detected(tmp_path):

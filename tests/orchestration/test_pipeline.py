@@ -32,7 +32,7 @@ from pwa_pipeline.orchestration.partitions import (
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
 
-from ._results import materialization
+from .._results import materialization
 
 # every partitioned asset (what a sweep run materialises); the leaderboard has its own tests
 ASSETS = [a for a in defs.assets if a.partitions_def is not None]

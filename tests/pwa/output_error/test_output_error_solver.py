@@ -8,7 +8,7 @@ from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.output_error.simulator import FreeRuns
 from pwa_pipeline.pwa.output_error.solver import levenberg_marquardt, refine_output_error
 
-from ._output_error_cases import _output_noise_system
+from ..._output_error_cases import _output_noise_system
 
 
 def test_a_diverging_start_is_refused_with_its_reason():

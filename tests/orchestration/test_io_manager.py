@@ -10,7 +10,7 @@ from pwa_pipeline.orchestration.files import inside
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.settings import PipelineSettings
 
-from ._results import holding
+from .._results import holding
 
 
 def test_paths_cannot_leave_the_store(tmp_path):

@@ -15,7 +15,7 @@ import pytest
 from pwa_pipeline.orchestration.credentials import mask_credentials, split_credentials
 from pwa_pipeline.orchestration.tracking import LoggedRun, MLflowTracker
 
-from ._fork_pool import fork_pool
+from .._fork_pool import fork_pool
 
 
 def _log_one(args):

@@ -7,7 +7,7 @@ from pwa_pipeline.pwa import SVMRegions
 from pwa_pipeline.pwa.steps.submodels import merge
 from pwa_pipeline.pwa.steps.submodels.merge import _prediction_gaps, merge_indistinguishable, separable
 
-from ._submodel_cases import _two_modes
+from ..._submodel_cases import _two_modes
 
 
 def test_a_random_split_of_one_mode_merges():
