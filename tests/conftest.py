@@ -33,13 +33,23 @@ def system_package():
     return check
 
 
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true",
+                     help="also run the tests marked slow (long checks the benchmarks repeat)")
+
+
 def pytest_collection_modifyitems(config, items):
     """Every test under ``tests/system`` (real services: chromium, PostgreSQL, a cluster) is
-    marked ``system``, so that ``-m "not system"`` runs the others alone."""
+    marked ``system``, so that ``-m "not system"`` runs the others alone; tests marked ``slow``
+    are skipped unless ``--run-slow`` is given (a skip, not a ``-m`` filter, so that any ``-m``
+    expression still leaves them out)."""
     system = Path(__file__).parent / "system"
+    skip_slow = pytest.mark.skip(reason="slow: pass --run-slow to run it")
     for item in items:
         if system in Path(item.fspath).parents:
             item.add_marker(pytest.mark.system)
+        if "slow" in item.keywords and not config.getoption("--run-slow"):
+            item.add_marker(skip_slow)
 
 
 def pytest_configure(config):

@@ -1,12 +1,8 @@
 """``run``: partitions one after the other in this process, on shared stores; a failure or
-an interrupt keeps what was computed."""
+an interrupt keeps what was computed (Ctrl-C to a real run: tests/system/test_processes.py)."""
 
 import os
 import shutil
-import signal
-import subprocess
-import sys
-import time
 
 import dagster as dg
 import pandas as pd
@@ -69,55 +65,6 @@ def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
     for key in keys[:2]:
         model = store.load(dg.AssetKey("pwa_model"), key)
         assert f"  {key}: {model.n_submodels_} PWA sub-model(s)" in out
-
-
-def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflow_template,
-                                                                  robot):
-    """Ctrl-C (SIGINT to the command's process group, as a terminal sends it) while a robot
-    partition with local sets of 250 rows runs: it ends as an interrupted run, the next
-    never starts, exit status 130, and no run is left STARTED. An interrupt can wait for
-    the step in flight to end, and one that a library dropped is sent again 5 s later, so the
-    command is given 150 s to end."""
-    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
-    (tmp_path / "hparams.toml").write_text(
-        '[longer.kuka_robot]\npreset = "default"\nna = 2\nnb = 2\n'
-        'local_models.n_rho = 250\n\n'
-        '[quick.hure_vasak]\npreset = "default"\nna = 1\nnb = 1\n')
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
-    env["PWA_PIPELINE_HOME"] = str(tmp_path)
-    env["PWA_HPARAMS"] = str(tmp_path / "hparams.toml")
-    keys = ["kuka_robot|longer", "hure_vasak|quick"]
-    out = tmp_path / "out.txt"
-    with open(out, "w") as sink:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "pwa_pipeline", "run",
-             *[a for k in keys for a in ("--partition", k)]], env=env, stdout=sink,
-            stderr=subprocess.STDOUT, start_new_session=True,
-            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    deadline = time.time() + 120
-    while "pwa_fit" not in out.read_text():  # the run is fitting the PWA chain
-        assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
-        time.sleep(0.2)
-    os.killpg(proc.pid, signal.SIGINT)
-    try:
-        status = proc.wait(timeout=150)
-    except subprocess.TimeoutExpired:  # what each process was doing goes into the failure
-        os.killpg(proc.pid, signal.SIGKILL)
-        raise AssertionError("not ended 150 s after Ctrl-C:\n" + out.read_text()[-6000:])
-    assert status == 130
-    text = out.read_text()
-    summary = text.split("\nSummary\n")[1]
-    assert f"  {keys[0]}: INTERRUPTED after" in summary
-    assert f"  not run to the end: {keys[1]}" in summary
-    assert f"=== materialising {keys[1]} ===" not in text
-    os.environ["DAGSTER_HOME"] = str(tmp_path / ".dagster_home")
-    try:
-        with dg.DagsterInstance.get() as instance:
-            statuses = [r.status for r in instance.get_runs()]
-    finally:
-        del os.environ["DAGSTER_HOME"]
-    assert statuses == [dg.DagsterRunStatus.FAILURE]
 
 
 def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_path,

@@ -185,7 +185,7 @@ def test_single_output_affine_switching_on_the_output():
 @pytest.mark.slow
 def test_single_output_fit_time_is_bounded():
     """Issue 13: a 2-mode SISO record of 50k samples in under 10 s on 2 cores (~4 s measured
-    by benchmarks/siso.py), with both modes; slow, run with -m slow."""
+    by benchmarks/siso.py), with both modes; slow, run with --run-slow."""
     import time
 
     from benchmarks.siso import TRUTH, two_mode_siso
