@@ -29,7 +29,8 @@ import pandas as pd
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.svm import LinearSVC
 
-from benchmarks._common import RESULTS, default_fit, write_json
+from benchmarks._common import RESULTS, write_json
+from benchmarks._fits import default_fit
 
 
 def recorded_svm_fits(fit: str) -> list[dict]:

@@ -38,7 +38,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks._common import RESULTS, default_fit, in_fresh_process, previous_tree, write_json
+from benchmarks._common import RESULTS, in_fresh_process, previous_tree, write_json
+from benchmarks._fits import default_fit
 from benchmarks.robustness import FIRST_SEED
 
 ROOT = Path(__file__).resolve().parents[1]

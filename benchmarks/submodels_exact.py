@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks._common import RESULTS, default_fit, in_fresh_process, previous_tree
+from benchmarks._common import RESULTS, in_fresh_process, previous_tree
+from benchmarks._fits import default_fit
 
 ROOT = Path(__file__).resolve().parents[1]
 FITS = ("paper-20dB:5000,paper-20dB:5001,paper-20dB:5002,paper-20dB:100,paper-25dB:5000,"
