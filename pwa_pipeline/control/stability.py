@@ -80,6 +80,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linprog
 
+from .._optional import require
 from .polyhedra import Box
 
 #: Solvers tried in turn for the LMIs (both are installed with cvxpy).
@@ -239,7 +240,7 @@ def _solve_lmi(A: np.ndarray, pairs: list[tuple[int, int]], blocks: list[int], s
     formed in numpy, so cvxpy sees one matrix product per condition (far quicker to compile
     than the matrix expression). Returns (P of each mode, solver status), P None unless
     solved."""
-    import cvxpy as cp
+    cp = require("cvxpy", "control", "The stability report's Lyapunov search")
 
     n = A.shape[1]
     D = _duplication(n)

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._optional import require
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
@@ -68,9 +70,8 @@ def colour(i: int) -> str:
 
 def figure(width: float, height: float, layout: str | None = "constrained") -> Figure:
     """A matplotlib figure of that size in inches, outside pyplot."""
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(width, height), layout=layout)
+    figures = require("matplotlib.figure", "plot", "Drawing a figure")
+    return figures.Figure(figsize=(width, height), layout=layout)
 
 
 def legend_below(fig: Figure) -> None:
