@@ -33,11 +33,21 @@ def theta_table(thetas: np.ndarray, phi_names: list[str], y_names: list[str]) ->
 
 
 def regions_table(regions, phi_names: list[str]) -> pd.DataFrame:
-    """The rows w_i and intercepts b_i of a fitted region step (``coef_``, ``intercept_``)."""
-    df = pd.DataFrame(regions.coef_, columns=phi_names,
-                      index=[f"H{i + 1}" for i in range(regions.n_regions_)])
-    df["b"] = regions.intercept_
-    return df
+    """The regions of a fitted region step: its score rows w_i and intercepts b_i where it
+    has them (``coef_``, ``intercept_``: the SVM's argmax), else the inequalities G φ ≤ q of
+    each region from ``halfspaces()`` (any region learner), one row per inequality."""
+    if hasattr(regions, "coef_"):
+        df = pd.DataFrame(regions.coef_, columns=phi_names,
+                          index=[f"H{i + 1}" for i in range(regions.n_regions_)])
+        df["b"] = regions.intercept_
+        return df
+    rows, index = [], []
+    for i, region in enumerate(regions.halfspaces()):
+        if region is not None:
+            G, q = region
+            rows += [[*g, b] for g, b in zip(G, q, strict=True)]
+            index += [f"H{i + 1}.{k + 1}" for k in range(len(q))]
+    return pd.DataFrame(rows, columns=[*phi_names, "≤ q"], index=index)
 
 
 #: The prefix of the per-output metrics in MLflow (its UI groups charts by the part before
