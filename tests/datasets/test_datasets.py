@@ -7,20 +7,21 @@ from pwa_pipeline.datasets.simulated import HURE_VASAK_THETAS, hure_vasak_mode
 
 
 def test_simulation_follows_eq_11_to_14(sim_30db):
-    d = sim_30db
-    assert d.u_train[0].shape == d.y_train[0].shape == (4000, 2)
-    assert d.u_train[0][:, 0].min() >= -4 and d.u_train[0][:, 0].max() <= 6
-    assert d.u_train[0][:, 1].min() >= -2 and d.u_train[0][:, 1].max() <= 4
+    u, y = sim_30db.u_train[0], sim_30db.y_train[0]
+    clean, modes = sim_30db.truth.y_clean_train[0], sim_30db.truth.modes_train[0]
+    assert u.shape == y.shape == (4000, 2)
+    assert u[:, 0].min() >= -4 and u[:, 0].max() <= 6
+    assert u[:, 1].min() >= -2 and u[:, 1].max() <= 4
     # noise-free dynamics: y(k) = θ_λᵀ φ(k), λ from y(k-1) (eq. 12)
-    phi = np.column_stack([d.truth.y_clean_train[0][:-1], d.u_train[0][:-1]])
-    np.testing.assert_array_equal(d.truth.modes_train[0][1:], hure_vasak_mode(d.truth.y_clean_train[0][:-1]))
-    pred = np.einsum("nd,ndm->nm", phi, HURE_VASAK_THETAS[d.truth.modes_train[0][1:]])
-    np.testing.assert_allclose(pred, d.truth.y_clean_train[0][1:], atol=1e-12)
+    phi = np.column_stack([clean[:-1], u[:-1]])
+    np.testing.assert_array_equal(modes[1:], hure_vasak_mode(clean[:-1]))
+    pred = np.einsum("nd,ndm->nm", phi, HURE_VASAK_THETAS[modes[1:]])
+    np.testing.assert_allclose(pred, clean[1:], atol=1e-12)
     # eq. (14) holds exactly per output
-    e = d.y_train[0] - d.truth.y_clean_train[0]
-    snr = 10 * np.log10((d.truth.y_clean_train[0]**2).sum(0) / (e**2).sum(0))
+    e = y - clean
+    snr = 10 * np.log10((clean**2).sum(0) / (e**2).sum(0))
     np.testing.assert_allclose(snr, [30.0, 30.0])
-    assert set(np.unique(d.truth.modes_train[0])) == {0, 1, 2, 3}
+    assert set(np.unique(modes)) == {0, 1, 2, 3}
 
 
 def test_simulation_is_seeded():
