@@ -49,6 +49,28 @@ def test_readme_example_runs():
     assert result.stdout.splitlines() == expected
 
 
+def _blocks(page: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", (ROOT / page).read_text(), re.S)
+
+
+def test_getting_started_repeats_the_readme_example():
+    """The docs' first example is the README's, word for word, so that one of them cannot
+    go stale while the test above runs the other."""
+    assert _blocks("docs/getting-started.md")[0] == _blocks("README.md")[0]
+
+
+@pytest.mark.parametrize("page", ["docs/getting-started.md", "docs/control.md"])
+def test_docs_examples_run(page, tmp_path):
+    """The complete examples of a page (those that import what they use) run in order, in
+    one process, and every line a comment marks ``# True`` prints True."""
+    code = "\n".join(block for block in _blocks(page) if "import" in block)
+    result = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert result.returncode == 0, result.stderr
+    expected_true = len(re.findall(r"^print\(.*#\s*True\s*$", code, re.M))
+    assert result.stdout.splitlines().count("True") >= expected_true
+
+
 @pytest.mark.slow
 def test_readme_machine_example_finds_each_joints_velocity_sign():
     """The README's structure-search example (about a minute) prints a choice with regions
