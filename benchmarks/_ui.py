@@ -550,15 +550,13 @@ def open_in_app(page, path: str) -> None:
 
 # --------------------------------------------------------------------------- the asset graph
 
-def open_asset_graph(page, stack: UIStack, assets: int, vertical: bool = True) -> dict:
-    """*Lineage*: the global asset graph with every group expanded (top to bottom when
-    ``vertical``), zoomed out until all ``assets`` are in view (the graph draws only the
-    nodes in view); the bounding box of each asset's node by its label (a long name is
+def open_asset_graph(page, stack: UIStack, assets: int) -> dict:
+    """*Lineage*: the global asset graph top to bottom with every group expanded, zoomed out
+    until all ``assets`` are in view (the graph draws only the nodes in view); the bounding box of each asset's node by its label (a long name is
     shortened in the middle: ``output…_refinement``)."""
     page.goto(f"{stack.dagster_url}/asset-groups")
     page.get_by_text("identification").first.wait_for()
-    items = (["Change graph to vertical orientation"] if vertical else []) + ["Expand all groups"]
-    for item in items:
+    for item in ("Change graph to vertical orientation", "Expand all groups"):
         page.locator("[aria-label=settings]").last.click()  # the graph's settings
         page.get_by_role("menuitem", name=item).click()
         page.keyboard.press("Escape")
