@@ -552,8 +552,9 @@ def open_in_app(page, path: str) -> None:
 
 def open_asset_graph(page, stack: UIStack, assets: int) -> dict:
     """*Lineage*: the global asset graph top to bottom with every group expanded, zoomed out
-    until all ``assets`` are in view (the graph draws only the nodes in view); the bounding box of each asset's node by its label (a long name is
-    shortened in the middle: ``output…_refinement``)."""
+    until all ``assets`` are in view (the graph draws only the nodes in view); the bounding
+    box of each asset's node by its label (a long name is shortened in the middle:
+    ``output…_refinement``)."""
     page.goto(f"{stack.dagster_url}/asset-groups")
     page.get_by_text("identification").first.wait_for()
     for item in ("Change graph to vertical orientation", "Expand all groups"):
