@@ -11,6 +11,7 @@ import numpy as np
 
 from .._arrays import array_digest
 from .._typing import Float2D
+from ..scoring.conventions import Convention
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,9 @@ class Dataset:
         it does not change them, so no model is fitted or scored again for it.
     sample_time : float, optional
         Seconds between samples, when known.
+    convention : Convention, optional
+        A measured benchmark's own figure of merit on its held-out record (e.g. free-run
+        RMSE in mm after 20 samples), scored beside this project's NRMSE.
     """
 
     name: str
@@ -102,10 +106,11 @@ class Dataset:
     truth: GroundTruth | None = None
     units: dict[str, str] = field(default_factory=dict)
     sample_time: float | None = None
+    convention: Convention | None = None
 
     def __setstate__(self, state: dict) -> None:
         # a data set pickled before it had units (an older store) has none
-        self.__dict__.update({"units": {}, "sample_time": None, **state})
+        self.__dict__.update({"units": {}, "sample_time": None, "convention": None, **state})
 
     def label(self, name: str) -> str:
         """``name [unit]`` of one of its channels or their lags (:func:`with_unit`), for an

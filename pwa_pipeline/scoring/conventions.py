@@ -39,12 +39,18 @@ class Convention:
         Whether the free run restarts at every experiment.
     warmup : int
         Measured samples that initialise the run and are not scored.
+    unit : str
+        The unit of an unnormalised score (``"mm"``); empty: the outputs' own.
+    scale : float
+        Factor from the outputs' unit to ``unit`` (1000 from m to mm).
     """
 
     name: str
     normalisation: str
     restart: bool
     warmup: int
+    unit: str = ""
+    scale: float = 1.0
 
 
 CONVENTIONS = {c.name: c for c in (
@@ -68,7 +74,8 @@ def single_run_scores(model: Model, u, y, convention: Convention) -> np.ndarray:
     Returns
     -------
     ndarray of shape (m,)
-        RMSE / range, or RMSE, per output, over the samples after the warm-up.
+        RMSE / range, or RMSE in the convention's unit, per output, over the samples after
+        the warm-up; inf where the run diverged.
     """
     if convention.restart:
         raise ValueError(f"convention {convention.name!r} restarts at every experiment: use "
@@ -82,7 +89,7 @@ def single_run_scores(model: Model, u, y, convention: Convention) -> np.ndarray:
     err = np.where(np.isfinite(err), err, np.inf)
     if convention.normalisation == "range":
         return err / (ya.max(axis=0) - ya.min(axis=0))
-    return err
+    return err * convention.scale
 
 
 def convention_scores(model: Model, u, y) -> dict[str, float]:
