@@ -15,7 +15,7 @@ from pathlib import Path
 import dagster as dg
 
 from ..config import HParamsFile
-from ..datasets import DATASETS, default_kuka_path
+from ..datasets import DATASETS, MEASURED, default_kuka_path
 from ..datasets.kuka import find_kuka
 from .settings import PipelineSettings
 
@@ -89,6 +89,9 @@ def unavailable_datasets(settings: PipelineSettings) -> dict[str, str]:
     if find_kuka(settings.kuka_path or None) is None:
         where = settings.kuka_path or default_kuka_path()
         missing["kuka_robot"] = f"no KUKA data at {where} (set PWA_KUKA_DATA)"
+    for name, (source, _) in MEASURED.items():
+        if absent := source.missing():
+            missing[name] = f"no {name} data: {absent[0]} is missing (set {source.env})"
     registry = settings.registry()
     for name in registry.names():
         path = Path(registry.get(name).path)

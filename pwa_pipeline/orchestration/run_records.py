@@ -10,6 +10,7 @@ import pandas as pd
 from ..config import Configuration
 from ..datasets import Dataset
 from ..pwa import PWARX
+from ..scoring.conventions import single_run_scores
 from ..scoring.evaluation import Evaluation
 from .model_facts import phi_names, truth_metadata
 from .reporting import model_metrics, score_metrics
@@ -30,6 +31,17 @@ class MethodRun:
     artifacts: dict[str, object]
     description: str
     fit_seconds: float
+
+
+def benchmark_metric(model, data: Dataset) -> dict[str, float]:
+    """A measured benchmark's own figure of merit on its held-out record
+    (``benchmark_<convention>``, e.g. ``benchmark_rmse_mm_from_20``), for a data set that
+    has one (:attr:`Dataset.convention`) and a free run that did not diverge (a diverged
+    run has its onset among the scores instead)."""
+    if data.convention is None:
+        return {}
+    score = float(np.mean(single_run_scores(model, data.u_test, data.y_test, data.convention)))
+    return {f"benchmark_{data.convention.name}": score} if np.isfinite(score) else {}
 
 
 def method_run(configuration: Configuration, method: str, model, evaluation: Evaluation,
@@ -86,7 +98,8 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
         artifacts.update({f"control/{name}": text for name, text in control.files.items()})
         artifacts["control/stability.json"] = report.to_dict()
     metrics = {**score_metrics(evaluation), **model_metrics(facts),
-               **model_metrics({"fit_seconds": fit_seconds}, prefix="")}
+               **model_metrics({"fit_seconds": fit_seconds}, prefix=""),
+               **benchmark_metric(model, data)}
     params = {**model.resolved_params(), "warmup": configuration.warmup}
     ds, hp = configuration.dataset, configuration.hparams
     return MethodRun(

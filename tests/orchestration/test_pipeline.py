@@ -620,7 +620,8 @@ def test_a_failing_noise_check_stops_the_steps_after_clustering(resources, tmp_p
 
 
 def test_the_schedule_skips_data_sets_that_are_missing(monkeypatch, tmp_path):
-    monkeypatch.setenv("PWA_KUKA_DATA", str(tmp_path / "nowhere"))
+    for variable in ("PWA_KUKA_DATA", "PWA_TANKS_DATA", "PWA_EMPS_DATA"):
+        monkeypatch.setenv(variable, str(tmp_path / "nowhere"))
     schedule = defs.get_repository_def().get_schedule_def("sweep_schedule")
     ctx = dg.build_schedule_context(scheduled_execution_time=pd.Timestamp("2026-11-21T02:00"))
     requests = schedule(ctx)
