@@ -36,8 +36,9 @@ structures of :mod:`~.structures` and keeps what the data support:
 
 Every candidate is a row of :attr:`SearchReport.table`, with its held-out NRMSE and what
 became of it (kept, not better by ``min_gain``, diverged, skipped and why, time limit).
-A candidate whose free run diverges is skipped; when ``max_seconds`` is reached the best
-structure so far is kept and the report is flagged.
+A candidate whose free run diverges is skipped; when ``max_seconds`` is reached the search
+stops proposing, the candidates already measured compete as they are (unrefined), the best
+of them is kept and the report is flagged.
 """
 
 import logging
@@ -447,8 +448,8 @@ class _Search:
             candidates = path[-2:] + self.clustered_stage(group, specs, coupling)
             best = (lin_cost, specs, lin_models, lin_info)
             for cand_specs, cand_models in candidates:
-                if self.late():
-                    break
+                # past the time limit a candidate competes unrefined: a measured structure
+                # better than the reference is never dropped for want of time
                 cost, models, info = self.refined(group, cand_specs, cand_models, "switching")
                 if cost < best[0]:
                     best = (cost, cand_specs, models, info)
@@ -650,7 +651,11 @@ class _Search:
         refinement); returns (held-out NRMSE, models, refinement info)."""
         step = self.p.refinement_step()
         cost0 = self.cost(models, group)
-        if step is None or self.late():
+        if step is None:
+            return cost0, models, {}
+        if self.late():
+            self.record("refined", group, specs, cost0, "not refined: time limit reached",
+                        models)
             return cost0, models, {}
         models = {j: replace_p(models[j]) for j in group}
         fit_u, fit_y = [e[0] for e in self.fit_exp], [e[1] for e in self.fit_exp]

@@ -137,6 +137,30 @@ def test_time_limit_keeps_the_best_so_far_and_flags_it():
     assert np.isfinite(model.simulate(u[0], y[0])).all()
 
 
+def test_a_time_limit_after_the_proposals_keeps_the_best_measured_candidate(monkeypatch):
+    """The limit reached once the scheduled candidates are measured (simulated by setting
+    the flag there): the friction offset, better than the linear reference on the held-out
+    experiments, is kept unrefined rather than dropped for the linear model."""
+    stage = structure_search._Search.scheduled_stage
+
+    def then_late(self, *args, **kwargs):
+        path = stage(self, *args, **kwargs)
+        self.time_limited = True
+        return path
+
+    monkeypatch.setattr(structure_search._Search, "scheduled_stage", then_late)
+    u, y = friction_machine()
+    with pytest.warns(SearchTimeLimit):
+        model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    report = model.structure_search_
+    assert report.time_limited and report.linear is False
+    assert model.structure_fit_.outputs[0].n_regions == 2
+    assert report.validation_nrmse < 0.8 * report.linear_nrmse
+    unrefined = report.table[report.table.outcome == "not refined: time limit reached"]
+    assert len(unrefined) >= 1 and unrefined.validation_nrmse.min() == \
+        pytest.approx(report.validation_nrmse)
+
+
 @pytest.mark.parametrize("kwargs, message", [
     ({"forms": ["levels"]}, r"forms must be a non-empty list of \['level', 'velocity'\]"),
     ({"couplings": []}, "couplings must be a non-empty list"),
