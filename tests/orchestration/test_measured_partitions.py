@@ -1,7 +1,6 @@
 """The measured benchmarks as partitions: offered with the bundled sets, skipped with the
 variable to set where their files are not, and scored in their own convention in MLflow."""
 
-import shutil
 
 import dagster as dg
 import numpy as np
@@ -10,10 +9,9 @@ import pytest
 
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.partitions import all_keys, runnable_keys
-from pwa_pipeline.orchestration.settings import PipelineSettings
-from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+from ._resources import run_resources
 
 
 @pytest.fixture()
@@ -46,18 +44,13 @@ def test_the_tanks_are_partitions_scored_in_their_own_convention(
     keys, skipped = runnable_keys(partitions, settings)
     assert "cascaded_tanks|default" in keys and not any(k.startswith("emps|") for k in keys)
     assert skipped["emps"].startswith("no emps data: ") and "set PWA_EMPS_DATA" in skipped["emps"]
-    db = tmp_path / "mlflow.db"
-    shutil.copy(mlflow_template, db)
-    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
-                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"))
-                 .with_files(settings.hparams_path, settings.datasets_path),
-                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}")}
+    resources = run_resources(tmp_path, mlflow_template, settings)
     result = dg.materialize(list(defs.assets), partition_key="cascaded_tanks|default",
                             resources=resources)
     assert result.success
     from mlflow.tracking import MlflowClient
 
-    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    client = MlflowClient(tracking_uri=resources["mlflow"].tracking_uri)
     (experiment,) = [e for e in client.search_experiments() if "cascaded_tanks" in e.name]
     runs = {run.data.tags.get("method"): run
             for run in client.search_runs([experiment.experiment_id])}

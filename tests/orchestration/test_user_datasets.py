@@ -1,6 +1,5 @@
 """The user's own data sets: registration checks, the split, the CLI and the partitions."""
 
-import shutil
 
 import dagster as dg
 import numpy as np
@@ -11,11 +10,10 @@ from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.datasets.user import UserDataset
 from pwa_pipeline.orchestration.definitions import build_definitions, partitions_of
-from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.partitions import all_keys, runnable_keys
 from pwa_pipeline.orchestration.registry import DatasetRegistry
-from pwa_pipeline.orchestration.settings import PipelineSettings
-from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+from ._resources import run_resources
 
 COLUMNS = dict(u=("u1", "u2"), y=("y1", "y2"))
 
@@ -144,12 +142,7 @@ def test_a_registered_data_set_is_a_partition_that_runs(tmp_path, csv, mlflow_te
     keys, skipped = runnable_keys(partitions, settings, ("paper", "default"))
     assert "plant|default" in keys and "plant|paper" not in keys
     assert "has no values for 'plant'" in skipped["plant|paper"]
-    db = tmp_path / "mlflow.db"
-    shutil.copy(mlflow_template, db)
-    resources = {"io_manager": PartitionedFileIOManager(base_dir=str(tmp_path / "storage")),
-                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"))
-                 .with_files(settings.hparams_path, settings.datasets_path),
-                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{db}")}
+    resources = run_resources(tmp_path, mlflow_template, settings)
     result = dg.materialize(list(defs.assets), partition_key="plant|default",
                             resources=resources)
     model = result.asset_value("pwa_model")
