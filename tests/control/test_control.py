@@ -24,35 +24,37 @@ def default_ss(default_30db):
     return default_30db.to_state_space()
 
 
+def _friction_step(y1: float, y2: float, u1: float) -> float:
+    """y(k) of the Coulomb-friction axis from y(k−1), y(k−2), u(k−1): Δy(k) = 0.8Δy(k−1)
+    − 0.02y(k−1) + 0.5u(k−1) ∓ 0.3 by the sign of Δy(k−1)."""
+    dy = y1 - y2
+    return y1 + 0.8 * dy - 0.02 * y1 + 0.5 * u1 + (-0.3 if dy > 0 else 0.3)
+
+
 def _friction(n_exp: int = 3, n: int = 300, seed: int = 0):
-    """A Coulomb-friction axis: Δy(k) = 0.8Δy(k−1) − 0.02y(k−1) + 0.5u(k−1) ∓ 0.3 by the
-    sign of Δy(k−1) (the structured route's test system)."""
+    """A Coulomb-friction axis (:func:`_friction_step`), the structured route's test system."""
     rng = np.random.default_rng(seed)
     us, ys = [], []
     for _ in range(n_exp):
         u = rng.normal(size=(n, 1))
         y = np.zeros((n, 1))
         for k in range(2, n):
-            dy = y[k - 1, 0] - y[k - 2, 0]
-            y[k] = y[k - 1] + 0.8 * dy - 0.02 * y[k - 1] + 0.5 * u[k - 1] \
-                + (-0.3 if dy > 0 else 0.3)
+            y[k, 0] = _friction_step(y[k - 1, 0], y[k - 2, 0], u[k - 1, 0])
         us.append(u)
         ys.append(y)
     return us, ys
 
 
 def _two_axes(n_exp: int = 3, n: int = 300, seed: int = 0):
-    """Output 1 linear in u; output 2 the friction axis of :func:`_friction` driven by u2."""
+    """Output 1 linear in u; output 2 the friction axis (:func:`_friction_step`) driven by u2."""
     rng = np.random.default_rng(seed)
     us, ys = [], []
     for _ in range(n_exp):
         u = rng.normal(size=(n, 2))
         y = np.zeros((n, 2))
         for k in range(2, n):
-            dy = y[k - 1, 1] - y[k - 2, 1]
             y[k, 0] = 0.7 * y[k - 1, 0] + 0.4 * u[k - 1, 0] - 0.2 * u[k - 1, 1]
-            y[k, 1] = y[k - 1, 1] + 0.8 * dy - 0.02 * y[k - 1, 1] + 0.5 * u[k - 1, 1] \
-                + (-0.3 if dy > 0 else 0.3)
+            y[k, 1] = _friction_step(y[k - 1, 1], y[k - 2, 1], u[k - 1, 1])
         us.append(u)
         ys.append(y)
     return us, ys
