@@ -9,7 +9,7 @@ benchmark (``default``, ``output_error``) with their linear ARX twins, the struc
 command's time), the best linear ARX of orders ≤ 4 with a constant (orders chosen by the
 free run on the last fifth of the estimation record), the subspace baseline, and the
 published figures in the same convention (PUBLISHED, sources in docs/measured.md). Writes
-results/measured.csv and results/measured.md.
+results/measured.csv and results/measured.md (with the machine's load while it ran).
 
 Usage: python -m benchmarks.measured [--datasets cascaded_tanks emps]
 """
@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from sklearn.base import clone
 
-from benchmarks._common import RESULTS, Timer, write_table
+from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write_table
 from pwa_pipeline import PWARX, LinearARX, evaluate
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import MEASURED, Dataset, load_dataset
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=list(MEASURED), choices=list(MEASURED))
     args = parser.parse_args(argv)
-    hparams, rows = HParamsFile(), []
+    hparams, rows, load = HParamsFile(), [], MachineLoad()
     for name in args.datasets:
         data = load_dataset(name)
         warmup = data.convention.warmup
@@ -102,6 +102,8 @@ def main(argv: list[str] | None = None) -> None:
                  for who, value, unit in PUBLISHED[name]]
     table = pd.DataFrame(rows)
     write_table(table, "measured")
+    with open(RESULTS / "measured.md", "a") as md:  # the fit times are wall-clock seconds
+        md.write(f"\nMachine: {describe_load(load.summary())}.\n")
     print((RESULTS / "measured.md").read_text())
 
 
