@@ -35,13 +35,15 @@ class MethodRun:
 
 def benchmark_metric(model, data: Dataset) -> dict[str, float]:
     """A measured benchmark's own figure of merit on its held-out record
-    (``benchmark_<convention>``, e.g. ``benchmark_rmse_mm_from_20``), for a data set that
+    (``benchmark/<convention>``, e.g. ``benchmark/rmse_mm_from_20``), for a data set that
     has one (:attr:`Dataset.convention`) and a free run that did not diverge (a diverged
-    run has its onset among the scores instead)."""
+    run has its onset among the scores instead). Prefixed, as the per-output scores, so
+    that a run keeps its few unprefixed headline metrics and the chart view its few
+    charts."""
     if data.convention is None:
         return {}
     score = float(np.mean(single_run_scores(model, data.u_test, data.y_test, data.convention)))
-    return {f"benchmark_{data.convention.name}": score} if np.isfinite(score) else {}
+    return {f"benchmark/{data.convention.name}": score} if np.isfinite(score) else {}
 
 
 def method_run(configuration: Configuration, method: str, model, evaluation: Evaluation,

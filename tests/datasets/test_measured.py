@@ -83,7 +83,7 @@ def test_the_official_score_is_the_rmse_in_the_benchmarks_unit_after_its_window(
         pytest.approx([2.0])
     data = Dataset("emps", [y], [y], [np.zeros_like(y)], [y], ["vir"], ["qm"],
                    convention=EMPS_CONVENTION)
-    assert benchmark_metric(Offset(), data) == {"benchmark_rmse_mm_from_20":
+    assert benchmark_metric(Offset(), data) == {"benchmark/rmse_mm_from_20":
                                                 pytest.approx(2.0)}
     assert benchmark_metric(Offset(), Dataset("x", [y], [y], [y], [y], ["u"], ["y"])) == {}
 
