@@ -162,6 +162,7 @@ def _until(condition, timeout: float, what) -> None:
         time.sleep(0.5)
 
 
+@pytest.mark.slow
 @pytest.mark.distributed
 @pytest.mark.xdist_group("compose")
 @pytest.mark.filterwarnings("ignore::DeprecationWarning:gql.*")

@@ -249,6 +249,7 @@ def test_two_clients_sweeping_at_once_take_turns_and_both_complete(cluster):
     _assert_results_equal_the_reference(cluster, first + second)
 
 
+@pytest.mark.slow
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
 def test_a_worker_killed_mid_sweep_leaves_a_complete_sweep_and_no_orphan(cluster):

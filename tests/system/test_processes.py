@@ -10,6 +10,7 @@ import sys
 import time
 
 import dagster as dg
+import pytest
 
 
 def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflow_template,
@@ -61,6 +62,7 @@ def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflo
     assert statuses == [dg.DagsterRunStatus.FAILURE]
 
 
+@pytest.mark.slow
 def test_doctor_finds_a_killed_run_at_once_and_leaves_a_live_one(tmp_path, mlflow_template,
                                                                   robot):
     """SIGKILL of ``run`` in the middle of a long partition (the robot's structure, refined on
