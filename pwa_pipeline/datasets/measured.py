@@ -121,8 +121,8 @@ def load_cascaded_tanks(path: str | os.PathLike | None = None) -> Dataset:
     FileNotFoundError
         Naming the file and the official download.
     ValueError
-        When the file lacks a column or a record is not 1024 finite samples long (naming the
-        file and the column).
+        When the file is not a CSV table, lacks a column, or a record is not 1024 finite
+        samples long (naming the file and the column).
 
     References
     ----------
@@ -131,7 +131,12 @@ def load_cascaded_tanks(path: str | os.PathLike | None = None) -> Dataset:
     2016.
     """
     file = TANKS.require(path) / TANKS.files[0]
-    table = pd.read_csv(file)
+    try:
+        table = pd.read_csv(file)
+    except (ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:
+        raise ValueError(f"{file}: not a CSV table that can be read ({exc}); the "
+                         f"benchmark's file is a CSV with columns {list(TANKS_COLUMNS)} "
+                         f"({TANKS.download})") from exc
     missing = [c for c in TANKS_COLUMNS if c not in table.columns]
     if missing:
         raise ValueError(f"{file}: column(s) {missing} missing; the benchmark's file has "
@@ -152,7 +157,14 @@ def load_cascaded_tanks(path: str | os.PathLike | None = None) -> Dataset:
 def _emps_record(file: Path) -> tuple[np.ndarray, np.ndarray, float]:
     from scipy.io import loadmat
 
-    mat = loadmat(file)
+    try:
+        mat = loadmat(file)
+    except NotImplementedError as exc:  # scipy reads MATLAB v4–v7.2, not v7.3's HDF5
+        raise ValueError(f"{file}: a MATLAB file of a version scipy does not read ({exc}); "
+                         f"the benchmark's files are MATLAB v5 ({EMPS.download})") from exc
+    except (ValueError, TypeError, IndexError, OSError) as exc:
+        raise ValueError(f"{file}: not a MATLAB file that can be read ({exc}); the "
+                         f"benchmark's files are MATLAB v5 ({EMPS.download})") from exc
     missing = [v for v in EMPS_VARIABLES if v not in mat]
     if missing:
         raise ValueError(f"{file}: variable(s) {missing} missing; the benchmark's files hold "
@@ -185,7 +197,8 @@ def load_emps(path: str | os.PathLike | None = None) -> Dataset:
     FileNotFoundError
         Naming the files and the official download.
     ValueError
-        When a file lacks a variable or its variables differ in length (naming both).
+        When a file is not a MATLAB v5 file scipy reads (a v7.3 file included), lacks a
+        variable, or its variables differ in length (naming the file and the variable).
 
     References
     ----------

@@ -65,6 +65,19 @@ def test_malformed_files_name_the_file_and_the_field(tmp_path):
     _emps_mats(tmp_path, drop="qm")
     with pytest.raises(ValueError, match=r"DATA_EMPS\.mat: variable\(s\) \['qm'\] missing"):
         load_emps(tmp_path)
+    (tmp_path / "DATA_EMPS.mat").write_bytes(b"\x89HDF\r\n" + bytes(200))
+    with pytest.raises(ValueError, match=r"DATA_EMPS\.mat: not a MATLAB file that can be "
+                                         r"read .* the benchmark's files are MATLAB v5"):
+        load_emps(tmp_path)
+    header = b"MATLAB 7.3 MAT-file, HDF5 schema 1.00 .".ljust(116) + bytes(8) + b"\x00\x02IM"
+    (tmp_path / "DATA_EMPS.mat").write_bytes(header + bytes(512))  # saved with -v7.3
+    with pytest.raises(ValueError, match=r"DATA_EMPS\.mat: a MATLAB file of a version scipy "
+                                         r"does not read .*v7\.3"):
+        load_emps(tmp_path)
+    (tmp_path / "dataBenchmark.csv").write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ValueError, match=r"dataBenchmark\.csv: not a CSV table that can be "
+                                         r"read"):
+        load_cascaded_tanks(tmp_path)
     _emps_mats(tmp_path)
     data = load_emps(tmp_path)
     assert data.u_train[0].shape == (500, 1) and data.sample_time == pytest.approx(1e-3)
