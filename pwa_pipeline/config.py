@@ -4,7 +4,7 @@ The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys c
 :class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"``, ``"paper"`` or
 ``"auto"``, the classmethod that builds its step objects; ``"auto"`` is the structure search
 of :mod:`~pwa_pipeline.pwa.search.search`, ``na`` and ``nb`` its largest orders, a
-sub-table ``search`` its parameters, e.g. ``search.max_seconds = 60``), ``na``, ``nb``,
+sub-table ``search`` its parameters, e.g. ``search.max_candidates = 500``), ``na``, ``nb``,
 ``affine``, and each step's parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
 subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). A sub-table
@@ -52,7 +52,7 @@ BASELINE_KEYS = {"warmup", "subspace"}
 _STEP_TABLES = {"refinement": OutputErrorRefinement, "scheduling": SignScheduling,
                 "search": StructureSearch}
 _EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"',
-             "search": "max_seconds = 60"}
+             "search": "max_candidates = 500"}
 _PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
                  ("clustering", "min_pts"): "min_pts"}
 

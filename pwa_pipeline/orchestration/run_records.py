@@ -89,7 +89,9 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
             # the columns a reader compares first, numbers to 4 significant digits
             artifacts["structure_search.csv"] = _search_table(search.table)
             facts.update(search_linear=float(search.linear),
+                         search_budget_spent=float(search.budget_spent),
                          search_time_limited=float(search.time_limited),
+                         search_candidates=search.n_candidates,
                          search_validation_nrmse=search.validation_nrmse,
                          search_linear_nrmse=search.linear_nrmse,
                          search_seconds=search.seconds)

@@ -14,7 +14,7 @@ from .estimator import PWARX, STEPS
 from .groups import OutputGroup
 from .memory import FitMemoryError
 from .partitions import RegionMap
-from .search import SearchReport, SearchTimeLimit, StructureSearch
+from .search import SearchBudgetSpent, SearchReport, SearchTimeLimit, StructureSearch
 from .steps.boundaries import ResidualRegions
 from .steps.clustering import DBSCANClustering
 from .steps.local_models import LocalLeastSquares
@@ -23,5 +23,5 @@ from .steps.submodels import ClusterCentres, RefinedSubModels
 
 __all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
            "LocalLeastSquares", "OutputGroup", "RefinedSubModels", "RegionMap",
-           "ResidualRegions", "SVMRegions", "SearchReport", "SearchTimeLimit",
-           "StructureSearch"]
+           "ResidualRegions", "SVMRegions", "SearchBudgetSpent", "SearchReport",
+           "SearchTimeLimit", "StructureSearch"]

@@ -224,7 +224,7 @@ class PWARX(ARXModelBase):
             The largest orders tried.
         **search
             Parameters of :class:`~.search.StructureSearch` (e.g.
-            ``max_seconds=60``).
+            ``max_candidates=500``).
         """
         return cls(na=na, nb=nb, affine=True,
                    submodels=RefinedSubModels(n_refine=3, n_search=0),
@@ -413,8 +413,10 @@ class PWARX(ARXModelBase):
             raise ValueError("the structure search fits a constant term and proposes "
                              "thresholds on it: it needs affine=True (PWARX.auto sets it)")
         t0 = time.perf_counter()
+        default = PWARX.default(self.na, self.nb)
         self.structure_fit_, self.structure_search_ = self.search.search(
-            experiments, self.na, self.nb, cluster=self._cluster)
+            experiments, self.na, self.nb, cluster=self._cluster,
+            default=lambda reg: default._run_steps(reg, eq3=True))
         self.timings_["search"] = time.perf_counter() - t0
         return output_groups(self.structure_fit_.outputs), list(
             self.structure_search_.structures)

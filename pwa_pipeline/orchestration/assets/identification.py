@@ -124,7 +124,8 @@ def fit_model(context: dg.AssetExecutionContext, settings: PipelineSettings,
     pwa = configuration.pwa
     if (search := pwa.search) is not None:
         context.log.info(f"structure search: orders up to ({pwa.na}, {pwa.nb}), at most "
-                         f"{search.max_seconds:g} s (search.max_seconds)")
+                         f"{search.max_candidates} candidates (search.max_candidates; "
+                         f"{search.max_seconds:g} s as a safety net)")
     model, caches = with_caches(pwa, settings, context.log.warning)
     with forwarded(SEARCH_LOG, context.log):
         model.fit(data.u_train, data.y_train)

@@ -33,12 +33,23 @@ structures of :mod:`~.structures` and keeps what the data support:
 6. **Never worse than linear.** Per output group, the refined structure with the lowest
    held-out free-run NRMSE is kept only if it beats the refined linear reference;
    otherwise the linear model is returned, and the report says so.
+7. **Never worse than the default.** The library default :class:`~.estimator.PWARX` of the
+   largest orders (the paper's steps 2–6 on eq. (3)'s φ, with the constant and without),
+   fitted on the same experiments, replaces the search's choice when its held-out free run
+   is better: a user never gets a worse model from the search than without it.
 
 Every candidate is a row of :attr:`SearchReport.table`, with its held-out NRMSE and what
-became of it (kept, not better by ``min_gain``, diverged, skipped and why, time limit).
-A candidate whose free run diverges is skipped; when ``max_seconds`` is reached the search
-stops proposing, the candidates already measured compete as they are (unrefined), the best
-of them is kept and the report is flagged.
+became of it (kept, not better by ``min_gain``, diverged, skipped and why). A candidate
+whose free run diverges is skipped.
+
+The search is budgeted in work, not seconds, so that the same data give the same model on
+a busy or a quiet machine: it measures at most ``max_candidates`` candidate structures
+(each a least-squares fit and a held-out free run), and the refinements stop by their
+iteration count and tolerance. When the budget is spent the search stops proposing, the
+candidates already measured compete (refined as usual), the best of them is kept and the
+report says so. ``max_seconds`` is only a safety net: past it the remaining candidates
+compete unrefined, and the report warns that the result then depends on the machine's
+speed.
 """
 
 import logging
@@ -56,6 +67,7 @@ from sklearn.utils._param_validation import HasMethods, Interval, StrOptions
 from ..._typing import Float2D
 from ...regressors import build_regressors
 from ...scoring.evaluation import WARMUP
+from ..kernels.free_run import sign_region_free_run
 from ..output_error import OutputErrorRefinement, held_out, refine_outputs
 from ..output_error.simulator import FreeRuns
 from ..partitions import SignRegions
@@ -83,7 +95,13 @@ _log = logging.getLogger(SEARCH_LOG)
 
 
 class SearchTimeLimit(UserWarning):
-    """The structure search reached ``max_seconds`` and kept the best structure so far."""
+    """The structure search reached its safety net ``max_seconds`` and kept the best
+    structure so far (a result that depends on the machine's speed)."""
+
+
+class SearchBudgetSpent(UserWarning):
+    """The structure search measured ``max_candidates`` candidates and kept the best of
+    them (the same on any machine)."""
 
 
 @dataclass(frozen=True)
@@ -129,7 +147,8 @@ class SearchReport:
     Attributes
     ----------
     table : pandas.DataFrame
-        One row per candidate: ``stage`` (linear, scheduled, clustered, refined, chosen),
+        One row per candidate: ``stage`` (linear, scheduled, clustered, refined, default,
+        chosen; ``searched`` for the search's own choice when the default PWARX beat it),
         ``outputs``, ``structure`` (form, orders, regions), ``regions`` (count),
         ``validation_nrmse`` (held-out free run, mean over the outputs), ``outcome``,
         ``seconds`` (since the search started).
@@ -140,8 +159,14 @@ class SearchReport:
     linear : bool
         Whether every output kept its linear model: the search returns the linear ARX
         model (no switching structure beat it on the held-out experiments).
+    n_candidates : int
+        Candidate structures measured (least squares and a held-out free run each).
+    budget_spent : bool
+        Whether ``max_candidates`` stopped the search's proposals (the best candidate
+        measured was kept).
     time_limited : bool
-        Whether ``max_seconds`` stopped the search (the best structure so far was kept).
+        Whether the safety net ``max_seconds`` stopped the search (the best structure so
+        far was kept, unrefined where the limit came first).
     validation_nrmse : float
         The returned model's held-out free-run NRMSE (mean over outputs).
     linear_nrmse : float
@@ -153,6 +178,8 @@ class SearchReport:
     choice: str
     structures: list[str]
     linear: bool
+    n_candidates: int
+    budget_spent: bool
     time_limited: bool
     validation_nrmse: float
     linear_nrmse: float
@@ -166,7 +193,7 @@ class SearchReport:
         linear = t[t.stage == "linear"]
         best = [g.validation_nrmse.idxmin() for _, g in linear.groupby(["outputs", "outcome"])
                 if g.validation_nrmse.notna().any()]
-        decided = t.stage.isin(["clustered", "refined", "chosen"]) \
+        decided = t.stage.isin(["clustered", "refined", "default", "searched", "chosen"]) \
             | t.outcome.str.startswith("kept")
         out = t.loc[sorted(set(best) | set(t.index[decided]))].copy()
         out.loc[out.stage == "linear", "outcome"] = \
@@ -222,14 +249,47 @@ class _HeldOut:
         self.std = scored.std(axis=0)
         self.std[self.std == 0] = 1.0
         self.u, self.y = u, y
+        #: Samples scored per output.
+        self.count = int(np.maximum(self.runs.lengths - warmup, 0).sum())
 
     def nrmse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
         """Free-run NRMSE of each output of ``group`` (the others measured), inf where the
-        run diverges."""
+        run diverges: compiled (:mod:`~pwa_pipeline.pwa.kernels.free_run`) for linear and
+        sign-scheduled models, else by :meth:`simulated_sse`."""
+        if all(models[j].region_of is None or isinstance(models[j].region_of, SignRegions)
+               for j in group):
+            sse = self.compiled_sse(models, group)
+        else:
+            sse = self.simulated_sse(models, group)
+        out = np.sqrt(sse / max(self.count, 1)) / self.std[group]
+        return np.where(out > DIVERGED, np.inf, out)
+
+    def compiled_sse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
+        """Sums of squared free-run errors of linear and sign-scheduled models, by the
+        compiled kernel."""
+        runs = self.runs
+        thetas = [models[j].thetas() for j in group]
+        weights = [np.zeros((0, runs.y.shape[2] * runs.na + runs.u.shape[2] * runs.nb + 1))
+                   if models[j].region_of is None else models[j].region_of.weights
+                   for j in group]
+        n_vars = np.array([len(w) for w in weights], dtype=np.int64)
+        d = thetas[0].shape[1]
+        packed_t = np.zeros((len(group), max(len(t) for t in thetas), d))
+        packed_w = np.zeros((len(group), max(1, int(n_vars.max())), d))
+        for jj, (t, w) in enumerate(zip(thetas, weights, strict=True)):
+            packed_t[jj, :len(t)], packed_w[jj, :len(w)] = t, w
+        return sign_region_free_run(runs.y, runs.u, runs.lengths.astype(np.int64),
+                                    self.warmup, runs.na, runs.nb,
+                                    np.array(group, dtype=np.int64), packed_t, packed_w,
+                                    n_vars)
+
+    def simulated_sse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
+        """Sums of squared free-run errors of any models, every experiment in lockstep
+        (numpy, a step per sample)."""
         runs, w = self.runs, self.warmup
         ysim = runs.y.copy()
         thetas = [models[j].thetas() for j in group]
-        sse, count = np.zeros(len(group)), 0
+        sse = np.zeros(len(group))
         with np.errstate(over="ignore", invalid="ignore"):
             for k in range(w, ysim.shape[1]):
                 active = runs.lengths > k
@@ -239,11 +299,9 @@ class _HeldOut:
                     target = runs.y[:, k, j]
                     ysim[:, k, j] = np.where(active, yk, target)
                     sse[jj] += float(np.sum(np.where(active, yk - target, 0.0) ** 2))
-                count += int(active.sum())
                 if not np.all(np.isfinite(sse)):
                     return np.full(len(group), np.inf)
-        out = np.sqrt(sse / max(count, 1)) / self.std[group]
-        return np.where(out > DIVERGED, np.inf, out)
+        return sse
 
 
 class StructureSearch(BaseEstimator):
@@ -264,7 +322,8 @@ class StructureSearch(BaseEstimator):
         Relative lowering of the held-out NRMSE a richer structure must bring.
     clustering : bool, default True
         Also try the paper's clustered regions (the estimator's steps 2–6) on the chosen
-        regressors.
+        regressors, and compare the result with the default PWARX of the largest orders
+        (module doc, stage 7).
     refinement : OutputErrorRefinement, optional
         Refines the best structure and the linear reference on the free-run error. None:
         ``OutputErrorRefinement(max_iter=30, patience=5, one_step_weight=0.001)``.
@@ -279,10 +338,18 @@ class StructureSearch(BaseEstimator):
         0.689, but on the simulated machines' tuning seeds
         (``benchmarks/auto_refit_tuning.py``) it left the medians where they were and made
         one DC-motor seed worse, 0.113 to 0.168.
-    max_seconds : float, default 180
-        Time bound of the search (a fit may pass it by the candidate and the refinement
-        under way); the best structure so far is then kept and :class:`SearchTimeLimit`
-        warned.
+    max_candidates : int, default 2000
+        The search's budget of work: candidate structures measured at most (each a
+        least-squares fit and a held-out free run; the linear stage is measured whole
+        whatever the budget). Once spent, the search stops proposing, the best candidate
+        measured is kept (refined as usual) and :class:`SearchBudgetSpent` warned. The
+        default lets the robot's search (six outputs, six inputs, orders up to 2: about
+        1,120 candidates) finish.
+    max_seconds : float, default 900
+        A safety net, not the budget: past it (a fit may pass it by the candidate and the
+        refinement under way) the remaining candidates compete unrefined, the best is kept
+        and :class:`SearchTimeLimit` warned: a result that then depends on the machine's
+        speed.
     """
 
     _parameter_constraints: dict = {
@@ -295,6 +362,7 @@ class StructureSearch(BaseEstimator):
         "refinement": [HasMethods(["fit"]), None, StrOptions({"none"})],
         "validation_fraction": [Interval(Real, 0, 1, closed="neither")],
         "refit": ["boolean"],
+        "max_candidates": [Interval(Integral, 1, None, closed="left")],
         "max_seconds": [Interval(Real, 0, None, closed="neither")],
     }
 
@@ -302,7 +370,7 @@ class StructureSearch(BaseEstimator):
                  switches=SWITCHES, min_gain: float = 0.02, clustering: bool = True,
                  refinement: BaseEstimator | str | None = None,
                  validation_fraction: float = 0.2, refit: bool = False,
-                 max_seconds: float = 180.0):
+                 max_candidates: int = 2000, max_seconds: float = 900.0):
         self.forms = forms
         self.couplings = couplings
         self.max_variables = max_variables
@@ -312,6 +380,7 @@ class StructureSearch(BaseEstimator):
         self.refinement = refinement
         self.validation_fraction = validation_fraction
         self.refit = refit
+        self.max_candidates = max_candidates
         self.max_seconds = max_seconds
 
     def _check(self) -> None:
@@ -333,7 +402,8 @@ class StructureSearch(BaseEstimator):
         return self.refinement
 
     def search(self, experiments: list[tuple[Float2D, Float2D]], na: int, nb: int,
-               cluster: Callable | None = None) -> tuple[StructureFit, SearchReport]:
+               cluster: Callable | None = None, default: Callable | None = None
+               ) -> tuple[StructureFit, SearchReport]:
         """Search the structure (module doc) on the experiments, orders up to (na, nb).
 
         Parameters
@@ -345,6 +415,10 @@ class StructureSearch(BaseEstimator):
         cluster : callable, optional
             ``cluster(reg)`` → (θ (s, d, group size), the fitted steps by name): the paper's
             steps 2–6 (the estimator passes its own); None: no clustered candidate.
+        default : callable, optional
+            As ``cluster``, the library default's steps on eq. (3)'s φ: the default PWARX
+            of orders (na, nb) the result must not be worse than (the estimator passes
+            it); None: no such check.
 
         Returns
         -------
@@ -360,15 +434,16 @@ class StructureSearch(BaseEstimator):
         if na < 1 or nb < 1:
             raise ValueError(f"the structure search needs na >= 1 and nb >= 1 as its largest "
                              f"orders; got na={na}, nb={nb}")
-        return _Search(self, experiments, na, nb, cluster).run()
+        return _Search(self, experiments, na, nb, cluster, default).run()
 
 
 class _Search:
     """One run of :meth:`StructureSearch.search`."""
 
     def __init__(self, params: StructureSearch, experiments: list, na: int, nb: int,
-                 cluster: Callable | None):
-        self.p, self.na, self.nb, self.cluster = params, na, nb, cluster
+                 cluster: Callable | None, default: Callable | None):
+        self.p, self.na, self.nb = params, na, nb
+        self.cluster, self.default = cluster, default
         self.t0 = time.perf_counter()
         self.lags = na + 1
         self.warmup = max(self.lags, nb, WARMUP)
@@ -385,18 +460,44 @@ class _Search:
         self.held = _HeldOut(self.held_exp, self.lags, nb, self.warmup)
         self.names = phi_names(self.m, self.r, self.lags, nb, True)
         self.rows: list[dict] = []
+        self.n_candidates = 0
+        self.budget_spent = False
         self.time_limited = False
 
     # -- helpers --------------------------------------------------------------------------
     def elapsed(self) -> str:
-        """Seconds since the search started, against its bound, for the progress lines."""
-        return f"{time.perf_counter() - self.t0:.0f} of at most {self.p.max_seconds:g} s"
+        """Candidates measured against the budget and seconds so far, for the progress
+        lines."""
+        return (f"{self.n_candidates} of at most {self.p.max_candidates} candidates, "
+                f"{time.perf_counter() - self.t0:.0f} s")
 
     def late(self) -> bool:
-        """Whether the time bound has passed (sets the flag)."""
+        """Whether the safety net ``max_seconds`` has passed (sets the flag)."""
         if time.perf_counter() - self.t0 > self.p.max_seconds:
             self.time_limited = True
         return self.time_limited
+
+    def stopped(self) -> bool:
+        """Whether the search stops proposing: its budget of candidates spent, or the
+        safety net passed (sets the flags)."""
+        if self.n_candidates >= self.p.max_candidates:
+            self.budget_spent = True
+        return self.late() or self.budget_spent
+
+    def stop_reason(self) -> str:
+        """Why the search stopped proposing, as a clause for the report ("" if it did
+        not)."""
+        if self.time_limited:
+            return (f"; stopped by the time limit (safety net) of {self.p.max_seconds:g} s "
+                    f"after {self.n_candidates} candidates")
+        if self.budget_spent:
+            return f"; stopped by the budget of {self.p.max_candidates} candidates"
+        return ""
+
+    def measure(self, models: dict, group: list[int]) -> float:
+        """A new candidate's held-out NRMSE, counted against the budget."""
+        self.n_candidates += 1
+        return self.cost(models, group)
 
     def record(self, stage: str, group: list[int], specs: dict, cost: float, outcome: str,
                models: dict | None = None) -> None:
@@ -455,8 +556,8 @@ class _Search:
                     best = (cost, cand_specs, models, info)
             keep = best[1] is not specs
             outcome = ("chosen: beats the linear model on the held-out experiments" if keep
-                       else "chosen: linear (no switching structure beat it on the held-out "
-                            "experiments)")
+                       else "chosen: linear (no switching structure measured beat it on the "
+                            "held-out experiments" + self.stop_reason() + ")")
             final_costs.append(best[0])
             best_specs, best_models = best[1], best[2]
             chosen.update(best_models)
@@ -472,26 +573,43 @@ class _Search:
                          f"linear reference {lin_cost:#.4g}.")
             _log.info(f"structure search: {kept} (held-out NRMSE {final_costs[-1]:#.4g}, "
                       f"linear {lin_cost:#.4g}; {self.elapsed()})")
-        if self.p.refit and not self.late():
-            chosen = self.refit(groups, chosen)
-        all_linear = all(o.structure == "linear" for o in chosen.values())
         weights = [len(g) for g in groups]
         final = float(np.average(final_costs, weights=weights))
         lin = float(np.average(lin_costs, weights=weights))
+        default = self.default_stage(final)
+        if default is not None:
+            final, models, text = default
+            groups, chosen = [list(range(self.m))], models
+            described = dict.fromkeys(range(self.m), text)
+            notes.append(f"The default PWARX ({text}) beats the search's choice on the "
+                         f"held-out experiments: kept, held-out free-run NRMSE {final:#.4g}.")
+        if self.p.refit and not self.late():
+            chosen = self.refit(groups, chosen)
+        all_linear = all(o.structure == "linear" for o in chosen.values())
         outputs = ("One model for all outputs (joint)" if coupling == "joint"
                    else "One model per output (decoupled)")
         choice = (f"{outputs}; {self.split}. "
                   + ("Linear ARX: no switching structure beat it. " if all_linear else "")
                   + " ".join(notes))
         if self.time_limited:
-            choice += f" Time limit of {self.p.max_seconds:g} s reached: best so far kept."
-            warnings.warn(f"the structure search reached its time limit of "
-                          f"{self.p.max_seconds:g} s and kept the best structure so far",
+            choice += (f" Time limit (safety net) of {self.p.max_seconds:g} s reached after "
+                       f"{self.n_candidates} candidates: the best so far kept, a result that "
+                       f"depends on the machine's speed (raise max_seconds).")
+            warnings.warn(f"the structure search reached its time limit (safety net) of "
+                          f"{self.p.max_seconds:g} s after {self.n_candidates} candidates "
+                          f"and kept the best structure so far",
                           SearchTimeLimit, stacklevel=4)
+        elif self.budget_spent:
+            choice += (f" Budget of {self.p.max_candidates} candidates spent: the best "
+                       f"measured kept (raise max_candidates to search further).")
+            warnings.warn(f"the structure search measured its budget of "
+                          f"{self.p.max_candidates} candidates (max_candidates) and kept "
+                          f"the best of them", SearchBudgetSpent, stacklevel=4)
         seconds = time.perf_counter() - self.t0
         report = SearchReport(table=pd.DataFrame(self.rows), choice=choice,
                               structures=[described[j] for j in range(self.m)],
-                              linear=all_linear, time_limited=self.time_limited,
+                              linear=all_linear, n_candidates=self.n_candidates,
+                              budget_spent=self.budget_spent, time_limited=self.time_limited,
                               validation_nrmse=final, linear_nrmse=lin, seconds=seconds)
         n_val = self.n_experiments - self.n_fit
         fit = StructureFit(
@@ -514,13 +632,13 @@ class _Search:
                 if "decoupled" in self.p.couplings:
                     for j in everything:
                         models = {j: self.model(j, spec, "decoupled")}
-                        cost = self.cost(models, [j])
+                        cost = self.measure(models, [j])
                         self.record("linear", [j], specs, cost, "decoupled", models)
                         if cost < per_output.get(j, (None, None, np.inf))[2]:
                             per_output[j] = (spec, models[j], cost)
                 if "joint" in self.p.couplings:
                     models = {j: self.model(j, spec, "joint") for j in everything}
-                    cost = self.cost(models, everything)
+                    cost = self.measure(models, everything)
                     self.record("linear", everything, specs, cost, "joint", models)
                     if joint is None or cost < joint[0]:
                         joint = (cost, {j: (spec, models[j]) for j in everything})
@@ -589,14 +707,14 @@ class _Search:
         for j in group:
             pool = self.variables(j, coupling)
             for _ in range(self.p.max_variables):
-                if self.late():
+                if self.stopped():
                     break
                 best = None
                 for var in pool:
                     if var.name in {v.name for v in specs[j].variables}:
                         continue
                     for switch in self.p.switches:
-                        if self.late():
+                        if self.stopped():
                             break
                         spec = replace(specs[j], variables=specs[j].variables + (var,),
                                        switch=switch)
@@ -606,7 +724,7 @@ class _Search:
                             self.record("scheduled", group, tried, np.nan,
                                         "skipped: a region holds too few training rows")
                             continue
-                        cost = self.cost(trial, group)
+                        cost = self.measure(trial, group)
                         outcome = "diverged" if not np.isfinite(cost) else "tried"
                         self.record("scheduled", group, tried, cost, outcome, trial)
                         if np.isfinite(cost) and (best is None or cost < best[0]):
@@ -625,7 +743,7 @@ class _Search:
                         ) -> list[tuple[dict, dict]]:
         """The paper's clustered regions on the group's regressors (those of its linear
         reference): a candidate beside the scheduled ones, or none."""
-        if not self.p.clustering or self.cluster is None or self.late():
+        if not self.p.clustering or self.cluster is None or self.stopped():
             return []
         base = specs[group[0]]
         spec = OutputSpec(base.form, base.na, base.nb, switch="clustered")
@@ -639,12 +757,61 @@ class _Search:
             self.record("clustered", group, tried, np.nan, f"skipped: {exc}")
             return []
         s = trial[group[0]].n_regions
-        cost = self.cost(trial, group)
+        cost = self.measure(trial, group)
         useful = bool(np.isfinite(cost)) and s > 1
         self.record("clustered", group, tried, cost,
                     "candidate: refined next" if useful else
                     ("one cluster: the linear model" if s == 1 else "diverged"), trial)
         return [(tried, trial)] if useful else []
+
+    def default_stage(self, final: float) -> tuple[float, dict, str] | None:
+        """The library default :class:`~.estimator.PWARX` of the largest orders (level form,
+        joint outputs, the paper's steps 2–6 on eq. (3)'s φ), with the constant and
+        without, fitted on the fitting experiments: the search's result is never worse on
+        the held-out experiments than the model a user gets without it. Measured whatever
+        the budget (as the linear stage); returns (held-out NRMSE, models by output,
+        structure in words) of the better one when it beats ``final``, else None."""
+        if not self.p.clustering or self.default is None or self.late():
+            return None
+        _log.info(f"structure search: the default PWARX of orders ({self.na}, {self.nb}) "
+                  f"({self.elapsed()})")
+        group = list(range(self.m))
+        best = None
+        for affine in (False, True):
+            spec = OutputSpec("level", self.na, self.nb, switch="clustered")
+            label = "default PWARX" + (" with a constant" if affine else "")
+            tried = dict.fromkeys(group, spec)
+            parts = {}
+            for j in group:
+                M, c, names = output_regressors(j, self.m, self.r, self.na, self.nb, True,
+                                                "level", "joint", phi_lags=self.lags,
+                                                phi_nb=self.nb)
+                parts[j] = (M, c, names) if affine else (M[:-1], c, names[:-1])
+            try:
+                trial = clustered_models(group, self.reg, parts, self.default)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                self.record("default", group, tried, np.nan, f"{label}: skipped: {exc}")
+                continue
+            cost = self.measure(trial, group)
+            s = trial[0].n_regions
+            text = (f"level ({self.na}, {self.nb}){' with a constant' if affine else ''}, "
+                    f"clustered ({s} regions)")
+            better = bool(cost < final) and (best is None or cost < best[0])
+            self.record("default", group, tried, cost,
+                        f"{label}: " + ("beats the search's choice" if cost < final
+                                        else "not better than the search's choice"), trial)
+            if better:
+                best = (cost, trial, text)
+        if best is not None:
+            for row in self.rows:  # one chosen row: the search's own choice is superseded
+                if row["stage"] == "chosen":
+                    row["stage"] = "searched"
+                    row["outcome"] = "superseded by the default PWARX: " + row["outcome"]
+            self.record("chosen", group, dict.fromkeys(
+                group, OutputSpec("level", self.na, self.nb, switch="clustered")), best[0],
+                "chosen: the default PWARX, better than the search's structures on the "
+                "held-out experiments", best[1])
+        return best
 
     def refined(self, group: list[int], specs: dict, models: dict, label: str):
         """The group's models refined on the free-run error (as given without a

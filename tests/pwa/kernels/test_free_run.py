@@ -1,0 +1,63 @@
+"""The compiled held-out free run of the structure search equals its numpy loop."""
+
+import numpy as np
+import pytest
+
+from pwa_pipeline.pwa.partitions import SignRegions
+from pwa_pipeline.pwa.search.search import _HeldOut
+from pwa_pipeline.pwa.structures import OutputModel, output_regressors
+
+
+def _experiments(seed: int, lengths=(120, 90, 150), m: int = 2, r: int = 2):
+    rng = np.random.default_rng(seed)
+    out = []
+    for n in lengths:
+        u = rng.uniform(-1, 1, (n, r))
+        y = np.zeros((n, m))
+        for k in range(2, n):
+            y[k] = 0.6 * y[k - 1] - 0.1 * y[k - 2] + 0.4 * u[k - 1] \
+                + 0.1 * np.sign(y[k - 1] - y[k - 2])
+        out.append((u, y + 0.01 * rng.standard_normal((n, m))))
+    return out
+
+
+def _model(j: int, lags: int, nb: int, n_vars: int, rng, scale: float = 0.3,
+           form: str = "level"):
+    M, c, names = output_regressors(j, 2, 2, lags - 1, nb, True, form, "joint",
+                                    phi_lags=lags, phi_nb=nb)
+    if n_vars == 0:
+        om = OutputModel(M, c, np.zeros(len(names), bool), 1, None, "linear", names)
+    else:
+        sign = SignRegions(rng.standard_normal((n_vars, M.shape[1])))
+        om = OutputModel(M, c, np.ones(len(names), bool), sign.n_regions_, sign, "all",
+                         names)
+    om.p = scale * rng.standard_normal(om.n_params)
+    return om
+
+
+@pytest.mark.parametrize("n_vars, form", [((0, 0), "level"), ((1, 2), "level"),
+                                           ((2, 0), "velocity"), ((3, 1), "level")])
+def test_the_compiled_free_run_equals_the_numpy_loop(n_vars, form):
+    lags, nb = 3, 2
+    held = _HeldOut(_experiments(0), lags, nb, warmup=5)
+    rng = np.random.default_rng(1)
+    models = {j: _model(j, lags, nb, n_vars[j], rng, scale=0.1, form=form) for j in (0, 1)}
+    for group in ([0], [1], [0, 1]):
+        compiled = held.compiled_sse(models, group)
+        loop = held.simulated_sse(models, group)
+        assert np.all(np.isfinite(loop)) and np.all(loop > 0)
+        assert np.all(np.sqrt(loop / held.count) / held.std[group] < 10)  # not diverged
+        np.testing.assert_allclose(compiled, loop, rtol=1e-10)
+        np.testing.assert_allclose(held.nrmse(models, group),
+                                   np.sqrt(loop / held.count) / held.std[group], rtol=1e-10)
+
+
+def test_a_diverging_free_run_is_inf_in_both():
+    """A run that overflows is inf in both, for every output of the group."""
+    lags, nb = 3, 2
+    held = _HeldOut(_experiments(2), lags, nb, warmup=5)
+    rng = np.random.default_rng(3)
+    models = {j: _model(j, lags, nb, 1, rng, scale=50.0) for j in (0, 1)}
+    assert np.all(np.isinf(held.simulated_sse(models, [0, 1])))
+    assert np.all(np.isinf(held.compiled_sse(models, [0, 1])))
+    assert np.all(np.isinf(held.nrmse(models, [0, 1])))
