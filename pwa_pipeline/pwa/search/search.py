@@ -88,6 +88,8 @@ SWITCHES = ("offset", "all")
 QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
 #: Held-out NRMSE above which a free run counts as diverged (as the evaluation's).
 DIVERGED = 10.0
+#: Hinge steps at most per kept oblique boundary (:meth:`_Search.hinge`).
+HINGE_STEPS = 3
 #: Fewest training rows a scheduled region needs per parameter it switches.
 ROWS_PER_PARAMETER = 3
 #: The standard-library logger of the search's progress: a line per stage at INFO.
@@ -321,6 +323,11 @@ class StructureSearch(BaseEstimator):
     switches : list of {"offset", "all"}, default both
     min_gain : float, default 0.02
         Relative lowering of the held-out NRMSE a richer structure must bring.
+    oblique : bool, default True
+        Also propose oblique boundaries: thresholds of each output's linear one-step
+        prediction ŷ = θᵀφ (a level a combination of outputs and inputs reaches), and
+        move a kept one to the hinge of its two pieces (Breiman 1993), where a continuous
+        nonlinearity (a saturation, an overflow) switches.
     clustering : bool, default True
         Also try the paper's clustered regions (the estimator's steps 2–6) on the chosen
         regressors, and compare the result with the default PWARX of the largest orders
@@ -359,6 +366,7 @@ class StructureSearch(BaseEstimator):
         "max_variables": [Interval(Integral, 0, 4, closed="both")],
         "switches": [list, tuple],
         "min_gain": [Interval(Real, 0, 1, closed="left")],
+        "oblique": ["boolean"],
         "clustering": ["boolean"],
         "refinement": [HasMethods(["fit"]), None, StrOptions({"none"})],
         "validation_fraction": [Interval(Real, 0, 1, closed="neither")],
@@ -368,7 +376,8 @@ class StructureSearch(BaseEstimator):
     }
 
     def __init__(self, forms=FORMS, couplings=COUPLINGS, max_variables: int = 2,
-                 switches=SWITCHES, min_gain: float = 0.02, clustering: bool = True,
+                 switches=SWITCHES, min_gain: float = 0.02, oblique: bool = True,
+                 clustering: bool = True,
                  refinement: BaseEstimator | str | None = None,
                  validation_fraction: float = 0.2, refit: bool = False,
                  max_candidates: int = 2000, max_seconds: float = 900.0):
@@ -377,6 +386,7 @@ class StructureSearch(BaseEstimator):
         self.max_variables = max_variables
         self.switches = switches
         self.min_gain = min_gain
+        self.oblique = oblique
         self.clustering = clustering
         self.refinement = refinement
         self.validation_fraction = validation_fraction
@@ -657,8 +667,10 @@ class _Search:
         coupling = min(finite, key=finite.get)
         return best[coupling], coupling
 
-    def variables(self, j: int, coupling: str) -> list[Variable]:
-        """The scheduling variables output j's regions may read."""
+    def variables(self, j: int, coupling: str, linear: dict[int, OutputModel]
+                  ) -> list[Variable]:
+        """The scheduling variables output j's regions may read (``linear``: the group's
+        linear reference models, whose one-step predictions give the oblique ones)."""
         out = []
         names, data = self.names, self.reg.phi
         const = np.zeros(len(names))
@@ -689,6 +701,15 @@ class _Search:
             thresholds(u1)
             if self.nb >= 2:
                 out.append(Variable(f"Δu{q + 1}(k-1) > 0", unit(u1) - unit(f"u{q + 1}(k-2)")))
+        if self.p.oblique:
+            # thresholds of the linear one-step prediction ŷ_q(k) = θ_qᵀφ(k): a boundary
+            # that a combination of levels and inputs reaches (an overflow, a saturation)
+            for q in own:
+                theta = linear[q].thetas()[0]
+                predicted = data @ theta
+                for t in np.unique(np.round(np.quantile(predicted, QUANTILES), 12)):
+                    w = theta - t * const
+                    out.append(Variable(f"ŷ{q + 1}: {oblique_name(w, names)}", w))
         return out
 
     def enough_rows(self, om: OutputModel) -> bool:
@@ -703,10 +724,11 @@ class _Search:
         kept in turn (specs and least-squares models by output), each with one variable
         more than the one before."""
         specs, models = dict(specs), dict(models)
+        linear = dict(models)
         path = []
         current = self.cost(models, group)
         for j in group:
-            pool = self.variables(j, coupling)
+            pool = self.variables(j, coupling, linear)
             for _ in range(self.p.max_variables):
                 if self.stopped():
                     break
@@ -734,11 +756,48 @@ class _Search:
                     break
                 current = best[0]
                 specs[j], models[j] = best[1], best[2]
-                path.append((dict(specs), dict(models)))
                 self.record("scheduled", group, specs, current,
                             f"kept for y{j + 1}: lowers the held-out NRMSE by "
                             f"{self.p.min_gain:.0%} or more", models)
+                if self.p.oblique and len(specs[j].variables) == 1:
+                    current = self.hinge(group, j, specs, models, coupling, current)
+                path.append((dict(specs), dict(models)))
         return path
+
+    def hinge(self, group: list[int], j: int, specs: dict, models: dict, coupling: str,
+              current: float) -> float:
+        """Breiman's hinge finding on output j's one boundary: two affine pieces of a
+        continuous map meet where θ₁ᵀφ = θ₀ᵀφ, so the boundary is moved there
+        (w ← θ₁ − θ₀ over φ) and both pieces refitted, while the held-out NRMSE falls by
+        ``min_gain`` (at most :data:`HINGE_STEPS` times). A discontinuous switch (a
+        friction offset) gains nothing and keeps its boundary. Updates ``specs[j]`` and
+        ``models[j]`` in place; returns the held-out NRMSE."""
+        for _ in range(HINGE_STEPS):
+            if self.stopped():
+                break
+            thetas = models[j].thetas()
+            w = thetas[1] - thetas[0]
+            if not np.any(w[:-1]):
+                break
+            if w[np.argmax(np.abs(w[:-1]))] < 0:  # either side may be region 1: read w > 0
+                w = -w
+            var = Variable(f"hinge of y{j + 1}: {oblique_name(w, self.names)}", w)
+            spec = replace(specs[j], variables=(var,))
+            trial = {**models, j: self.model(j, spec, coupling)}
+            tried = {**specs, j: spec}
+            if not self.enough_rows(trial[j]):
+                self.record("scheduled", group, tried, np.nan,
+                            "skipped: a region holds too few training rows")
+                break
+            cost = self.measure(trial, group)
+            better = bool(np.isfinite(cost)) and cost < current * (1 - self.p.min_gain)
+            self.record("scheduled", group, tried, cost,
+                        f"kept for y{j + 1}: the hinge of its two pieces" if better
+                        else "hinge tried: not better", trial)
+            if not better:
+                break
+            current, specs[j], models[j] = cost, spec, trial[j]
+        return current
 
     def clustered_stage(self, group: list[int], specs: dict, coupling: str
                         ) -> list[tuple[dict, dict]]:
@@ -887,6 +946,27 @@ class _Search:
                 assign_params(models, group, res.thetas)
             out.update(models)
         return out
+
+
+def oblique_name(w: np.ndarray, names: list[str], terms: int = 4) -> str:
+    """An oblique boundary wᵀφ > 0 in words, scaled so that its largest coefficient is ±1,
+    the constant moved to the right and the ``terms`` largest entries shown, e.g.
+    ``"y1(k-1) + 0.625·u1(k-1) > 1.25"``."""
+    coef, constant = w[:-1], w[-1]
+    scale = np.max(np.abs(coef))
+    if scale == 0:
+        return f"{constant:.4g} > 0"
+    coef, constant = coef / scale, constant / scale
+    order = [i for i in np.argsort(-np.abs(coef), kind="stable") if coef[i] != 0][:terms]
+    text = ""
+    for n, i in enumerate(order):
+        c = coef[i]
+        sign = ("-" if c < 0 else "") if n == 0 else (" - " if c < 0 else " + ")
+        size = "" if np.isclose(abs(c), 1) else f"{abs(c):.3g}·"
+        text += f"{sign}{size}{names[i]}"
+    if np.count_nonzero(coef) > terms:
+        text += " + …"
+    return f"{text} > {-constant:.4g}"
 
 
 def _outputs(group: list[int]) -> str:
