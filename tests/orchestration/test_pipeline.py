@@ -529,7 +529,15 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert model.search.max_variables == 1 and not report.time_limited
     page_meta = materialization(result, "pwa_model").metadata
     page = page_meta["structure search"].value
-    assert page.startswith(f"{len(report.table)} candidates tried") and "| chosen" in page
+    assert page.startswith(f"{report.n_candidates} candidates measured in ") \
+        and "| chosen" in page
+    # every row of a measured candidate counted: the linear and scheduled ones, not the
+    # rows that only say a variable was kept or a candidate skipped
+    table = report.table
+    summary_rows = table.outcome.str.contains("lowers the held-out NRMSE") \
+        | table.outcome.str.startswith("skipped")
+    assert report.n_candidates == (table.stage.isin(["linear", "scheduled"])
+                                   & ~summary_rows).sum() > 10
     client, runs = _runs(resources, "hure_vasak")
     pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
     assert pwa_run.data.params["search__max_variables"] == "1"
@@ -544,6 +552,8 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
                                rtol=5e-4)
     assert pwa_run.data.metrics["model/search_linear_nrmse"] == pytest.approx(
         report.linear_nrmse, rel=1e-3)
+    assert pwa_run.data.metrics["model/search_candidates"] == report.n_candidates
+    assert pwa_run.data.metrics["model/search_budget_spent"] == 0.0
     assert page_meta["structure chosen"].value == report.choice
     assert page_meta["structure per output"].value.count("level (1, 1)") == 2
     # the export works for a searched model too, and the registered model simulates as it

@@ -346,7 +346,8 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
             rows["held-out NRMSE"].notna(), None)
         found |= {"structure chosen": dg.MetadataValue.md(report.choice),
                   "structure search": dg.MetadataValue.md(
-                      f"{len(report.table)} candidates tried in {report.seconds:.1f} s; those "
+                      f"{report.n_candidates} candidates measured in {report.seconds:.1f} s"
+                      f"{' (its budget: stopped there)' if report.budget_spent else ''}; those "
                       f"kept, refined and chosen (every candidate is in the MLflow run's "
                       f"`structure_search.csv`):\n\n"
                       f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}

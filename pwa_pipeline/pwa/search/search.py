@@ -344,7 +344,7 @@ class StructureSearch(BaseEstimator):
         by default: on the robot's training experiments (fitted on 0–58, scored on 59–65;
         ``benchmarks/robot_auto_tuning.py``) it lowered the free-run NRMSE from 0.700 to
         0.689, but on the simulated machines' tuning seeds
-        (``benchmarks/auto_refit_tuning.py``) it left the medians where they were and made
+        (``benchmarks/auto_tuning.py``) it left the medians where they were and made
         one DC-motor seed worse, 0.113 to 0.168.
     max_candidates : int, default 2000
         The search's budget of work: candidate structures measured at most (each a
@@ -581,7 +581,8 @@ class _Search:
                     else "")
             kept = "; ".join(f"y{j + 1}: {described[j]}" for j in group)
             notes.append(f"{kept}. Held-out free-run NRMSE {final_costs[-1]:#.4g}, refined "
-                         f"linear reference {lin_cost:#.4g}.")
+                         f"linear reference {lin_cost:#.4g}." + ("" if keep else
+                                                                 self.runner_up(group)))
             _log.info(f"structure search: {kept} (held-out NRMSE {final_costs[-1]:#.4g}, "
                       f"linear {lin_cost:#.4g}; {self.elapsed()})")
         weights = [len(g) for g in groups]
@@ -741,13 +742,10 @@ class _Search:
                             break
                         spec = replace(specs[j], variables=specs[j].variables + (var,),
                                        switch=switch)
-                        trial = {**models, j: self.model(j, spec, coupling)}
-                        tried = {**specs, j: spec}
-                        if not self.enough_rows(trial[j]):
-                            self.record("scheduled", group, tried, np.nan,
-                                        "skipped: a region holds too few training rows")
+                        measured = self.try_spec(group, j, specs, models, spec, coupling)
+                        if measured is None:
                             continue
-                        cost = self.measure(trial, group)
+                        cost, trial, tried = measured
                         outcome = "diverged" if not np.isfinite(cost) else "tried"
                         self.record("scheduled", group, tried, cost, outcome, trial)
                         if np.isfinite(cost) and (best is None or cost < best[0]):
@@ -763,6 +761,19 @@ class _Search:
                     current = self.hinge(group, j, specs, models, coupling, current)
                 path.append((dict(specs), dict(models)))
         return path
+
+    def try_spec(self, group: list[int], j: int, specs: dict, models: dict,
+                 spec: OutputSpec, coupling: str) -> tuple[float, dict, dict] | None:
+        """Output j's least-squares model of ``spec`` beside the group's others, measured:
+        (held-out NRMSE, models, specs), or None (recorded as skipped) when one of its
+        regions holds too few training rows."""
+        trial = {**models, j: self.model(j, spec, coupling)}
+        tried = {**specs, j: spec}
+        if not self.enough_rows(trial[j]):
+            self.record("scheduled", group, tried, np.nan,
+                        "skipped: a region holds too few training rows")
+            return None
+        return self.measure(trial, group), trial, tried
 
     def hinge(self, group: list[int], j: int, specs: dict, models: dict, coupling: str,
               current: float) -> float:
@@ -783,13 +794,10 @@ class _Search:
                 w = -w
             var = Variable(f"hinge of y{j + 1}: {oblique_name(w, self.names)}", w)
             spec = replace(specs[j], variables=(var,))
-            trial = {**models, j: self.model(j, spec, coupling)}
-            tried = {**specs, j: spec}
-            if not self.enough_rows(trial[j]):
-                self.record("scheduled", group, tried, np.nan,
-                            "skipped: a region holds too few training rows")
+            measured = self.try_spec(group, j, specs, models, spec, coupling)
+            if measured is None:
                 break
-            cost = self.measure(trial, group)
+            cost, trial, tried = measured
             better = bool(np.isfinite(cost)) and cost < current * (1 - self.p.min_gain)
             self.record("scheduled", group, tried, cost,
                         f"kept for y{j + 1}: the hinge of its two pieces" if better
@@ -823,6 +831,21 @@ class _Search:
                     "candidate: refined next" if useful else
                     ("one cluster: the linear model" if s == 1 else "diverged"), trial)
         return [(tried, trial)] if useful else []
+
+    def runner_up(self, group: list[int]) -> str:
+        """The best switching candidate the group's linear model beat, in a sentence (or
+        that none was measured)."""
+        rows = [r for r in self.rows if r["outputs"] == _outputs(group)
+                and r["stage"] in ("scheduled", "clustered", "refined")
+                and not all(part.endswith("linear") for part in r["structure"].split("; "))
+                and np.isfinite(r["validation_nrmse"])]
+        if not rows:
+            reason = self.stop_reason().removeprefix("; ")
+            return " No switching candidate was measured" + (f" ({reason})." if reason
+                                                            else ".")
+        best = min(rows, key=lambda r: r["validation_nrmse"])
+        return (f" The best switching candidate measured, {best['structure']}, had "
+                f"{best['validation_nrmse']:#.4g}.")
 
     def default_stage(self, final: float) -> tuple[float, dict, str] | None:
         """The library default :class:`~.estimator.PWARX` of the largest orders (level form,

@@ -156,6 +156,17 @@ def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
     assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert "Linear ARX: no switching structure beat it" in report.choice
     assert report.validation_nrmse == report.linear_nrmse
+    # with the best switching candidate's number, the one the table lists
+    import re
+    table = report.table
+    switching = table[table.stage.isin(["scheduled", "clustered", "refined"])
+                      & ~table.structure.str.endswith("linear")]
+    best = switching.loc[switching.validation_nrmse.idxmin()]
+    found = re.search(r"The best switching candidate measured, (.+), had ([0-9.]+)\.",
+                      report.choice)
+    assert found and found.group(1) == best.structure
+    assert float(found.group(2)) == pytest.approx(best.validation_nrmse, rel=1e-3)
+    assert float(found.group(2)) >= report.linear_nrmse
 
 
 def test_the_linear_fallback_wins_over_a_switching_structure_worse_on_held_out_data(
@@ -251,6 +262,8 @@ def test_a_spent_budget_on_a_linear_result_says_why_linear_was_kept():
     chosen = model.structure_search_.table.query("stage == 'chosen'").outcome.item()
     assert chosen == ("chosen: linear (no switching structure measured beat it on the held-out "
                       "experiments; stopped by the budget of 4 candidates)")
+    assert "No switching candidate was measured (stopped by the budget of 4 candidates)." \
+        in model.structure_search_.choice
 
 
 def test_the_same_data_give_the_same_model_on_a_busy_machine():
