@@ -28,6 +28,8 @@ from .._typing import Float2D
 
 #: A region as rows (G, q) of G φ ≤ q over φ; None for a region that is never chosen.
 Halfspaces = tuple[Float2D, np.ndarray] | None
+#: A region map's compiled form (:meth:`RegionMap.compiled`): kind, W (v, D), b (v,).
+CompiledForm = tuple[str, Float2D, np.ndarray]
 
 
 class RegionMap(ABC):
@@ -49,6 +51,13 @@ class RegionMap(ABC):
         """Each region as (G, q) with region i = {φ : G φ ≤ q} over φ's D entries (the
         constant included), one entry per region, None for a region that is never chosen;
         ties go to the lowest-numbered region."""
+
+    def compiled(self) -> CompiledForm | None:
+        """The map as the compiled free runs read it (:mod:`~pwa_pipeline.pwa.kernels`):
+        ``("sign", W, b)``, region Σ_v 2^v [W_vφ + b_v > 0], or ``("argmax", W, b)``,
+        region argmax_v W_vφ + b_v (the first on ties); None (the default) when it has no
+        such form, and the free runs call :meth:`predict`."""
+        return None
 
 
 def argmax_halfspaces(coef: Float2D, intercept: np.ndarray) -> list[Halfspaces]:
@@ -92,6 +101,9 @@ class SingleRegion(RegionMap):
     def predict(self, phi: Float2D) -> np.ndarray:
         return np.zeros(len(phi), dtype=int)
 
+    def compiled(self) -> CompiledForm:
+        return "sign", np.zeros((0, self.n_features)), np.zeros(0)
+
     def halfspaces(self) -> list[Halfspaces]:
         return [(np.zeros((0, self.n_features)), np.zeros(0))]
 
@@ -123,6 +135,9 @@ class SignRegions(RegionMap):
         bits = (phi @ self.weights.T) > 0
         return bits @ (1 << np.arange(self.weights.shape[0]))
 
+    def compiled(self) -> CompiledForm:
+        return "sign", self.weights, np.zeros(len(self.weights))
+
     def halfspaces(self) -> list[Halfspaces]:
         """Region of bits β: w_vᵀφ ≤ 0 where β_v = 0, −w_vᵀφ ≤ 0 where β_v = 1."""
         v = self.weights.shape[0]
@@ -152,6 +167,11 @@ class ProjectedRegions(RegionMap):
 
     def predict(self, phi: Float2D) -> np.ndarray:
         return self.regions.predict(phi @ self.M.T)
+
+    def compiled(self) -> CompiledForm | None:
+        """The inner map's form over ψ = M φ, as a form over φ."""
+        inner = self.regions.compiled()
+        return None if inner is None else (inner[0], inner[1] @ self.M, inner[2])
 
     def halfspaces(self) -> list[Halfspaces]:
         """{ψ : G ψ ≤ q} is {φ : G M φ ≤ q}."""

@@ -7,19 +7,58 @@ robot's 13 held-out experiments, where the search measures about 1,100 candidate
 compiled pass per experiment takes a few milliseconds. Compiled on first use and cached on
 disk (``cache=True``, next to this file).
 
-The candidates it runs are those of linear and sign-scheduled regions
-(:class:`~pwa_pipeline.pwa.partitions.SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]); other region
-maps (the clusters' SVM) are simulated by the search's numpy loop.
+The candidates it runs are those whose region map has a compiled form
+(:func:`~pwa_pipeline.pwa.partitions.compiled_form`): linear, sign-scheduled
+(:class:`~pwa_pipeline.pwa.partitions.SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]) and the
+clusters' SVM regions (an argmax of affine scores); others are simulated by the search's
+numpy loop.
 """
 
 import numpy as np
 from numba import njit
 
+#: Region kinds of the kernels: the signs of scheduling variables, or an argmax of scores.
+SIGN, ARGMAX = 0, 1
+
+
+def pack_regions(forms: list[tuple[str, np.ndarray, np.ndarray]], d: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The kernels' region arrays (kinds, weights (G, V, D), bias (G, V), n_vars) of each
+    simulated output's compiled form (:meth:`~pwa_pipeline.pwa.partitions.RegionMap.compiled`),
+    unused rows zero."""
+    v = max(1, max(len(w) for _, w, _ in forms))
+    kinds = np.array([SIGN if kind == "sign" else ARGMAX for kind, _, _ in forms],
+                     dtype=np.int64)
+    weights, bias = np.zeros((len(forms), v, d)), np.zeros((len(forms), v))
+    for g, (_, w, b) in enumerate(forms):
+        weights[g, :len(w)], bias[g, :len(b)] = w, b
+    return kinds, weights, bias, np.array([len(w) for _, w, _ in forms], dtype=np.int64)
+
 
 @njit(nogil=True, cache=True)
-def sign_region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: int,
-                         lags: int, nb: int, outputs: np.ndarray, thetas: np.ndarray,
-                         weights: np.ndarray, n_vars: np.ndarray) -> np.ndarray:
+def region_index(phi: np.ndarray, weights: np.ndarray, bias: np.ndarray, n_vars: int,
+                 kind: int) -> int:
+    """The region of φ: Σ_v 2^v [w_vᵀφ > 0] (``SIGN``), or the first v of largest
+    w_vᵀφ + b_v (``ARGMAX``, as ``numpy.argmax``), over the first ``n_vars`` rows."""
+    lam = 0
+    best = -np.inf
+    for v in range(n_vars):
+        z = bias[v]
+        for a in range(len(phi)):
+            z += weights[v, a] * phi[a]
+        if kind == SIGN:
+            if z > 0:
+                lam += 1 << v
+        elif z > best:
+            best, lam = z, v
+    return lam
+
+
+@njit(nogil=True, cache=True)
+def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: int,
+                    lags: int, nb: int, outputs: np.ndarray, thetas: np.ndarray,
+                    kinds: np.ndarray, weights: np.ndarray, bias: np.ndarray,
+                    n_vars: np.ndarray) -> np.ndarray:
     """Sum of squared free-run errors of each simulated output, over every experiment.
 
     Each experiment e runs from sample ``warmup`` to ``lengths[e]``, its outputs before
@@ -39,8 +78,11 @@ def sign_region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warm
     thetas : ndarray of shape (G, R, D)
         Each simulated output's parameter row per region over φ (R at least 2^v; unused
         rows zero).
-    weights : ndarray of shape (G, V, D)
-        Each output's scheduling variables w_v (its first ``n_vars[g]`` rows).
+    kinds : ndarray of shape (G,)
+        Each output's region kind (:data:`SIGN`, :data:`ARGMAX`; :func:`region_index`).
+    weights, bias : ndarrays of shape (G, V, D), (G, V)
+        Each output's scheduling variables or scores w_vᵀφ + b_v (its first ``n_vars[g]``
+        rows).
     n_vars : ndarray of shape (G,)
 
     Returns
@@ -69,13 +111,7 @@ def sign_region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warm
                     i += 1
             phi[d - 1] = 1.0
             for jj in range(g):
-                region = 0
-                for v in range(n_vars[jj]):
-                    z = 0.0
-                    for a in range(d):
-                        z += weights[jj, v, a] * phi[a]
-                    if z > 0:
-                        region += 1 << v
+                region = region_index(phi, weights[jj], bias[jj], n_vars[jj], kinds[jj])
                 s = 0.0
                 for a in range(d):
                     s += thetas[jj, region, a] * phi[a]

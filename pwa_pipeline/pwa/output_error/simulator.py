@@ -11,6 +11,11 @@ from collections.abc import Callable
 import numpy as np
 
 from ..._typing import Float2D
+from ..kernels.free_run import pack_regions
+from ..kernels.sensitivities import sensitivity_block
+
+#: Time steps the compiled free run runs between two products of its Jacobian rows.
+BLOCK = 256
 
 
 class _NormalEquations:
@@ -137,10 +142,21 @@ class OutputFreeRuns(FreeRuns):
         self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
 
     def simulate(self, p: np.ndarray, sensitivities: bool):
-        """As :meth:`FreeRuns.simulate`, with the concatenated p_j."""
+        """As :meth:`FreeRuns.simulate`, with the concatenated p_j: compiled
+        (:mod:`~pwa_pipeline.pwa.kernels.sensitivities`) for models on an affine φ whose
+        regions have a compiled form (linear, sign-scheduled, clustered), else the numpy
+        loop."""
         sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
         thetas = [self.models[j].c + g @ p[a:b]
                   for j, g, (a, b) in zip(sim, self.g, bounds, strict=True)]
+        forms = [self.models[j].compiled_regions() for j in sim]
+        if self.affine and all(f is not None for f in forms):
+            return self._compiled(thetas, forms, sensitivities)
+        return self._looped(thetas, sensitivities)
+
+    def _looped(self, thetas: list[np.ndarray], sensitivities: bool):
+        """:meth:`simulate` by the numpy loop, for any region maps."""
+        sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
 
         def step(phi):
             regions = [self.models[j].regions(phi) for j in sim]
@@ -153,3 +169,38 @@ class OutputFreeRuns(FreeRuns):
 
         with np.errstate(over="ignore", invalid="ignore"):
             return self._run(step, int(self.offsets[-1]), sensitivities)
+
+    def _compiled(self, thetas: list[np.ndarray], forms: list, sensitivities: bool):
+        """:meth:`simulate` by the compiled kernel (``forms``: the simulated outputs'
+        compiled regions), a block of :data:`BLOCK` time steps at a time, JᵀJ and Jᵀr
+        summed by one matrix product per block."""
+        sim, n_par = self.simulated, int(self.offsets[-1])
+        n_exp, n = self.y.shape[:2]
+        d = thetas[0].shape[1]
+        n_regions = max(len(t) for t in thetas)
+        packed = np.zeros((len(sim), n_regions, d))
+        gmat = np.zeros((len(sim), n_regions, d, n_par))
+        for jj, (t, g) in enumerate(zip(thetas, self.g, strict=True)):
+            packed[jj, :len(t)] = t
+            gmat[jj, :len(g), :, self.offsets[jj]:self.offsets[jj + 1]] = g
+        regions = pack_regions(forms, d)
+        ysim, ring = self.y.copy(), np.zeros((n_exp, self.na + 1, len(sim), n_par))
+        rows = np.empty((BLOCK * n_exp * len(sim), n_par) if sensitivities else (0, n_par))
+        residuals = np.empty(len(rows))
+        jtj, jtr, cost = np.zeros((n_par, n_par)), np.zeros(n_par), 0.0
+        for k0 in range(self.warmup, n, BLOCK):
+            k1 = min(n, k0 + BLOCK)
+            cost += sensitivity_block(self.y, self.u, self.lengths.astype(np.int64),
+                                      self.warmup, self.na, self.nb,
+                                      np.array(sim, dtype=np.int64), packed, gmat,
+                                      self.offsets.astype(np.int64), *regions, k0, k1,
+                                      ysim, ring, rows, residuals, sensitivities)
+            if not np.isfinite(cost):
+                return np.inf, None, None
+            if sensitivities:
+                used = (k1 - k0) * n_exp * len(sim)
+                jtj += rows[:used].T @ rows[:used]
+                jtr += rows[:used].T @ residuals[:used]
+        if not sensitivities:
+            return cost / self.n_scored, None, None
+        return cost / self.n_scored, jtj, jtr

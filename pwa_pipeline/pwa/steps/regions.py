@@ -11,7 +11,7 @@ from sklearn.utils._param_validation import Interval
 from sklearn.utils.validation import check_is_fitted
 
 from ..._typing import Float2D
-from ..partitions import Halfspaces, argmax_halfspaces
+from ..partitions import CompiledForm, Halfspaces, argmax_halfspaces
 from .base import BaseRegions
 
 
@@ -162,6 +162,14 @@ class SVMRegions(BaseRegions):
         if self.n_regions_ == 1:
             return np.zeros(phi.shape[0], dtype=int)
         return np.argmax(phi @ self.coef_.T + self.intercept_, axis=1)
+
+    def compiled(self) -> CompiledForm:
+        """argmax_i w_i·φ + b_i (the scores of :meth:`predict`); with one region, no
+        scores."""
+        check_is_fitted(self)
+        if self.n_regions_ == 1:
+            return "sign", np.zeros((0, self.coef_.shape[1])), np.zeros(0)
+        return "argmax", self.coef_, self.intercept_
 
     def halfspaces(self) -> list[Halfspaces]:
         """H_i = {φ : (w_j − w_i)·φ ≤ b_i − b_j for every j ≠ i} (:func:`~..partitions.

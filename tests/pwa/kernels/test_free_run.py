@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from pwa_pipeline.pwa.partitions import SignRegions
+from pwa_pipeline.pwa.partitions import ProjectedRegions, SignRegions
 from pwa_pipeline.pwa.search.search import _HeldOut
+from pwa_pipeline.pwa.steps.regions import SVMRegions
 from pwa_pipeline.pwa.structures import OutputModel, output_regressors
 
 
@@ -23,10 +24,20 @@ def _experiments(seed: int, lengths=(120, 90, 150), m: int = 2, r: int = 2):
 
 def _model(j: int, lags: int, nb: int, n_vars: int, rng, scale: float = 0.3,
            form: str = "level"):
+    """Output j's model: linear (``n_vars`` 0), on the signs of ``n_vars`` random
+    variables, or (``n_vars`` < 0) on -n_vars regions of an SVM fitted on ψ = M φ (the
+    clusters' regions)."""
     M, c, names = output_regressors(j, 2, 2, lags - 1, nb, True, form, "joint",
                                     phi_lags=lags, phi_nb=nb)
     if n_vars == 0:
         om = OutputModel(M, c, np.zeros(len(names), bool), 1, None, "linear", names)
+    elif n_vars < 0:
+        psi = rng.uniform(-1, 1, (400, M.shape[0]))
+        psi[:, -1] = 1.0
+        labels = np.argmax(psi @ rng.standard_normal((M.shape[0], -n_vars)), axis=1)
+        regions = ProjectedRegions(M, SVMRegions().fit(psi, labels))
+        om = OutputModel(M, c, np.ones(len(names), bool), -n_vars, regions, "clustered",
+                         names)
     else:
         sign = SignRegions(rng.standard_normal((n_vars, M.shape[1])))
         om = OutputModel(M, c, np.ones(len(names), bool), sign.n_regions_, sign, "all",
@@ -36,7 +47,8 @@ def _model(j: int, lags: int, nb: int, n_vars: int, rng, scale: float = 0.3,
 
 
 @pytest.mark.parametrize("n_vars, form", [((0, 0), "level"), ((1, 2), "level"),
-                                           ((2, 0), "velocity"), ((3, 1), "level")])
+                                           ((2, 0), "velocity"), ((3, 1), "level"),
+                                           ((-3, -2), "level"), ((-2, 1), "level")])
 def test_the_compiled_free_run_equals_the_numpy_loop(n_vars, form):
     lags, nb = 3, 2
     held = _HeldOut(_experiments(0), lags, nb, warmup=5)
