@@ -15,7 +15,7 @@ from ..kernels.free_run import pack_regions
 from ..kernels.sensitivities import sensitivity_block
 
 #: Time steps the compiled free run runs between two products of its Jacobian rows.
-BLOCK = 256
+BLOCK = 2048
 
 
 class _NormalEquations:

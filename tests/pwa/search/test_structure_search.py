@@ -11,7 +11,7 @@ from pwa_pipeline import PWARX, LinearARX, make_hure_vasak
 from pwa_pipeline.config import build_pwarx
 from pwa_pipeline.pwa import SearchBudgetSpent, SearchTimeLimit, StructureSearch
 from pwa_pipeline.pwa.search import search as structure_search
-from pwa_pipeline.pwa.search.search import split_experiments
+from pwa_pipeline.pwa.search.search import folds, split_experiments, windows
 from pwa_pipeline.regressors import build_regressors
 
 FAST = {"clustering": False, "max_variables": 1, "forms": ["level"]}
@@ -150,38 +150,54 @@ def test_oblique_names_read_as_formulas():
 
 def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
     u, y = friction_machine(friction=0.0)
-    model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    model = PWARX.auto(na=2, nb=1, n_folds=5, **FAST).fit(u, y)
     report = model.structure_search_
     assert report.linear is True
     assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert "Linear ARX: no switching structure beat it" in report.choice
     assert report.validation_nrmse == report.linear_nrmse
-    # with the best switching candidate's number, the one the table lists
+    # with the best switching candidate's number, the one the table lists: none was
+    # shortlisted (none lowered the first block's error by min_gain), so the number is the
+    # first block's, beside the linear model's there
     import re
     table = report.table
+    assert table[table.stage == "cross-validated"].structure.tolist() == \
+        ["level (2, 1), linear"]
     switching = table[table.stage.isin(["scheduled", "clustered", "refined"])
                       & ~table.structure.str.endswith("linear")]
     best = switching.loc[switching.validation_nrmse.idxmin()]
-    found = re.search(r"The best switching candidate measured, (.+), had ([0-9.]+)\.",
-                      report.choice)
+    found = re.search(r"The best switching candidate measured, (.+), had ([0-9.]+) on the "
+                      r"first held-out block, where the refined linear model had ([0-9.]+) "
+                      r"\(none lowered the error by min_gain", report.choice)
     assert found and found.group(1) == best.structure
     assert float(found.group(2)) == pytest.approx(best.validation_nrmse, rel=1e-3)
-    assert float(found.group(2)) >= report.linear_nrmse
+    first = table[(table.stage == "refined") & table.structure.str.endswith("linear")]
+    assert float(found.group(3)) == pytest.approx(first.validation_nrmse.item(), rel=1e-3)
+    assert float(found.group(2)) > (1 - 0.02) * float(found.group(3))
 
 
+@pytest.mark.parametrize("n_folds", [1, 5])
 def test_the_linear_fallback_wins_over_a_switching_structure_worse_on_held_out_data(
-        monkeypatch):
+        monkeypatch, n_folds):
     """A switching structure the greedy search kept whose refined free run is worse than the
-    linear model's is not returned (drop the fallback and this fails)."""
+    linear model's, on the first block or over the folds, is not returned (drop the
+    fallback and this fails)."""
     refined = structure_search._Search.refined
+    cross_validated = structure_search._Search.cross_validated
 
     def worse(self, group, specs, models, label):
         cost, models, info = refined(self, group, specs, models, label)
         return (cost * 10 if label == "switching" else cost), models, info
 
+    def worse_folds(self, group, models, main, refine):
+        costs = cross_validated(self, group, models, main, refine)
+        switching = any(models[j].region_of is not None for j in group)
+        return [c * 10 for c in costs] if switching else costs
+
     monkeypatch.setattr(structure_search._Search, "refined", worse)
+    monkeypatch.setattr(structure_search._Search, "cross_validated", worse_folds)
     u, y = friction_machine()
-    model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    model = PWARX.auto(na=2, nb=1, n_folds=n_folds, **FAST).fit(u, y)
     assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert model.structure_search_.linear is True
     assert model.structure_search_.validation_nrmse == model.structure_search_.linear_nrmse
@@ -203,6 +219,87 @@ def test_split_holds_out_the_last_experiments():
     fit, held, how = split_experiments(exps, 0.2, min_samples=3)
     assert [e[1][0, 0] for e in held] == [8, 9] and len(fit) == 8
     assert how == "experiments 9–10 of 10 held out"
+
+
+def test_folds_hold_out_each_block_of_experiments_in_turn():
+    exps = [(np.zeros((5, 1)), np.full((5, 1), i)) for i in range(10)]
+    blocks = folds(exps, 0.2, n_folds=5, min_samples=3)
+    assert [[e[1][0, 0] for e in held] for _, held in blocks] == \
+        [[8, 9], [6, 7], [4, 5], [2, 3], [0, 1]]
+    assert [e[1][0, 0] for e in blocks[2][0]] == [0, 1, 2, 3, 6, 7, 8, 9]
+    assert blocks[0][:2] == split_experiments(exps, 0.2, min_samples=3)[:2]
+    assert len(folds(exps, 0.2, n_folds=3, min_samples=3)) == 3
+    assert len(folds(exps, 0.3, n_folds=9, min_samples=3)) == 3  # 3 whole blocks of 3
+
+
+def test_folds_cut_one_record_in_blocks_fitting_what_lies_either_side():
+    u, y = np.arange(1000.0)[:, None], np.arange(1000.0)[:, None]
+    blocks = folds([(u, y)], 0.2, n_folds=9, min_samples=30)
+    spans = [[(int(e[1][0, 0]), int(e[1][-1, 0]) + 1) for e in fit + held]
+             for fit, held in blocks]
+    assert spans == [[(0, 800), (800, 1000)], [(0, 600), (800, 1000), (600, 800)],
+                     [(0, 400), (600, 1000), (400, 600)], [(0, 200), (400, 1000), (200, 400)],
+                     [(200, 1000), (0, 200)]]
+    # a part shorter than min_samples is left out of the fit
+    blocks = folds([(u, y)], 0.3, n_folds=5, min_samples=150)
+    assert [len(e[1]) for e in blocks[2][0]] == [600] and len(blocks[2][1][0][1]) == 300
+
+
+def test_a_long_record_is_refined_on_windows_evenly_spread():
+    y = np.arange(10_000.0)[:, None]
+    exps = [(y[:6000], y[:6000]), (y[6000:9000], y[6000:9000]), (y[9000:], y[9000:])]
+    assert windows(exps, 10_000, length=1000) is exps
+    got = windows(exps, 4000, length=1000)
+    assert [len(w[1]) for w in got] == [1000] * 4
+    assert [int(w[1][0, 0]) for w in got] == [0, 3333, 6666, 9000]  # the last one shifted
+    assert all(np.array_equal(w[0], w[1]) for w in got)  # u and y cut alike
+    # experiments shorter than a window are taken whole, as many as the samples allow
+    short = [(y[i:i + 300], y[i:i + 300]) for i in range(0, 6000, 300)]
+    got = windows(short, 1500, length=1000)
+    assert [len(w[1]) for w in got] == [300] * 5
+    assert [int(w[1][0, 0]) for w in got] == [0, 1200, 2700, 4200, 5700]
+
+
+def test_max_rows_fits_candidates_on_a_subsample_and_finds_the_same_structure(friction_fit):
+    """Past ``max_rows`` the candidates are fitted on one regressor row in k and refined on
+    windows; the friction offset is found all the same, its constants within noise."""
+    full, (u, y) = friction_fit
+    model = PWARX.auto(na=2, nb=1, max_rows=1000, **FAST).fit(u, y)
+    report = model.structure_search_
+    assert "candidates fitted on one in 3 of the 2970 regressor rows (max_rows), the " \
+        "shortlisted ones on all and refined on 900 samples" in report.choice
+    assert model.structures_ == full.structures_
+    (out,) = model.structure_fit_.outputs
+    np.testing.assert_allclose(sorted(out.thetas()[:, -1]), [-0.08, 0.08], atol=0.01)
+    assert report.validation_nrmse < 1.05 * full.structure_search_.validation_nrmse
+
+
+def test_the_choice_is_the_lowest_mean_over_the_folds_not_the_first_block(monkeypatch):
+    """The friction offset, better than linear on the first block, made 20 times worse on
+    every other fold: judged over 5 folds the linear model wins, judged on the first block
+    alone the friction offset (a mutation choosing by the first block fails this)."""
+    cross_validated = structure_search._Search.cross_validated
+
+    def worse_elsewhere(self, group, models, main, refine):
+        costs = cross_validated(self, group, models, main, refine)
+        switching = any(models[j].region_of is not None for j in group)
+        return costs[:1] + [c * 20 for c in costs[1:]] if switching else costs
+
+    monkeypatch.setattr(structure_search._Search, "cross_validated", worse_elsewhere)
+    u, y = friction_machine()
+    five = PWARX.auto(na=2, nb=1, n_folds=5, **FAST).fit(u, y).structure_search_
+    one = PWARX.auto(na=2, nb=1, **FAST).fit(u, y).structure_search_
+    assert five.linear and not one.linear
+    rows = five.table[five.table.stage == "cross-validated"]
+    switching = rows[~rows.structure.str.endswith("linear")]
+    first = [float(t.split(": ")[1].split(", ")[0]) for t in rows.outcome]
+    assert first[1] < first[0]  # the switching candidate was better on the first block
+    for row in rows.itertuples():  # each row's figure is the mean of its folds
+        figures = [float(x) for x in row.outcome.split(": ")[1].split(", ")]
+        assert len(figures) == 5
+        assert row.validation_nrmse == pytest.approx(np.mean(figures), rel=2e-3)
+    assert five.validation_nrmse == rows.validation_nrmse.iloc[0] \
+        < switching.validation_nrmse.min()
 
 
 def test_time_limit_keeps_the_best_so_far_and_flags_it():
