@@ -1,5 +1,5 @@
 """Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end
-(:mod:`.partition_runs`); ``add-dataset``, ``list-datasets``
+(`partition_runs`); ``add-dataset``, ``list-datasets``
 and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and

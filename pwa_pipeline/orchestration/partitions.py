@@ -1,10 +1,10 @@
 """The partitions: the pairs of a data set and a hyper-parameter set that has values for it,
-keys like ``"kuka_robot|paper"`` (:class:`PartitionKey`, the one place a key is joined and
+keys like ``"kuka_robot|paper"`` (`PartitionKey`, the one place a key is joined and
 split: the command line and the assets that receive Dagster's key parse it here once and pass
-the typed value, or the partition's :class:`~pwa_pipeline.config.Configuration`, on).
+the typed value, or the partition's `Configuration`, on).
 
 Only pairs that can run are offered: a set's own table for the data set, or, for a data set
-a user registered, its ``[<set>."*"]`` table (see :mod:`pwa_pipeline.config`). The paper's
+a user registered, its ``[<set>."*"]`` table (see `pwa_pipeline.config`). The paper's
 sets give values per data set and no rule, so ``hure_vasak|robot`` or ``<your data>|paper``
 are not partitions.
 """

@@ -1,4 +1,4 @@
-"""Compiled kernel of the structure search's held-out free run (:mod:`~pwa_pipeline.pwa.search`).
+"""Compiled kernel of the structure search's held-out free run (`pwa_pipeline.pwa.search`).
 
 numba, because the search measures every candidate structure by simulating the held-out
 experiments sample by sample (each sample's regressor φ̂(k) holds the outputs simulated
@@ -8,7 +8,7 @@ compiled pass per experiment takes a few milliseconds. Compiled on first use and
 disk (``cache=True``, next to this file).
 
 The candidates it runs are those of linear and sign-scheduled regions
-(:class:`~pwa_pipeline.pwa.partitions.SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]); other region
+(`SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]); other region
 maps (the clusters' SVM) are simulated by the search's numpy loop.
 """
 

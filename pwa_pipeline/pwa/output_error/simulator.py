@@ -1,5 +1,5 @@
 """The free run of an ARX-structured model and its sensitivities dŷ(k)/dθ, for the
-output-error refinement (:mod:`~pwa_pipeline.pwa.output_error`).
+output-error refinement (`pwa_pipeline.pwa.output_error`).
 
 The Jacobian of the free run is propagated forward in time (sensitivities through the output
 lags of φ̂, the region treated as locally constant), for all experiments at once, and only
@@ -123,7 +123,7 @@ class FreeRuns:
 
 class OutputFreeRuns(FreeRuns):
     """The experiments simulated with per-output models
-    (:class:`~pwa_pipeline.pwa.structures.OutputModel`): the outputs ``simulated`` run free, the others
+    (`OutputModel`): the outputs ``simulated`` run free, the others
     keep their measured values.
 
     The parameters are the concatenated p_j of the simulated outputs.
@@ -137,7 +137,7 @@ class OutputFreeRuns(FreeRuns):
         self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
 
     def simulate(self, p: np.ndarray, sensitivities: bool):
-        """As :meth:`FreeRuns.simulate`, with the concatenated p_j."""
+        """As `FreeRuns.simulate`, with the concatenated p_j."""
         sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
         thetas = [self.models[j].c + g @ p[a:b]
                   for j, g, (a, b) in zip(sim, self.g, bounds, strict=True)]
