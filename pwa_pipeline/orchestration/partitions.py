@@ -78,6 +78,28 @@ def check_keys(partitions_def: dg.StaticPartitionsDefinition, keys: list[str]) -
                              f"that has no values for a data set gives it no partition)")
 
 
+def check_runnable(keys: list[str], settings: PipelineSettings) -> None:
+    """Raise a ValueError, in one line, naming the requested partitions whose data set's files
+    are missing and why (before any run, rather than a failed run's stack traces).
+
+    Parameters
+    ----------
+    keys : list of str
+        Partition keys, each a partition of the definitions (`check_keys`).
+    settings : PipelineSettings
+        The resource of the same definitions (files and registry).
+    """
+    missing = unavailable_datasets(settings)
+    blocked: dict[str, list[str]] = {}
+    for key in keys:
+        dataset = PartitionKey.parse(key).dataset
+        if dataset in missing:
+            blocked.setdefault(dataset, []).append(key)
+    if blocked:
+        raise ValueError("; ".join(f"{', '.join(found)} cannot run: {missing[dataset]}"
+                                   for dataset, found in blocked.items()))
+
+
 def all_keys(partitions_def: dg.StaticPartitionsDefinition) -> list[str]:
     """Every partition key, as strings."""
     return [str(k) for k in partitions_def.get_partition_keys()]
