@@ -4,7 +4,7 @@
 
 - ``<!-- generated: estimators -->``: one table per estimator class, built from the class
   itself: its parameters and defaults from ``get_params()`` of an instance made with no
-  arguments, the values of :meth:`PWARX.paper` beside them, and each parameter's description
+  arguments, the values of ``PWARX.paper()`` beside them, and each parameter's description
   from the numpydoc *Parameters* section of the class docstring (parsed by griffe, as the API
   reference is). Which step classes exist is found by walking the package for scikit-learn
   estimators, and which parameter of ``PWARX`` a class serves by the class names that the
@@ -71,8 +71,7 @@ def parameter_docs(cls: type) -> dict[str, str]:
 
 
 def _plain(text: str) -> str:
-    """One table cell of Markdown from a reST description."""
-    text = re.sub(r":[a-z]+:`~?\.?([^`]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", text)
+    """One table cell of Markdown from a docstring's description."""
     text = text.replace("``", "`")
     text = " ".join(text.split())
     return text.replace("|", "\\|")

@@ -1,9 +1,9 @@
 """pwa-pipeline: identification of MIMO piecewise-affine ARX models.
 
-The numerical core (:mod:`pwa_pipeline.pwa`, :mod:`~pwa_pipeline.baselines`,
-:mod:`~pwa_pipeline.scoring`, :mod:`~pwa_pipeline.datasets`, :mod:`~pwa_pipeline.config`)
+The numerical core (`pwa_pipeline.pwa`, `pwa_pipeline.baselines`,
+`pwa_pipeline.scoring`, `pwa_pipeline.datasets`, `pwa_pipeline.config`)
 depends only on numpy, scipy, scikit-learn and pandas; everything that imports Dagster or
-MLflow lives in :mod:`pwa_pipeline.orchestration`.
+MLflow lives in `pwa_pipeline.orchestration`.
 """
 
 from importlib.metadata import PackageNotFoundError, version

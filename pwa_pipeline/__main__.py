@@ -1,4 +1,4 @@
-"""``python -m pwa_pipeline``: the command line of :mod:`pwa_pipeline.orchestration.cli`."""
+"""``python -m pwa_pipeline``: the command line of `pwa_pipeline.orchestration.cli`."""
 
 import sys
 

@@ -21,7 +21,7 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
 
 
 def check_name(name: str, what: str) -> str:
-    """``name`` if it matches :data:`NAME_PATTERN`, else a ValueError naming ``what``."""
+    """``name`` if it matches `NAME_PATTERN`, else a ValueError naming ``what``."""
     if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
         raise ValueError(
             f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"

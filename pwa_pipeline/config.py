@@ -1,23 +1,23 @@
 """Named hyper-parameter sets (``data/hparams.toml``), read and validated once.
 
 The file has one table per set and data set, ``[<set>.<dataset>]``, whose keys configure
-:class:`~pwa_pipeline.pwa.estimator.PWARX`: ``preset`` (``"default"``, ``"paper"`` or
+[`PWARX`][pwa_pipeline.PWARX]: ``preset`` (``"default"``, ``"paper"`` or
 ``"auto"``, the classmethod that builds its step objects; ``"auto"`` is the structure search
-of :mod:`~pwa_pipeline.pwa.search.search`, ``na`` and ``nb`` its largest orders, a
+of `pwa_pipeline.pwa.search.search`, ``na`` and ``nb`` its largest orders, a
 sub-table ``search`` its parameters, e.g. ``search.max_candidates = 500``), ``na``, ``nb``,
 ``affine``, and each step's parameters as a sub-table, e.g. ``clustering.eps = 0.1`` (``clustering__eps`` in
 ``get_params``). ``[baselines.<dataset>]`` holds the evaluation protocol's ``warmup`` and the
 subspace baseline's parameters (``subspace.order``, ``subspace.horizon``). A sub-table
 ``refinement`` (e.g. ``refinement.max_iter = 30``) adds simulation-error refinement
-(:class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`) to the PWA model and, so that
+(`OutputErrorRefinement`) to the PWA model and, so that
 the comparison is fair, to the linear ARX baseline. The structures of
-:mod:`~pwa_pipeline.pwa.structures` are keys too: ``form = "velocity"``,
+`pwa_pipeline.pwa.structures` are keys too: ``form = "velocity"``,
 ``outputs = "decoupled"`` (shared with the linear ARX baseline) and a sub-table
 ``scheduling`` (e.g. ``scheduling.switch = "select"``) for user regions
-(:class:`~pwa_pipeline.pwa.scheduling.SignScheduling`, PWA model only).
+(`SignScheduling`, PWA model only).
 
 A table ``[<set>."*"]`` applies the set to every data set a user registers
-(:mod:`pwa_pipeline.datasets.user`); it gives no orders, which come from the registration
+(`pwa_pipeline.datasets.user`); it gives no orders, which come from the registration
 (``na``, ``nb``, ``affine``). ``[baselines."*"]`` does the same for the baselines. A
 data set's own table, ``[<set>.<name>]``, takes precedence. Every estimator is built and its
 parameters checked when the file is read, so a bad value fails before any run, with the file,
@@ -66,7 +66,7 @@ class Configuration:
     hparams, dataset : str
         The set and data set names.
     estimators : dict
-        The unfitted estimator of each method of :data:`pwa_pipeline.methods.METHODS`.
+        The unfitted estimator of each method of `pwa_pipeline.methods.METHODS`.
     warmup : int
         Warm-up samples of the evaluation protocol.
     source : Path
@@ -160,7 +160,7 @@ class HParamsFile:
     Parameters
     ----------
     path : path-like, optional
-        Default: :func:`default_hparams_path`.
+        Default: `default_hparams_path`.
 
     Attributes
     ----------
@@ -287,7 +287,7 @@ class HParamsFile:
 
 
 def load_hparams(path: str | os.PathLike | None = None) -> HParamsFile:
-    """The hyper-parameter file (default :func:`default_hparams_path`), read and checked once
+    """The hyper-parameter file (default `default_hparams_path`), read and checked once
     per process and read again when it changes (its modification time or size): the
     definitions, the command line and every partition's ``configuration`` share one
     reading.
@@ -295,7 +295,7 @@ def load_hparams(path: str | os.PathLike | None = None) -> HParamsFile:
     Raises
     ------
     FileNotFoundError, ValueError
-        As :class:`HParamsFile`.
+        As [`HParamsFile`][pwa_pipeline.config.HParamsFile].
     """
     resolved = Path(path).resolve() if path is not None else default_hparams_path()
     if not resolved.is_file():
@@ -306,6 +306,6 @@ def load_hparams(path: str | os.PathLike | None = None) -> HParamsFile:
 
 @functools.lru_cache(maxsize=16)
 def _read(path: Path, stamp: tuple[int, int]) -> HParamsFile:
-    """:class:`HParamsFile` of ``path`` as it was at ``stamp`` (its modification time and
-    size, the cache's key)."""
+    """[`HParamsFile`][pwa_pipeline.config.HParamsFile] of ``path`` as it was at ``stamp`` (its modification
+    time and size, the cache's key)."""
     return HParamsFile(path)

@@ -1,5 +1,5 @@
 """The Dagster code location, importable as ``pwa_pipeline.definitions`` (``workspace.yaml``,
-``dagster ... -m pwa_pipeline.definitions``); built in :mod:`pwa_pipeline.orchestration`."""
+``dagster ... -m pwa_pipeline.definitions``); built in `pwa_pipeline.orchestration`."""
 
 from .orchestration.definitions import defs
 

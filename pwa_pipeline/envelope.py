@@ -5,19 +5,19 @@ training; elsewhere it extrapolates, and a PWA model's regions, drawn through th
 regressors, say nothing there. The **data envelope** is the box in which each entry of φ
 (the constant left out) lies within its channel's training range, the smallest and largest
 value of that output or input over the training experiments (``signal_range_``, recorded by
-``fit``; every lag of a channel shares it), widened on either side by :data:`PADDING` of the
+``fit``; every lag of a channel shares it), widened on either side by `PADDING` of the
 span (of the channel's magnitude, at least 1, when the span is zero, so that a constant
 channel still has a box around its value).
 
 A box, not the convex hull of the training regressors: it is what the state-space form
-bounds its regions with (:mod:`pwa_pipeline.control`, whose envelope over z = [x; u] is this
+bounds its regions with (`pwa_pipeline.control`, whose envelope over z = [x; u] is this
 box over x = φ without the constant, with the inputs' own ranges appended for u(k)), it is
 cheap to test per sample, and it names the channel that left it. It is a necessary
 condition only: a regressor inside the box may still combine its entries in a way the
 training data never did.
 
 This module is the one place the box is computed; the estimators
-(:meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope`), the evaluation protocol and
+(`outside_envelope`), the evaluation protocol and
 the state-space conversion all call it.
 """
 
@@ -50,8 +50,8 @@ def channel_bounds(signal_range: Float2D, padding: float = PADDING
     ----------
     signal_range : array-like of shape (2, m + r)
         Row 0 the minima, row 1 the maxima of each output, then each input
-        (:func:`training_range`).
-    padding : float, default :data:`PADDING`
+        (`training_range`).
+    padding : float, default PADDING
         Share of each span added on either side; of max(|min|, |max|, 1) for a channel whose
         span is zero.
 
@@ -89,7 +89,7 @@ def regressor_bounds(signal_range: Float2D, m: int, r: int, output_lags: int,
                      input_lags: int, padding: float = PADDING
                      ) -> tuple[np.ndarray, np.ndarray]:
     """The data envelope over φ(k) without the constant: each entry bounded by its channel's
-    :func:`channel_bounds`.
+    `channel_bounds`.
 
     Parameters
     ----------
@@ -98,7 +98,7 @@ def regressor_bounds(signal_range: Float2D, m: int, r: int, output_lags: int,
         Outputs and inputs.
     output_lags, input_lags : int
         Lags of each output (na, or na + 1 in the velocity form) and of each input (nb).
-    padding : float, default :data:`PADDING`
+    padding : float, default PADDING
 
     Returns
     -------
@@ -120,7 +120,7 @@ def outside_box(values: Float2D, lower: np.ndarray, upper: np.ndarray,
     ----------
     values : ndarray of shape (N, p)
     lower, upper : ndarrays of shape (p,)
-    slack : float, default :data:`SLACK`
+    slack : float, default SLACK
         A value beyond a wall by at most ``slack`` times the box's width there is inside.
 
     Returns
@@ -141,13 +141,13 @@ def training_range(experiments: list[tuple[Float2D, Float2D]]) -> Float2D:
     Parameters
     ----------
     experiments : list of (u, y)
-        As :func:`~pwa_pipeline._validation.as_experiments` returns them.
+        As `as_experiments` returns them.
 
     Returns
     -------
     ndarray of shape (2, m + r)
         Row 0 the minima, row 1 the maxima: the estimators keep it as ``signal_range_``,
-        the data envelope of their state-space form (:mod:`pwa_pipeline.control`).
+        the data envelope of their state-space form (`pwa_pipeline.control`).
     """
     joined = np.vstack([np.hstack([y, u]) for u, y in experiments])
     return np.vstack([joined.min(axis=0), joined.max(axis=0)])

@@ -84,7 +84,7 @@ def build_regressors(
     Parameters
     ----------
     experiments : list of (u, y)
-        As returned by :func:`pwa_pipeline._validation.as_experiments`.
+        As returned by `pwa_pipeline._validation.as_experiments`.
     na, nb : int
         Output and input orders of eq. (3).
     affine : bool

@@ -88,3 +88,28 @@ def test_readme_machine_example_finds_each_joints_velocity_sign():
     assert result.returncode == 0, result.stderr
     assert "velocity (2, 2)" in result.stdout
     assert "Δy1(k-1) > 0" in result.stdout and "Δy2(k-1) > 0" in result.stdout
+
+
+def _github_anchor(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+@pytest.mark.parametrize("page", ["README.md", "data/README.md", "benchmarks/README.md"])
+def test_readme_links_resolve(page):
+    """Every relative link of a README outside the docs site (which `mkdocs build --strict`
+    checks) names a file of the repository and, with an anchor, one of its headings."""
+    source = ROOT / page
+    broken = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", source.read_text()):
+        if re.match(r"[a-z]+:", target):
+            continue
+        path, _, anchor = target.partition("#")
+        linked = (source.parent / path).resolve() if path else source
+        if not linked.exists():
+            broken.append(target)
+        elif anchor:
+            headings = re.findall(r"^#+ (.+)$", linked.read_text(), re.M)
+            if anchor not in {_github_anchor(h) for h in headings}:
+                broken.append(target)
+    assert not broken, broken

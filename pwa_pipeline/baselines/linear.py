@@ -28,11 +28,11 @@ class LinearARX(ARXModelBase):
     affine : bool, default False
     form : {"level", "velocity"}, default "level"
         ``"velocity"``: each output's increment Δy(k) from na lagged increments, the level
-        y(k−1) and the inputs, integrated (:mod:`~pwa_pipeline.pwa.structures`).
+        y(k−1) and the inputs, integrated (`pwa_pipeline.pwa.structures`).
     outputs : {"joint", "decoupled"}, default "joint"
         ``"decoupled"``: one MISO model per output, on its own lags and every input.
     refinement : estimator, optional
-        An :class:`~pwa_pipeline.pwa.output_error.OutputErrorRefinement`: θ refined from the
+        An `OutputErrorRefinement`: θ refined from the
         least-squares fit to minimise the free-run error on the training experiments. None:
         least squares only.
 
@@ -42,7 +42,7 @@ class LinearARX(ARXModelBase):
         Over the level regressor φ (eq. 3; na + 1 output lags in the velocity form), so a
         velocity-form or decoupled model predicts as any ARX model.
     groups_ : list of OutputGroup
-        The fitted shape every ARX model shares (:mod:`~pwa_pipeline.pwa.groups`): one
+        The fitted shape every ARX model shares (`pwa_pipeline.pwa.groups`): one
         group of every output with one region, ``theta_`` as its sub-model (its ``steps``
         hold the fitted refinement, where one ran on the level, joint route). So
         ``thetas_`` is ``theta_[None]``, ``n_submodels_`` 1.
@@ -50,14 +50,14 @@ class LinearARX(ARXModelBase):
         Each output's structure in words (form, orders, linear).
     structure_fit_ : StructureFit (velocity form or decoupled outputs)
         The validation experiments and the refinement of each output group
-        (:class:`~pwa_pipeline.pwa.structure_fit.StructureFit`).
+        (`StructureFit`).
     timings_ : dict
         Seconds of the fit (``fit``).
     n_inputs_, n_outputs_ : int
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
-        envelope of :meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope` and of
-        :meth:`to_state_space`.
+        envelope of `outside_envelope` and of
+        `to_state_space`.
 
     Examples
     --------

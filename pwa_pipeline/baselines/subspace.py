@@ -49,7 +49,8 @@ class SubspaceSS(BaseEstimator):
     horizon : int, default 10
         Past and future block rows k of the Hankel matrices (k·m ≥ n).
     warmup : int, default 10
-        Samples used to estimate the initial state when :meth:`predict` is not told.
+        Samples used to estimate the initial state when [`predict`][pwa_pipeline.baselines.SubspaceSS.predict]
+        is not told.
     refit : {"none", "simulation"}, default "none"
         ``"simulation"``: after the subspace step, A's eigenvalues are pulled inside the
         radius ``max_radius`` and B, D refitted by least squares on the free-run (simulation)
@@ -70,7 +71,7 @@ class SubspaceSS(BaseEstimator):
     n_inputs_, n_outputs_ : int
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
-        envelope of :meth:`outside_envelope`.
+        envelope of [`outside_envelope`][pwa_pipeline.baselines.SubspaceSS.outside_envelope].
     timings_ : dict
         Seconds of the fit (``fit``).
 
@@ -183,7 +184,7 @@ class SubspaceSS(BaseEstimator):
         return self
 
     def resolved_params(self) -> dict:
-        """:meth:`get_params` with the order chosen at fit filled in."""
+        """`get_params` with the order chosen at fit filled in."""
         return {**self.get_params(), "order": self.order_}
 
     @property
@@ -254,7 +255,7 @@ class SubspaceSS(BaseEstimator):
                        input_names: list[str] | None = None,
                        output_names: list[str] | None = None) -> PWAStateSpace:
         """The model as a state-space model of one mode, x⁺ = A x + B u, y = C x + D u
-        (:class:`~pwa_pipeline.control.PWAStateSpace`, state ``x1 … xn``), for controller
+        ([`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace], state ``x1 … xn``), for controller
         design beside the ARX models' forms.
 
         Its envelope, where the model is said to be known, is the range of its states over
@@ -262,13 +263,13 @@ class SubspaceSS(BaseEstimator):
         experiment started from its first ``warmup`` samples) and each input's training
         range, widened by ``padding`` of each span. Its state is not made of past outputs,
         so it is simulated from an initial state (``ss.simulate(u, x0=...)``, e.g.
-        :meth:`initial_state` of a warm-up).
+        [`initial_state`][pwa_pipeline.baselines.SubspaceSS.initial_state] of a warm-up).
 
         Parameters
         ----------
         u, y : array-like or lists of them
             The training data (the model keeps no state trajectory of its own).
-        padding : float, default :data:`~pwa_pipeline.envelope.PADDING`
+        padding : float, default PADDING
         input_names, output_names : list of str, optional
 
         Returns
@@ -337,15 +338,15 @@ class SubspaceSS(BaseEstimator):
         """Whether each sample k follows data outside the training range: the state x(k)
         sums up the past, and the model is known only where the past inputs and outputs
         went, so sample k is flagged when u(k−1) or y(k−1) leaves its channel's training
-        range widened by ``padding`` of its span (:func:`~pwa_pipeline.envelope.
-        channel_bounds`; the ARX models test their regressor φ(k) likewise).
+        range widened by ``padding`` of its span (` channel_bounds`; the ARX models test their regressor φ(k)
+        likewise).
 
         Parameters
         ----------
         u : array-like of shape (N, r), or a list of such arrays
         y : array-like of shape (N, m), or a list of such arrays
             Measured outputs, or a simulation's (NaN or inf counts as outside).
-        padding : float, default :data:`~pwa_pipeline.envelope.PADDING`
+        padding : float, default PADDING
 
         Returns
         -------

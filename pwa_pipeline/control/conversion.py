@@ -1,15 +1,16 @@
-"""From a fitted PWARX or LinearARX model to its PWA state-space form (:class:`PWAStateSpace`).
+"""From a fitted PWARX or LinearARX model to its PWA state-space form
+([`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace]).
 
 **Dynamics.** Every model of the project predicts y(k) from the regressor φ(k) of eq. (2)–(3)
 (L output lags, nb input lags, the constant when affine; L = na + 1 in the velocity form,
 whose increments are linear in φ): output p by a parameter row Θ_{p,i} over φ chosen by its
 region i (eq. 1). With the state x(k) = φ(k) without the constant, a mode's C_i and g_i are
 those rows over x and over the constant, and A_i, B_i, f_i shift the lags
-(:func:`mode_matrices`).
+(`mode_matrices`).
 
 **Regions.** The fitted model keeps its outputs in groups, each with one region map over φ
-(``model.groups_``, :mod:`pwa_pipeline.pwa.groups`) whose ``halfspaces()`` write each
-region as {φ : G φ ≤ q} (:mod:`pwa_pipeline.pwa.partitions`: the argmax of the SVM regions,
+(``model.groups_``, `pwa_pipeline.pwa.groups`) whose ``halfspaces()`` write each
+region as {φ : G φ ≤ q} (`pwa_pipeline.pwa.partitions`: the argmax of the SVM regions,
 the signs of scheduling variables, a map over an output group's regressor ψ = Mφ, one
 region). φ = [x; 1] (or x) is linear in z = [x; u], so each region is an H-polyhedron over
 z. With one group (the paper's route, a linear model) the modes are its regions; with several
@@ -21,17 +22,17 @@ spans its channel's training range (the smallest and largest value of that outpu
 over the training experiments; all lags of a channel share it), widened on each side by
 ``padding`` (default 5 %) of that span (of the channel's magnitude, at least 1, when the span
 is zero): over x, the box the fitted model's own
-:meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope` tests φ against
-(:mod:`pwa_pipeline.envelope`, the one place it is computed), and over u(k) the inputs'
+`outside_envelope` tests φ against
+(`pwa_pipeline.envelope`, the one place it is computed), and over u(k) the inputs'
 padded ranges. A cell whose Chebyshev ball inside the envelope has radius at most
-:data:`~.polyhedra.EMPTY_RADIUS` half-widths is dropped and listed in ``dropped_modes``;
-redundant rows are removed by linear programs (:func:`~.polyhedra.irredundant_rows`).
+`EMPTY_RADIUS` half-widths is dropped and listed in ``dropped_modes``;
+redundant rows are removed by linear programs (`irredundant_rows`).
 
 **Ties.** The closed regions overlap on their boundaries. The modes keep the fitted model's
 order (its region index, lexicographically over partitions), so the rule "the
-lowest-numbered region that holds z" (:meth:`PWAStateSpace.mode_of`) is the model's own: an
-argmax picks the lowest index among equal scores, a sign test puts 0 with bit 0, and the
-lowest product cell is the product of the lowest regions.
+lowest-numbered region that holds z" ([`PWAStateSpace.mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of])
+is the model's own: an argmax picks the lowest index among equal scores, a sign test puts 0 with bit 0, and
+the lowest product cell is the product of the lowest regions.
 """
 
 import itertools
@@ -67,7 +68,7 @@ class Partition:
 
 
 def partition(group) -> Partition:
-    """The :class:`Partition` of a fitted output group (its region map's ``halfspaces()``,
+    """The `Partition` of a fitted output group (its region map's ``halfspaces()``,
     the regions never chosen left out)."""
     cells = group.regions.halfspaces()
     live = [i for i, cell in enumerate(cells) if cell is not None]
@@ -105,8 +106,8 @@ def mode_matrices(theta: Float2D, m: int, r: int, lags: int, nb: int, affine: bo
 def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
                  padding: float) -> Box:
     """The data envelope over z = [x; u] from each channel's training range: over x the
-    box of :func:`~pwa_pipeline.envelope.regressor_bounds` (φ without the constant),
-    over u(k) each input's :func:`~pwa_pipeline.envelope.channel_bounds`.
+    box of `regressor_bounds` (φ without the constant),
+    over u(k) each input's `channel_bounds`.
 
     Parameters
     ----------
@@ -123,7 +124,7 @@ def envelope_box(signal_range: Float2D, m: int, r: int, lags: int, nb: int,
 
 def signal_range(u: Signals, y: Signals) -> Float2D:
     """Smallest and largest value of each output, then each input, over the experiments:
-    shape (2, m + r) (:func:`~pwa_pipeline.envelope.training_range`)."""
+    shape (2, m + r) (`training_range`)."""
     return training_range(as_experiments(u, y))
 
 
@@ -147,7 +148,7 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     u, y : array-like or lists of them, optional
         Data whose range makes the envelope (the training data). None: the model's
         ``signal_range_``, the range of its training data recorded at fit.
-    padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (0.05)
+    padding : float, default PADDING (0.05)
         Widening of the envelope beyond that range, a share of each channel's span.
     input_names, output_names : list of str, optional
         Names for the state's entries (default ``u1…``, ``y1…``).
@@ -269,14 +270,14 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     return ss
 
 
-#: Random points of the envelope at which :func:`check_regions` compares the exported
+#: Random points of the envelope at which `check_regions` compares the exported
 #: regions with the model's own.
 CHECK_POINTS = 2000
 
 
 def check_regions(ss: PWAStateSpace, groups) -> None:
     """Raise ValueError where the exported regions disagree with the output groups' own
-    ``predict`` at :data:`CHECK_POINTS` seeded random points of the envelope: a region map
+    ``predict`` at `CHECK_POINTS` seeded random points of the envelope: a region map
     whose ``halfspaces()`` do not describe the regions its ``predict()`` gives (a region
     step of one's own that overrides one and not the other) would otherwise export another
     model than the fitted one."""

@@ -1,6 +1,6 @@
-"""The PWA state-space model as a versioned JSON document (:data:`SCHEMA`, version
-:data:`SCHEMA_VERSION`): what :meth:`PWAStateSpace.to_json
-<pwa_pipeline.control.PWAStateSpace.to_json>` writes and ``from_json`` reads.
+"""The PWA state-space model as a versioned JSON document (`SCHEMA`, version
+`SCHEMA_VERSION`): what [`PWAStateSpace.to_json`][pwa_pipeline.control.PWAStateSpace.to_json] writes and
+``from_json`` reads.
 
 The document is an object with
 
@@ -36,7 +36,7 @@ READ_VERSIONS = (1, 2)
 
 
 def to_document(ss) -> dict:
-    """The JSON document of a :class:`~.state_space.PWAStateSpace` as Python objects."""
+    """The JSON document of a [`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace] as Python objects."""
     lower, upper = ss.envelope
     return {
         "schema": SCHEMA,
@@ -68,7 +68,7 @@ def write_json(ss, path: str | Path | None = None) -> str:
 
 
 def read_json(source: str | Path, model: Callable):
-    """A model read from a JSON document written by :func:`write_json`, built by
+    """A model read from a JSON document written by `write_json`, built by
     ``model`` (the state-space class, called with the document's matrices, regions and
     options).
 
@@ -77,7 +77,7 @@ def read_json(source: str | Path, model: Callable):
     source : str or Path
     The JSON text, or the path of a file holding it.
     model : callable
-    :class:`~.state_space.PWAStateSpace`.
+    [`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace].
 
     Raises
     ------

@@ -1,5 +1,5 @@
-"""The PWA state-space model as an MPT3 script (MATLAB): :func:`mpt3_script`, what
-:meth:`PWAStateSpace.to_mpt3 <pwa_pipeline.control.PWAStateSpace.to_mpt3>` writes."""
+"""The PWA state-space model as an MPT3 script (MATLAB): `mpt3_script`, what
+[`PWAStateSpace.to_mpt3`][pwa_pipeline.control.PWAStateSpace.to_mpt3] writes."""
 
 from pathlib import Path
 

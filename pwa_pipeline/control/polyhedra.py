@@ -104,7 +104,7 @@ def shaping_by_rays(Ht: Float2D, ht: np.ndarray, interior: np.ndarray, n_rays: i
     Along a ray from a point inside, the first row the ray meets is a facet: just beyond
     that point only that row is violated, so no other rows imply it. A row counts only when
     the ray meets it alone (the next row farther on by a violation of more than
-    :data:`REDUNDANCY_TOL`), so equal rows are left to the linear programs. Rays: the rows'
+    `REDUNDANCY_TOL`), so equal rows are left to the linear programs. Rays: the rows'
     normals, the coordinate axes both ways, and ``n_rays`` random directions.
 
     Returns
@@ -135,10 +135,10 @@ def irredundant_rows(Ht: Float2D, ht: np.ndarray, protected: np.ndarray | None =
     """The rows of a non-empty bounded polyhedron {z̃ : H̃ z̃ ≤ h̃} that shape it.
 
     Row k is redundant when max H̃_k z̃ over the other kept rows (with row k itself relaxed by
-    1, which keeps the program bounded) stays within :data:`REDUNDANCY_TOL` of h̃_k. Rows are
+    1, which keeps the program bounded) stays within `REDUNDANCY_TOL` of h̃_k. Rows are
     tested in order and a redundant one is removed at once, so of two equal rows the later
     stays. Given a point inside, rows that rays from it show to shape the set
-    (:func:`shaping_by_rays`) need no program.
+    (`shaping_by_rays`) need no program.
 
     Parameters
     ----------
@@ -149,7 +149,7 @@ def irredundant_rows(Ht: Float2D, ht: np.ndarray, protected: np.ndarray | None =
     protected : ndarray of bool, shape (k,), optional
         Rows known to shape the polyhedron (not tested).
     interior : ndarray of shape (p,), optional
-        A point strictly inside (e.g. the centre of :func:`chebyshev_ball`).
+        A point strictly inside (e.g. the centre of `chebyshev_ball`).
 
     Returns
     -------

@@ -9,7 +9,7 @@ certificate proves" below); no equilibrium of the affine model is analysed.
 Three tests, in turn:
 
 1. **Spectral radius.** ρ(A_i) of each mode. A mode with ρ(A_i) ≥ 1 (within
-   :data:`MARGINAL`) rules a common quadratic function out. If such a mode can also follow
+   `MARGINAL`) rules a common quadratic function out. If such a mode can also follow
    itself (its region holds a point [x; u] whose successor, with some next input, is in the
    same region: a linear program, below), no piecewise-quadratic function of the form of
    test 3 exists either, and the report stops there (method ``"spectral radius"``). This is
@@ -32,8 +32,8 @@ Three tests, in turn:
    where (i, j) is a **transition** unless a linear program proves that no step can take
    the model from region i to region j: no z = [x; u] in P_i and in the envelope has a
    successor x⁺ = A_i x + B_i u + f_i that, with some input u⁺ in the envelope, gives
-   [x⁺; u⁺] in P_j and in the envelope (:func:`transitions`; every row relaxed by
-   :data:`SLACK` half-widths of the envelope, so a pair that only touches is kept). The
+   [x⁺; u⁺] in P_j and in the envelope (`transitions`; every row relaxed by
+   `SLACK` half-widths of the envelope, so a pair that only touches is kept). The
    model is not defined outside its envelope, so every step it takes is one of these
    transitions; with every pair kept this is the standard condition for arbitrary
    switching.
@@ -107,7 +107,7 @@ SLACK = 1e-6
 
 @dataclass(frozen=True)
 class StabilityReport:
-    """The verdict of :func:`stability_report`.
+    """The verdict of [`stability_report`][pwa_pipeline.control.stability_report].
 
     Attributes
     ----------
@@ -133,7 +133,7 @@ class StabilityReport:
         ``{"P1": P_1, "P2": P_2, …}`` (mode i's matrix as ``P{i+1}``, numbered as the MPT3
         script numbers the modes) for a piecewise one; empty when not certified.
     transitions : ndarray of int, shape (k, 2), or None
-        The pairs (i, j) of modes a step can go between (:func:`transitions`), when the
+        The pairs (i, j) of modes a step can go between (`transitions`), when the
         piecewise search computed them.
     """
 
@@ -165,7 +165,7 @@ def transitions(ss, pairs=None, deadline: float | None = None,
     (i, j) is excluded only when a linear program (HiGHS) shows that no z = [x; u] in
     region i and in the envelope has a successor x⁺ = A_i x + B_i u + f_i such that
     [x⁺; u⁺] lies in region j and in the envelope for some input u⁺. The program runs in
-    the envelope's coordinates (:class:`~pwa_pipeline.control.polyhedra.Box`) with every row
+    the envelope's coordinates (`Box`) with every row
     relaxed by ``slack`` half-widths, so rounding never excludes a pair; a program that
     does not finish cleanly keeps its pair.
 
@@ -175,8 +175,8 @@ def transitions(ss, pairs=None, deadline: float | None = None,
     pairs : iterable of (int, int), optional
         The pairs to test; default every (i, j).
     deadline : float, optional
-        A :func:`time.perf_counter` value; past it the function gives up and returns None.
-    slack : float, default :data:`SLACK`
+        A `time.perf_counter` value; past it the function gives up and returns None.
+    slack : float, default SLACK
 
     Returns
     -------
@@ -343,13 +343,13 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
     ss : PWAStateSpace
     solvers : tuple of str, default ("CLARABEL", "SCS")
         cvxpy solvers tried in turn for each LMI.
-    max_seconds : float, default :data:`MAX_SECONDS`
+    max_seconds : float, default MAX_SECONDS
         Time budget of the report: the transitions' linear programs stop past it and each
         solver is given what is left as its time limit; a search without time left is
         skipped and the message says so.
-    max_lmi_size : int, default :data:`MAX_LMI_SIZE`
+    max_lmi_size : int, default MAX_LMI_SIZE
         A search whose LMI holds more coefficients ((modes or transitions) ×
-        (n(n+1)/2)², :func:`lmi_size`) is skipped, and the message says so.
+        (n(n+1)/2)², `lmi_size`) is skipped, and the message says so.
 
     Returns
     -------

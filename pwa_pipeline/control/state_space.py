@@ -14,8 +14,8 @@ over the constant), A_i the shift of the lags with that prediction entering the 
 lag, and B_i placing u(k) in the newest input lag. This is the form of MPT3's ``PWASystem``
 (each mode an ``LTISystem`` with D = 0 and its domain set over (x, u)). The regions P_i are
 the model's regions made explicit inside the **data envelope**, the box of training values
-slightly padded (:mod:`~pwa_pipeline.control.conversion`); outside it the model is an
-extrapolation and :meth:`PWAStateSpace.mode_of` says so (−1).
+slightly padded (`pwa_pipeline.control.conversion`); outside it the model is an
+extrapolation and [`PWAStateSpace.mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of] says so (−1).
 """
 
 from pathlib import Path
@@ -37,10 +37,10 @@ from .mpt3 import mpt3_script
 
 #: Distance (in half-widths of the envelope, along a region row's unit normal) within which a
 #: point counts as on a region's boundary: such a point lies in several closed regions and
-#: takes the lowest-numbered one (the tie rule of :meth:`PWAStateSpace.mode_of`).
+#: takes the lowest-numbered one (the tie rule of `PWAStateSpace.mode_of`).
 TIE_TOL = 1e-9
 
-#: What :meth:`PWAStateSpace.simulate` does when the trajectory leaves the envelope.
+#: What `PWAStateSpace.simulate` does when the trajectory leaves the envelope.
 OUTSIDE = ("raise", "nearest")
 
 
@@ -66,12 +66,13 @@ class PWAStateSpace:
     y = C_i x + D_i u + g_i, valid where z = [x; u] ∈ P_i = {z : H_i z ≤ h_i} (see the
     module doc).
 
-    Built by :func:`~pwa_pipeline.control.to_state_space` (``model.to_state_space()``) or
-    read by :meth:`from_json`. An ARX model's state is the non-minimal one of eq. (2)–(3):
-    the last L outputs and nb inputs (``output_lags``, ``input_lags``), so :meth:`simulate`
-    from a warm-up of measured outputs gives the fitted model's simulation, and D = 0. A
-    state of another kind (the subspace baseline's, ``output_lags=None``) has its own names
-    and is simulated from a given initial state (``simulate(u, x0=...)``).
+    Built by [`to_state_space`][pwa_pipeline.control.to_state_space] (``model.to_state_space()``) or
+    read by [`from_json`][pwa_pipeline.control.PWAStateSpace.from_json]. An ARX model's state is the
+    non-minimal one of eq. (2)–(3): the last L outputs and nb inputs (``output_lags``, ``input_lags``), so
+    [`simulate`][pwa_pipeline.control.PWAStateSpace.simulate] from a warm-up of measured outputs gives the
+    fitted model's simulation, and D = 0. A state of another kind (the subspace baseline's,
+    ``output_lags=None``) has its own names and is simulated from a given initial state (``simulate(u,
+    x0=...)``).
 
     Parameters
     ----------
@@ -89,7 +90,7 @@ class PWAStateSpace:
     state_names : list of str, optional
         The state's entries' names when it is not made of past values (default ``x1…``).
     affine : bool, default False
-        φ ends in the constant 1 (eq. 2), for :meth:`regressors`.
+        φ ends in the constant 1 (eq. 2), for [`regressors`][pwa_pipeline.control.PWAStateSpace.regressors].
     input_names, output_names : list of str, optional
         Default ``u1…`` and ``y1…``.
     padding : float or None, default 0.05
@@ -224,7 +225,7 @@ class PWAStateSpace:
 
     def _stack_regions(self) -> None:
         """All regions' rows in one matrix (a region without rows gets 0·z ≤ 1), for
-        :meth:`mode_of`."""
+        [`mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of]."""
         p = self.n_states + self.n_inputs
         rows = [(H, h) if len(h) else (np.zeros((1, p)), np.ones(1)) for H, h in self.regions]
         self._H = np.vstack([H for H, _ in rows])
@@ -299,7 +300,7 @@ class PWAStateSpace:
 
         Every z in the envelope lies in one region, or on the boundary of several; the tie
         rule is the fitted model's: among the closed regions that hold z (within
-        :data:`TIE_TOL` half-widths of the envelope) the lowest-numbered one, as an argmax
+        `TIE_TOL` half-widths of the envelope) the lowest-numbered one, as an argmax
         picks the lowest index on ties and a sign test puts 0 with the negative side. (A
         point that rounding leaves in no region takes the least violated one.)
 
@@ -332,7 +333,7 @@ class PWAStateSpace:
 
     def step(self, x, u) -> tuple[np.ndarray, np.ndarray]:
         """One step from state x and input u: (x⁺, y) = (A_i x + B_i u + f_i,
-        C_i x + D_i u + g_i) with i = :meth:`mode_of` (x, u).
+        C_i x + D_i u + g_i) with i = [`mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of] (x, u).
 
         Parameters
         ----------
@@ -383,7 +384,7 @@ class PWAStateSpace:
         -------
         ndarray of shape (N − max(L, nb), n), or a list of them
             Row k − max(L, nb) is x(k), aligned with ``u[max(L, nb):]`` (and with
-            :meth:`regressors`).
+            [`regressors`][pwa_pipeline.control.PWAStateSpace.regressors]).
         """
         pairs = self._pairs(u, y)
         out = [lagged_matrix(ue, ye, self.output_lags, self.input_lags, affine=False)
@@ -392,7 +393,8 @@ class PWAStateSpace:
 
     def regressors(self, u: Signals, y: Signals) -> Float2D | list[Float2D]:
         """The fitted model's regressor φ(k) (eq. 2–3) of the same samples as
-        :meth:`states`: φ(k) = [x(k); 1] for an affine model, x(k) otherwise.
+        [`states`][pwa_pipeline.control.PWAStateSpace.states]: φ(k) = [x(k); 1] for an affine model, x(k)
+        otherwise.
 
         Returns
         -------
@@ -508,7 +510,7 @@ class PWAStateSpace:
 
     def stability(self, **options):
         """The stability report of the modes' linear parts
-        (:func:`~pwa_pipeline.control.stability.stability_report`; ``options`` are its
+        ([`stability_report`][pwa_pipeline.control.stability_report]; ``options`` are its
         keyword arguments)."""
         from .stability import stability_report
 
@@ -517,18 +519,18 @@ class PWAStateSpace:
     # --- export ------------------------------------------------------------------------
 
     def to_dict(self) -> dict:
-        """The JSON document of :meth:`to_json` as Python objects
-        (:func:`~.json_format.to_document`)."""
+        """The JSON document of [`to_json`][pwa_pipeline.control.PWAStateSpace.to_json] as Python objects
+        (`to_document`)."""
         return to_document(self)
 
     def to_json(self, path: str | Path | None = None) -> str:
-        """The model as a versioned JSON document (:mod:`~.json_format`, whose schema it
+        """The model as a versioned JSON document (`json_format`, whose schema it
         documents), also written to ``path`` when given."""
         return write_json(self, path)
 
     @classmethod
     def from_json(cls, source: str | Path) -> "PWAStateSpace":
-        """Read a model written by :meth:`to_json` (:func:`~.json_format.read_json`): the
+        """Read a model written by [`to_json`][pwa_pipeline.control.PWAStateSpace.to_json] (`read_json`): the
         JSON text or the path of a file holding it.
 
         Raises
@@ -541,7 +543,7 @@ class PWAStateSpace:
 
     def to_mpt3(self, path: str | Path | None = None, Ts: float = 1.0) -> str:
         """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``
-        (:func:`~.mpt3.mpt3_script`, whose parameters these are)."""
+        (`mpt3_script`, whose parameters these are)."""
         return mpt3_script(self, path, Ts)
 
     def __repr__(self) -> str:

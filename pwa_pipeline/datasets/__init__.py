@@ -1,6 +1,6 @@
 """Data: the paper's simulated system, the KUKA KR300 robot, the cascaded tanks and EMPS
 benchmarks, simulated machines with switching physics, and users' own tables, every one
-returned as a :class:`Dataset`."""
+returned as a [`Dataset`][pwa_pipeline.datasets.Dataset]."""
 
 from .builtin import DATASETS, load_dataset
 from .dataset import Dataset, GroundTruth

@@ -18,10 +18,10 @@ def load_dataset(name: str, kuka_path: str | os.PathLike | None = None, seed: in
 
     ``hure_vasak``: the section 5 system at 30 dB, 4,000 training samples of ``seed`` and
     4,000 held-out ones of a fresh record (seed + 1000), with its ground truth, unit-free
-    (:func:`~.simulated.make_hure_vasak`). ``kuka_robot``: :func:`~.kuka.load_kuka`
-    (train / test), joint positions in degrees and motor torques in N·m.
-    ``cascaded_tanks`` and ``emps``: the measured benchmarks of
-    :mod:`~pwa_pipeline.datasets.measured` (estimation / test record), from their default
+    ([`make_hure_vasak`][pwa_pipeline.datasets.make_hure_vasak]). ``kuka_robot``:
+    [`load_kuka`][pwa_pipeline.datasets.load_kuka] (train / test), joint positions in degrees and motor
+    torques in N·m. ``cascaded_tanks`` and ``emps``: the measured benchmarks of
+    `pwa_pipeline.datasets.measured` (estimation / test record), from their default
     folders.
 
     Raises

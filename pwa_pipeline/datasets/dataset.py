@@ -1,5 +1,5 @@
-"""The one data-set type every loader and generator returns (:class:`Dataset`), and what a
-simulated one knows about itself (:class:`GroundTruth`)."""
+"""The one data-set type every loader and generator returns ([`Dataset`][pwa_pipeline.datasets.Dataset]), and
+what a simulated one knows about itself ([`GroundTruth`][pwa_pipeline.datasets.GroundTruth])."""
 
 import functools
 import hashlib
@@ -53,7 +53,7 @@ def with_unit(name: str, units: Mapping[str, str]) -> str:
     """``name [unit]`` for a channel or one of its lags, ``name`` alone without a unit.
 
     The channel of a regressor name such as ``q1(k-2)``
-    (:func:`~pwa_pipeline.regressors.regressor_names`) is the text before its ``(``; an empty
+    (`regressor_names`) is the text before its ``(``; an empty
     unit counts as none.
 
     Examples
@@ -68,7 +68,7 @@ def with_unit(name: str, units: Mapping[str, str]) -> str:
 @dataclass(frozen=True)
 class Dataset:
     """Training and held-out experiments of one data set, with channel names and units: what
-    every loader and generator of :mod:`pwa_pipeline.datasets` returns, as scikit-learn's
+    every loader and generator of `pwa_pipeline.datasets` returns, as scikit-learn's
     loaders all return a ``Bunch``.
 
     Every estimator takes the experiments as they are (``model.fit(data.u_train,
@@ -87,8 +87,8 @@ class Dataset:
         A simulated data set's true system, noise-free outputs and regimes.
     units : dict of str to str
         The unit of each channel that has one (``{"q1": "deg"}``), for figure axes; a
-        channel not in it has none. Not part of :attr:`digest`: a unit names the numbers,
-        it does not change them, so no model is fitted or scored again for it.
+        channel not in it has none. Not part of [`digest`][pwa_pipeline.datasets.Dataset.digest]: a unit names
+        the numbers, it does not change them, so no model is fitted or scored again for it.
     sample_time : float, optional
         Seconds between samples, when known.
     convention : Convention, optional
@@ -113,7 +113,7 @@ class Dataset:
         self.__dict__.update({"units": {}, "sample_time": None, "convention": None, **state})
 
     def label(self, name: str) -> str:
-        """``name [unit]`` of one of its channels or their lags (:func:`with_unit`), for an
+        """``name [unit]`` of one of its channels or their lags (`with_unit`), for an
         axis label."""
         return with_unit(name, self.units)
 

@@ -51,12 +51,13 @@ def _split(x: Float2D, length: int) -> list[Float2D]:
 
 def _candidates(base: Path) -> list[Path]:
     """The files that may hold the benchmark: ``base`` itself if it is a ``.mat`` file, else
-    the :data:`KUKA_FILES` inside it."""
+    the `KUKA_FILES` inside it."""
     return [base] if base.suffix == ".mat" else [base / f for f in KUKA_FILES]
 
 
 def find_kuka(path: str | os.PathLike | None = None) -> Path | None:
-    """The benchmark's ``.mat`` file at ``path`` (default :func:`default_kuka_path`), or None."""
+    """The benchmark's ``.mat`` file at ``path`` (default
+    [`default_kuka_path`][pwa_pipeline.datasets.default_kuka_path]), or None."""
     base = Path(path) if path is not None else default_kuka_path()
     return next((c for c in _candidates(base) if c.is_file()), None)
 
@@ -78,7 +79,8 @@ def load_kuka(path: str | os.PathLike | None = None, segment: int = KUKA_SEGMENT
     Parameters
     ----------
     path : path-like, optional
-        The ``.mat`` file or the folder holding it. Default: :func:`default_kuka_path`.
+        The ``.mat`` file or the folder holding it. Default:
+        [`default_kuka_path`][pwa_pipeline.datasets.default_kuka_path].
     segment : int, default 606
         Experiment length; regressors and simulations must not span two experiments.
 

@@ -3,22 +3,25 @@
 Three physically different machines, each simulated by a fixed-step integrator much finer
 than its sampling period and sampled with a zero-order hold on the input:
 
-- :func:`make_two_link_arm`: a two-link planar arm in a vertical plane, gravity, Coulomb and
+- [`make_two_link_arm`][pwa_pipeline.datasets.make_two_link_arm]: a two-link planar arm in a vertical plane,
+gravity, Coulomb and
   viscous joint friction (switching on the sign of each joint velocity), torques in, joint
   angles out;
-- :func:`make_two_tank`: two cascaded tanks with an inlet valve that saturates (shut below
+- [`make_two_tank`][pwa_pipeline.datasets.make_two_tank]: two cascaded tanks with an inlet valve that
+saturates (shut below
   one command, fully open above another) and an upper tank that overflows;
-- :func:`make_dc_motor`: a DC motor driving an inertia through a gear with backlash, behind
+- [`make_dc_motor`][pwa_pipeline.datasets.make_dc_motor]: a DC motor driving an inertia through a gear with
+backlash, behind
   an amplifier with a dead zone, voltage in, motor and load speed out.
 
-Every generator returns a :class:`~.dataset.Dataset` of several experiments (lists of arrays, one
-per experiment), each experiment drawn from its own random stream, the input a filtered
+Every generator returns a [`Dataset`][pwa_pipeline.datasets.Dataset] of several experiments (lists of arrays,
+one per experiment), each experiment drawn from its own random stream, the input a filtered
 random multi-level signal that crosses the machine's switching surfaces, the measured
 outputs corrupted by Gaussian sensor noise of a realistic size.
 
 Seeds. The same ``seed`` gives the same data, bit for bit. Seeds ``0 … 999``
-(:data:`TUNING_SEEDS`) are for tuning estimators and their defaults; seeds from ``1000``
-(:data:`REPORTING_FIRST_SEED`) are for reported figures only and are never used while
+(`TUNING_SEEDS`) are for tuning estimators and their defaults; seeds from ``1000``
+(`REPORTING_FIRST_SEED`) are for reported figures only and are never used while
 tuning. Held-out experiments of a seed (``n_test``) come from a random stream
 independent of its training experiments, so the two never share an input or a noise draw.
 None of these data come from, or are calibrated on, the KUKA KR300 test record.
@@ -119,7 +122,7 @@ def _package(u: np.ndarray, y_clean: np.ndarray, flags: dict[str, np.ndarray],
 
 def _dataset(name: str, simulate: Callable[..., _Part], n_experiments: int, n_test: int,
              **kwargs) -> Dataset:
-    """A machine's :class:`~.dataset.Dataset`: ``n_experiments`` training experiments from
+    """A machine's [`Dataset`][pwa_pipeline.datasets.Dataset]: ``n_experiments`` training experiments from
     the seed's training stream and ``n_test`` held-out ones from its independent held-out
     stream (none with ``n_test=0``)."""
     train = simulate(n_experiments=n_experiments, held_out=False, **kwargs)
@@ -134,7 +137,7 @@ def _dataset(name: str, simulate: Callable[..., _Part], n_experiments: int, n_te
 
 # --------------------------------------------------------------------------- two-link arm
 
-#: Parameters of :func:`make_two_link_arm` (SI units: m, kg, kg·m², N·m, N·m·s/rad, rad).
+#: Parameters of `make_two_link_arm` (SI units: m, kg, kg·m², N·m, N·m·s/rad, rad).
 ARM = {
     "l1": 1.0, "lc1": 0.5, "m1": 20.0, "I1": 20.0 * 1.0**2 / 12,
     "lc2": 0.4, "m2": 10.0, "I2": 10.0 * 0.8**2 / 12,
@@ -233,7 +236,8 @@ def make_two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int =
 def _two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
                   noise_std: float | None = 0.05, held_out: bool = False,
                       burn_in: int = 20) -> _Part:
-    """The experiments of :func:`make_two_link_arm` from the seed's training or held-out stream."""
+    """The experiments of [`make_two_link_arm`][pwa_pipeline.datasets.make_two_link_arm] from the seed's
+    training or held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = ARM, 0.1, 20
@@ -265,7 +269,7 @@ def _two_link_arm(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
 
 # --------------------------------------------------------------------------- two tanks
 
-#: Parameters of :func:`make_two_tank` (SI units: m², m, m³/s, V).
+#: Parameters of `make_two_tank` (SI units: m², m, m³/s, V).
 TANK = {
     "area": (0.0154, 0.0154), "outlet": (5.0e-5, 6.0e-5), "height1": 0.5,
     "q_max": 2.0e-4, "u_shut": 1.0, "u_open": 7.0,
@@ -322,7 +326,8 @@ def make_two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
 def _two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
               noise_std: float | None = 0.002, held_out: bool = False,
                   burn_in: int = 100) -> _Part:
-    """The experiments of :func:`make_two_tank` from the seed's training or held-out stream."""
+    """The experiments of [`make_two_tank`][pwa_pipeline.datasets.make_two_tank] from the seed's training or
+    held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = TANK, 2.0, 20
@@ -360,7 +365,7 @@ def _two_tank(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
 
 # --------------------------------------------------------------------------- DC motor
 
-#: Parameters of :func:`make_dc_motor` (SI units: V, Ω, N·m/A, kg·m², N·m/rad, rad).
+#: Parameters of `make_dc_motor` (SI units: V, Ω, N·m/A, kg·m², N·m/rad, rad).
 MOTOR = {
     "u_max": 12.0, "dead_zone": 2.5, "R": 4.0, "K": 0.03, "J_m": 2.0e-5, "b_m": 1.0e-6,
     "N": 20.0, "J_l": 5.0e-3, "b_l": 2.0e-3, "k_s": 2.0, "c_s": 0.01,
@@ -425,7 +430,8 @@ def make_dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
 def _dc_motor(n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
               noise_std: tuple[float, float] | float | None = (1.0, 0.05),
               held_out: bool = False, burn_in: int = 20) -> _Part:
-    """The experiments of :func:`make_dc_motor` from the seed's training or held-out stream."""
+    """The experiments of [`make_dc_motor`][pwa_pipeline.datasets.make_dc_motor] from the seed's training or
+    held-out stream."""
     _check(n_experiments, n_samples, noise_std)
     rng = _rng(seed, held_out)
     p, dt, sub = MOTOR, 0.02, 20
@@ -471,8 +477,8 @@ MACHINES: dict[str, Callable[..., Dataset]] = {
 
 def make_machine(name: str, n_experiments: int = 40, n_samples: int = 600, seed: int = 0,
                  n_test: int = 0, **kwargs) -> Dataset:
-    """One machine of :data:`MACHINES` by name, with its default noise unless ``kwargs``
-    override it.
+    """One machine of [`MACHINES`][pwa_pipeline.datasets.MACHINES] by name, with its default noise unless
+    ``kwargs`` override it.
 
     Raises
     ------

@@ -5,8 +5,8 @@ repository.
 
 Each benchmark's own figure of merit is a free-run RMSE in the output's units over a stated
 window of the test record, its first samples given to set the initial state
-(:attr:`Dataset.convention`, scored by
-:func:`~pwa_pipeline.scoring.conventions.single_run_scores`). Published figures use these
+(`Dataset.convention`, scored by
+`single_run_scores`). Published figures use these
 conventions; this project's NRMSE (eq. 21) is reported beside them, never mixed with them.
 """
 
@@ -49,7 +49,7 @@ class MeasuredSource:
     download : str
         The official download, named in the error when a file is missing.
     convention : Convention
-        The benchmark's figure of merit (:attr:`Dataset.convention`).
+        The benchmark's figure of merit (`Dataset.convention`).
     """
 
     name: str
@@ -67,7 +67,8 @@ class MeasuredSource:
         return Path(__file__).resolve().parents[3] / "shared" / "data" / self.folder
 
     def missing(self, path: str | os.PathLike | None = None) -> list[Path]:
-        """The official files absent from ``path`` (default :meth:`path`)."""
+        """The official files absent from ``path`` (default
+        [`path`][pwa_pipeline.datasets.measured.MeasuredSource.path])."""
         base = Path(path) if path is not None else self.path()
         return [base / f for f in self.files if not (base / f).is_file()]
 
@@ -108,7 +109,7 @@ def load_cascaded_tanks(path: str | os.PathLike | None = None) -> Dataset:
 
     Estimation record ``uEst, yEst`` for training and test record ``uVal, yVal`` held out,
     1024 samples each, 4 s apart; both start from the same unknown state. The test record is
-    for scoring only (:data:`TANKS_CONVENTION`).
+    for scoring only (`TANKS_CONVENTION`).
 
     Parameters
     ----------
@@ -184,7 +185,7 @@ def load_emps(path: str | os.PathLike | None = None) -> Dataset:
 
     ``DATA_EMPS.mat`` for training and ``DATA_EMPS_PULSES.mat`` (the same reference with force
     pulses on the load) held out, 24,841 samples each at 1 kHz, measured in closed loop. The
-    test record is for scoring only (:data:`EMPS_CONVENTION`).
+    test record is for scoring only (`EMPS_CONVENTION`).
 
     Parameters
     ----------

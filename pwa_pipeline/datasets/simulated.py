@@ -65,7 +65,7 @@ def make_hure_vasak(n_samples: int = 4000, snr_db: float | None = 30.0, seed: in
     snr_db : float or None, default 30
     seed : int, default 0
         Seed of the training record; the held-out record's is ``seed`` + 1000
-        (:data:`TEST_SEED_OFFSET`), so that the two never share an input or a noise draw.
+        (`TEST_SEED_OFFSET`), so that the two never share an input or a noise draw.
     n_test : int, default 0
         Samples of the held-out record (0: none).
     burn_in : int, default 100
@@ -74,7 +74,7 @@ def make_hure_vasak(n_samples: int = 4000, snr_db: float | None = 30.0, seed: in
     -------
     Dataset
         One training record (and one held-out record with ``n_test``), with the
-        :class:`~.dataset.GroundTruth`: θ_i, each sample's mode, the noise-free outputs.
+        [`GroundTruth`][pwa_pipeline.datasets.GroundTruth]: θ_i, each sample's mode, the noise-free outputs.
 
     Examples
     --------

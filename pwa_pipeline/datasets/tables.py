@@ -191,9 +191,9 @@ def load_table(
 ) -> Dataset:
     """A CSV or Parquet table as a data set: every experiment (one per id of
     ``experiment_column``, else the whole table) for training, none held out (split it with
-    :class:`~.user.UserDataset`, or pass ``u_train[:k]``).
+    [`UserDataset`][pwa_pipeline.datasets.UserDataset], or pass ``u_train[:k]``).
 
-    See :func:`read_table` for the parameters and the errors.
+    See `read_table` for the parameters and the errors.
 
     Returns
     -------

@@ -1,7 +1,8 @@
 """Users' own data sets: a CSV or Parquet file described by name, with its columns, its
-split into training and held-out experiments, and its model orders (:class:`UserDataset`,
-which loads as a :class:`~.dataset.Dataset`). The pipeline keeps such descriptions in its
-registry of data sets (:mod:`pwa_pipeline.orchestration.registry`).
+split into training and held-out experiments, and its model orders
+([`UserDataset`][pwa_pipeline.datasets.UserDataset], which loads as a
+[`Dataset`][pwa_pipeline.datasets.Dataset]). The pipeline keeps such descriptions in its registry of data sets
+(`pwa_pipeline.orchestration.registry`).
 """
 
 import math
@@ -72,7 +73,7 @@ class UserDataset:
     test_fraction : float, optional
         Without ``test_experiments``: with two or more experiments, the last
         ``round(f · n)`` of them (at least one, at most all but one) in file order; with one,
-        the last ``f`` of its samples. Default :data:`DEFAULT_TEST_FRACTION`.
+        the last ``f`` of its samples. Default `DEFAULT_TEST_FRACTION`.
     na, nb : int
         Output and input orders of eq. (3) for every hyper-parameter set that gives none.
     affine : bool
@@ -147,7 +148,7 @@ class UserDataset:
         Raises
         ------
         FileNotFoundError, ValueError
-            Everything :func:`~pwa_pipeline.datasets.tables.read_table` checks, unknown test
+            Everything `read_table` checks, unknown test
             experiments, no experiment left for training, an experiment too short for the
             orders or (held out) for the evaluation warm-up, or fewer regressor rows than
             the default local-set size n_ρ = 3d.

@@ -1,4 +1,4 @@
 """Orchestration layer: Dagster assets, resources, checks and schedules, MLflow tracking.
 
-Everything numerical is imported from the core (:mod:`pwa_pipeline`); nothing here computes.
+Everything numerical is imported from the core (`pwa_pipeline`); nothing here computes.
 """

@@ -2,8 +2,8 @@
 the hyper-parameter sets of a sweep, in a folder or at an fsspec URL beside the assets (so
 that workers on other machines share them).
 
-Each entry is a signed pickle (:mod:`.signed_pickles`) keyed by a hash of its inputs and of
-the numerical core's source (:func:`core_fingerprint`), so an entry computed by other code
+Each entry is a signed pickle (`signed_pickles`) keyed by a hash of its inputs and of
+the numerical core's source (`core_fingerprint`), so an entry computed by other code
 is never loaded; an unusable entry is recomputed after a warning.
 """
 
@@ -25,7 +25,7 @@ from .signed_pickles import UnsignedFileError, load_object, save_object, signing
 
 
 def cache_key(phi: np.ndarray, target: np.ndarray, **settings) -> str:
-    """Content hash of the regressors, the numerical core's source (:func:`core_fingerprint`)
+    """Content hash of the regressors, the numerical core's source (`core_fingerprint`)
     and the settings local models depend on."""
     h = hashlib.sha256(core_fingerprint().encode())
     h.update(array_digest(phi, target).encode())
@@ -74,8 +74,8 @@ class SignedMemory:
     """The ``joblib.Memory`` interface over this store's signed pickles, for
     ``RefinedSubModels(memory=...)``: ``cache(func)`` returns ``func`` whose result is kept at
     ``<root>/<folder>/<key>.pkl`` (``root`` a folder or an fsspec URL, see
-    :func:`.files.store_root`), the key a hash of the function, the numerical core's source
-    (:func:`core_fingerprint`), ``salt`` (e.g. the source fingerprint of other code the
+    `files.store_root`), the key a hash of the function, the numerical core's source
+    (`core_fingerprint`), ``salt`` (e.g. the source fingerprint of other code the
     function calls) and the arguments (``joblib.hash``) but those named in ``ignore``, as
     joblib's. An entry without a valid
     signature, or unreadable, is recomputed after ``warn`` (a logging function) names it.

@@ -47,7 +47,7 @@ def sub_model_results(subs, partition: str) -> list[dg.AssetCheckResult]:
 
 
 def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
-    """Noise share below :data:`NOISE_LIMIT`, for a fitted clustering step."""
+    """Noise share below `NOISE_LIMIT`, for a fitted clustering step."""
     return [dg.AssetCheckResult(
         asset_key="clusters", check_name="noise_share_below_limit",
         passed=clustering.noise_share_ <= NOISE_LIMIT,
@@ -66,7 +66,7 @@ def not_applicable(specs: list[dg.AssetCheckSpec], partition: str,
 
 def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetCheckResult]:
     """PWA free-run mean NRMSE no worse than the linear ARX's (within
-    :data:`FREE_RUN_RTOL`); a warning, not an error."""
+    `FREE_RUN_RTOL`); a warning, not an error."""
     sel = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
     score = dict(zip(sel["method"], sel["nrmse"], strict=True))
     pwa, lin = score.get("pwa", np.nan), score.get("linear_arx", np.nan)

@@ -1,5 +1,5 @@
 """Command line (``python -m pwa_pipeline``): ``run`` materialises the pipeline end to end
-(:mod:`.partition_runs`); ``add-dataset``, ``list-datasets``
+(`partition_runs`); ``add-dataset``, ``list-datasets``
 and ``remove-dataset`` manage the user's data sets.
 
 Runs go to the Dagster instance in ``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) and
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from .dask_sweep import step_failures
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
-    from .partitions import DEFAULT_SETS, PartitionKey, check_keys, runnable_keys
+    from .partitions import DEFAULT_SETS, PartitionKey, check_keys, check_runnable, runnable_keys
     from .reporting import leaderboard_markdown
 
     defs = cli_definitions(args.tracking_uri)
@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     if args.partition:
         keys = args.partition
         check_keys(partitions_def, keys)  # a clear error for a mistyped key before any run
+        check_runnable(keys, defs.resources["settings"])  # and for data that are not there
     else:
         keys, skipped = runnable_keys(partitions_def, defs.resources["settings"],
                                       None if args.all else DEFAULT_SETS)
@@ -288,9 +289,11 @@ def main(argv: list[str] | None = None) -> int:
         "run", help="materialise every asset of the default partitions and print the "
                     "comparison (PWA vs linear ARX vs subspace, one-step and free-run)")
     p_run.add_argument("--partition", action="append", metavar="DATASET|HPARAMS",
-                       help="a partition key such as 'kuka_robot|paper' (repeatable); "
-                            "default: every data set whose data are present (built-in and "
-                            "registered) with the 'paper', 'default' and 'auto' sets")
+                       help="a partition key such as 'kuka_robot|paper' (repeatable; one "
+                            "whose data set's files are missing stops the command before any "
+                            "run, saying why); default: every data set whose data are present "
+                            "(built-in and registered) with the 'paper', 'default' and 'auto' "
+                            "sets")
     p_run.add_argument("--all", action="store_true", help="every partition (the full sweep)")
     p_run.add_argument("--executor", choices=("in-process", "dask"), default="in-process",
                        help="in-process (default): each partition one run, every step in "

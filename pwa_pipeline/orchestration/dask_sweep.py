@@ -1,13 +1,13 @@
 """A sweep on a dask cluster: each partition one run of ``sweep_dask`` whose steps are dask
 tasks (``dagster_dask.dask_executor``).
 
-The executor needs what :func:`dagster.materialize` cannot give it: a job that every worker
-can rebuild (:func:`sweep_dask_job`, found by :func:`dagster.reconstructable`) and a
+The executor needs what `dagster.materialize` cannot give it: a job that every worker
+can rebuild (`sweep_dask_job`, found by `dagster.reconstructable`) and a
 persistent Dagster instance that every worker writes its events to (on several machines:
-PostgreSQL, see :mod:`.instance`). The partitions run one after the other on one scheduler
-(see :mod:`.jobs` for why), each run's steps in parallel on the workers: the identification
+PostgreSQL, see `instance`). The partitions run one after the other on one scheduler
+(see `jobs` for why), each run's steps in parallel on the workers: the identification
 chain beside the two baselines. The workers are given this process's stores in the run
-configuration (:func:`worker_run_config`), and are checked to reach them before any run.
+configuration (`worker_run_config`), and are checked to reach them before any run.
 """
 
 import contextlib
@@ -57,7 +57,7 @@ def dask_scheduler(address: str = "", n_workers: int = 2, processes: bool = True
 
     ``dashboard`` is where the LocalCluster serves dask's dashboard (another free port if
     taken; ``None``: none). A scheduler given by ``address`` must answer within
-    :data:`CONNECT_TIMEOUT` seconds and have a worker within :data:`WORKER_TIMEOUT`,
+    `CONNECT_TIMEOUT` seconds and have a worker within `WORKER_TIMEOUT`,
     whose workers must import pwa-pipeline and find the signing key of each store of
     ``stores`` (the asset store and the cache, created by this process): else a ValueError
     says which.
@@ -85,7 +85,7 @@ def dask_scheduler(address: str = "", n_workers: int = 2, processes: bool = True
 
 def _check_workers(client, address: str, stores: Sequence[str]) -> None:
     """Raise a ValueError unless the scheduler has a worker, every worker runs
-    pwa-pipeline's code and sees every store of ``stores`` (see :func:`dask_scheduler`)."""
+    pwa-pipeline's code and sees every store of ``stores`` (see `dask_scheduler`)."""
     try:
         client.wait_for_workers(1, timeout=WORKER_TIMEOUT)
     except TimeoutError:
@@ -107,7 +107,7 @@ def _check_workers(client, address: str, stores: Sequence[str]) -> None:
 
 
 def _missing_stores(stores: list[str]) -> list[str]:
-    """On a worker: silence :func:`_quiet_sizeof`'s warning, and return the stores of
+    """On a worker: silence `_quiet_sizeof`'s warning, and return the stores of
     ``stores`` whose signing key this worker cannot see."""
     _quiet_sizeof()
     return [s for s in stores if not (store_root(s) / KEY_FILE).exists()]
@@ -174,9 +174,9 @@ def sweep_on_dask(keys: list[str], instance: dg.DagsterInstance, address: str,
     loggers); ``before(key)`` is called as each run starts; ``io_manager`` is the store the
     runs write to (default: the code location's), which the outputs are read from.
     ``instance`` must be persistent (the workers open it from its reference). Each run
-    holds the scheduler's :data:`~.jobs.RUN_LOCK` (its executor takes it), so that other
+    holds the scheduler's `RUN_LOCK` (its executor takes it), so that other
     runs on the same scheduler wait for it rather than share its task names (see
-    :mod:`.jobs`).
+    `jobs`).
     """
     from .definitions import defs, partitions_of
 

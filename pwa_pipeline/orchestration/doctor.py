@@ -2,12 +2,12 @@
 
 A run killed with SIGKILL (or a machine that stops) cannot clean up: its Dagster run stays
 NOT_STARTED, STARTING or STARTED, its MLflow runs RUNNING, and a temporary file may stay beside
-the file it was writing. :func:`find_orphans` lists them; :func:`repair` marks the runs failed
+the file it was writing. `find_orphans` lists them; `repair` marks the runs failed
 / killed and deletes the temporary files.
 
 A Dagster run is left behind when none of the processes that logged its events is alive on
 this machine (a run on one machine's sqlite storage, or one that the command line tagged with
-this host); a run that logged no process yet is given :data:`START_GRACE` seconds. A run of
+this host); a run that logged no process yet is given `START_GRACE` seconds. A run of
 another machine, whose processes cannot be seen from here, is taken for left behind only once
 older than ``older_than``. An MLflow run RUNNING is left behind when the Dagster run that
 opened it (its ``dagster_run_id`` tag) is no longer going; one without that tag, or opened by a
@@ -35,7 +35,7 @@ GOING = (dg.DagsterRunStatus.NOT_STARTED, dg.DagsterRunStatus.STARTING,
 
 @dataclass
 class Orphans:
-    """What :func:`find_orphans` found."""
+    """What `find_orphans` found."""
 
     dagster_runs: list[str] = field(default_factory=list)
     mlflow_runs: list[str] = field(default_factory=list)

@@ -93,7 +93,7 @@ def _modified(path: UPath) -> float | None:
 
 
 def sweep_stale_tmp(folder: UPath, older_than: float = STALE_SECONDS) -> list[UPath]:
-    """Delete the temporary files of :func:`atomic_write` in ``folder`` older than
+    """Delete the temporary files of `atomic_write` in ``folder`` older than
     ``older_than`` seconds (a running write is seconds old); returns what was deleted."""
     if not folder.is_dir():
         return []

@@ -1,5 +1,5 @@
 """Figures as the pages show them: PNG bytes within a size, inlined in Markdown for
-Dagster's metadata (the figures themselves are drawn by :mod:`pwa_pipeline.plotting`)."""
+Dagster's metadata (the figures themselves are drawn by `pwa_pipeline.plotting`)."""
 
 from __future__ import annotations
 
@@ -24,9 +24,9 @@ def figures_fingerprint() -> str:
 
 
 def to_png(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> bytes:
-    """The figure as PNG bytes, at most ``max_bytes`` (the PNG of :func:`to_markdown`).
+    """The figure as PNG bytes, at most ``max_bytes`` (the PNG of `to_markdown`).
 
-    Saved at 90 dpi by default, where the figures of :mod:`pwa_pipeline.plotting` are at most 900 × 650 px
+    Saved at 90 dpi by default, where the figures of `pwa_pipeline.plotting` are at most 900 × 650 px
     (a laptop screen's page without scrolling); they then come out at about 15–250 kB.
     A PNG over ``max_bytes`` is saved again at a lower resolution until it fits (down to
     about 30 dpi).
@@ -51,14 +51,14 @@ def to_png(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> b
 
 def to_markdown(fig: Figure, width: int | None = None, max_bytes: int = 300_000) -> str:
     """The figure as a Markdown image with the PNG inlined (base64), for
-    ``dagster.MetadataValue.md``: :func:`png_markdown` of its :func:`to_png`, the suptitle as
+    ``dagster.MetadataValue.md``: `png_markdown` of its `to_png`, the suptitle as
     alternative text.
 
     Parameters
     ----------
     fig : Figure
     width, max_bytes
-        As in :func:`to_png`.
+        As in `to_png`.
     """
     return png_markdown(to_png(fig, width, max_bytes), fig.get_suptitle() or "figure")
 

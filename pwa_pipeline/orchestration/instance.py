@@ -35,13 +35,13 @@ run_queue:
       value: "dask"
       limit: 1
 """
-#: :data:`DAGSTER_YAML` with Dagster's PostgreSQL storage (runs, event logs, schedules).
+#: `DAGSTER_YAML` with Dagster's PostgreSQL storage (runs, event logs, schedules).
 POSTGRES_YAML = DAGSTER_YAML + f"""storage:
   postgres:
     postgres_url:
       env: {POSTGRES_ENV}
 """
-#: What earlier versions of this module wrote beside :data:`DAGSTER_YAML`: storage classes of
+#: What earlier versions of this module wrote beside `DAGSTER_YAML`: storage classes of
 #: this package that no longer exist. A file naming one is replaced.
 _EARLIER_MODULES = ("pwa_pipeline.orchestration.event_log",
                     "pwa_pipeline.orchestration.compute_logs")
@@ -74,7 +74,7 @@ def check_postgres_url(url: str) -> None:
 
 
 def probe_postgres(url: str) -> None:
-    """Connect once to the database at ``url`` (within :data:`CONNECT_TIMEOUT` seconds) and
+    """Connect once to the database at ``url`` (within `CONNECT_TIMEOUT` seconds) and
     raise a ValueError with the server's own reason if that fails: Dagster's storages retry
     for about 12 s and then report only that they retried."""
     from sqlalchemy import create_engine, text
@@ -99,9 +99,9 @@ def probe_postgres(url: str) -> None:
 
 
 def instance_yaml() -> str:
-    """The ``dagster.yaml`` this module generates: :data:`POSTGRES_YAML` when
-    ``$PWA_DAGSTER_POSTGRES_URL`` is set (checked by :func:`check_postgres_url`, its server
-    by :func:`probe_postgres`), else :data:`DAGSTER_YAML`."""
+    """The ``dagster.yaml`` this module generates: `POSTGRES_YAML` when
+    ``$PWA_DAGSTER_POSTGRES_URL`` is set (checked by `check_postgres_url`, its server
+    by `probe_postgres`), else `DAGSTER_YAML`."""
     url = os.environ.get(POSTGRES_ENV, "")
     if not url:
         return DAGSTER_YAML
@@ -112,13 +112,13 @@ def instance_yaml() -> str:
 
 def prepare_instance() -> dg.DagsterInstance:
     """``$DAGSTER_HOME`` (default ``<project>/.dagster_home``) with its ``dagster.yaml``
-    (:func:`instance_yaml`, written when missing, when this module generated it, or when an
+    (`instance_yaml`, written when missing, when this module generated it, or when an
     earlier version of this module wrote it) and its schema created; sets ``DAGSTER_HOME``
     and returns the instance.
 
     The first use of a new home creates its sqlite schema; two processes doing that at once
     can leave it unusable, so the first use holds ``<home>/.init.lock``. A PostgreSQL server
-    that does not answer within :data:`CONNECT_TIMEOUT` seconds, or refuses the
+    that does not answer within `CONNECT_TIMEOUT` seconds, or refuses the
     credentials, raises a ValueError naming the URL (password masked) and the reason.
     """
     wanted = instance_yaml()

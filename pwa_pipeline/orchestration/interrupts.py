@@ -4,8 +4,8 @@ Dagster stops a run on SIGINT by raising ``DagsterExecutionInterruptedError`` fr
 handler, in whatever the main thread is running at that moment. A handler that raises inside
 code which catches and drops the error (a finaliser, a library's clean-up, MLflow's logging)
 leaves the run going to its end.
-:func:`interrupts_redelivered` notices every SIGINT at the C level, where no handler can
-lose it, and sends it again while the run goes on. :func:`interruptible` makes a run that
+`interrupts_redelivered` notices every SIGINT at the C level, where no handler can
+lose it, and sends it again while the run goes on. `interruptible` makes a run that
 waits before its steps (for a busy dask scheduler) stop at once.
 """
 

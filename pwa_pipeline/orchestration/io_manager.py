@@ -1,14 +1,14 @@
 """The asset store: each asset partition a file under one folder, local or an fsspec URL.
 
 A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step objects and
-estimators, the core's frozen dataclasses) as a signed pickle (:mod:`.signed_pickles`).
+estimators, the core's frozen dataclasses) as a signed pickle (`signed_pickles`).
 Files live at ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}`` (an unpartitioned
 asset: ``<base_dir>/<asset>.{parquet,pkl}``), where ``base_dir`` is a folder or any fsspec
 URL (``s3://bucket/pwa``, ``file:///shared/pwa``): workers on other machines read and write
 the same files. The names are checked against
-:data:`pwa_pipeline._validation.NAME_PATTERN` and every path is checked to stay inside the
+`pwa_pipeline._validation.NAME_PATTERN` and every path is checked to stay inside the
 store. Every write goes to a temporary file and is moved into place
-(:func:`.files.atomic_write`), so a failed or killed run never leaves a half-written file
+(`files.atomic_write`), so a failed or killed run never leaves a half-written file
 under a name that is read; temporary files a killed run left behind are removed once they
 are an hour old.
 """

@@ -1,7 +1,7 @@
 """The jobs beside ``sweep``: ``sweep_dask`` (the same assets, steps on a dask cluster) and
 ``refresh_leaderboard`` (the cross-partition ranking), and the dask cluster they run on.
 
-``sweep`` (in :mod:`.schedules`) runs every step of a partition in one process: a partition
+``sweep`` (in `schedules`) runs every step of a partition in one process: a partition
 launched from the UI costs one process start-up, not one per step. ``sweep_dask`` hands
 each step to a dask cluster through ``dagster_dask.dask_executor``: a scheduler at
 ``$PWA_DASK_SCHEDULER`` (``tcp://host:8786``, started on its own with ``dask scheduler``,
@@ -12,11 +12,11 @@ thread-safe). The launchpad shows that configuration and lets it be changed per 
 One limit of ``dagster-dask`` 0.29: it names each dask task ``<job>.<step>``, so two runs of
 ``sweep_dask`` in flight on the same scheduler would share task keys, and dask would hand
 one run the other's results. Runs on a shared scheduler therefore take turns, each with
-every worker: the executor (:func:`dask_executor`) holds the scheduler's lock
-:data:`RUN_LOCK` (a ``distributed.Lock``, a lease that dask frees when the holding process
+every worker: the executor (`dask_executor`) holds the scheduler's lock
+`RUN_LOCK` (a ``distributed.Lock``, a lease that dask frees when the holding process
 dies) for as long as it runs, whoever launched the run: the command line, the UI, a
-schedule. The runs launched from the UI also carry the tag :data:`EXECUTOR_TAG`, which the
-instance's run queue admits one at a time (see :mod:`.instance`), so that the UI never
+schedule. The runs launched from the UI also carry the tag `EXECUTOR_TAG`, which the
+instance's run queue admits one at a time (see `instance`), so that the UI never
 starts more than one LocalCluster. An option of ``dagster-dask`` to name tasks by run would
 let runs share a scheduler at once.
 """
@@ -30,7 +30,7 @@ from .interrupts import interruptible
 
 #: The one asset that is not partitioned: it reads every partition of the scores.
 LEADERBOARD = "leaderboard"
-#: The job of every asset of one partition (built in :mod:`.schedules`), and the leaderboard's.
+#: The job of every asset of one partition (built in `schedules`), and the leaderboard's.
 SWEEP_JOB, LEADERBOARD_JOB = "sweep", "refresh_leaderboard"
 #: What a sweep run materialises: every asset of one partition.
 SWEEP_SELECTION = dg.AssetSelection.all() - dg.AssetSelection.assets(LEADERBOARD)
@@ -59,7 +59,7 @@ def dask_cluster(address: str | None = None) -> dict:
 
 
 def dask_run_config(address: str | None = None) -> dict:
-    """Run configuration selecting :func:`dask_cluster` for a ``sweep_dask`` run."""
+    """Run configuration selecting `dask_cluster` for a ``sweep_dask`` run."""
     return {"execution": {"config": {"cluster": dask_cluster(address)}}}
 
 
@@ -75,7 +75,7 @@ def dask_run_config(address: str | None = None) -> dict:
 )
 def dask_executor(init_context):
     """``dagster_dask.dask_executor`` on the configured cluster, taking turns on a shared
-    scheduler (:func:`taking_turns`). It is imported when a run uses it: importing dask's
+    scheduler (`taking_turns`). It is imported when a run uses it: importing dask's
     distributed takes about 2 s, which every process loading the code location (each run of
     ``sweep`` included) would otherwise pay. Its configuration is the ``existing`` and
     ``local`` clusters of ``dagster_dask``'s.
@@ -92,10 +92,10 @@ def dask_executor(init_context):
 
 
 def taking_turns(execute: Callable, address: str) -> Callable:
-    """``execute`` (an executor's :meth:`dagster.Executor.execute`) run while holding the
-    lock :data:`RUN_LOCK` of the dask scheduler at ``address``, so that runs on one
+    """``execute`` (an executor's `dagster.Executor.execute`) run while holding the
+    lock `RUN_LOCK` of the dask scheduler at ``address``, so that runs on one
     scheduler never share task keys (see the module doc). A run that has to wait says so in
-    its log and can be stopped while it waits (:func:`.interrupts.interruptible`)."""
+    its log and can be stopped while it waits (`interrupts.interruptible`)."""
 
     def locked(plan_context, execution_plan):
         from dask.distributed import Client, Lock, Variable
@@ -153,7 +153,7 @@ def build_sensors() -> list:
 
 def build_jobs() -> list:
     """``sweep_dask`` and ``refresh_leaderboard`` (``sweep`` and its schedule are built in
-    :mod:`.schedules`)."""
+    `schedules`)."""
     sweep_dask = dg.define_asset_job(
         "sweep_dask", selection=SWEEP_SELECTION, executor_def=dask_executor,
         config=dask_run_config(), tags=dict([EXECUTOR_TAG]),

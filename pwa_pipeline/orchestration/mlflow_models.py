@@ -27,7 +27,7 @@ class Simulator(mlflow.pyfunc.PythonModel):
 
     Parameters
     ----------
-    model : fitted estimator with ``simulate(u, y_init)``
+    model : fitted estimator with simulate(u, y_init)
     u_names, y_names : list of str
         The input and output column names.
     """
@@ -97,7 +97,7 @@ def predictor_fingerprint(model, u_names: list[str], y_names: list[str]) -> str:
 
 def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: list[str],
                   warmup: int, rows: int = 40) -> pd.DataFrame:
-    """An input table for :class:`Simulator`: ``rows`` samples, outputs given on ``warmup``."""
+    """An input table for `Simulator`: ``rows`` samples, outputs given on ``warmup``."""
     y = y[:rows].copy()
     y[warmup:] = np.nan
     return pd.concat([pd.DataFrame(u[:rows], columns=u_names),
@@ -106,24 +106,24 @@ def example_table(u: np.ndarray, y: np.ndarray, u_names: list[str], y_names: lis
 
 @dataclass(frozen=True)
 class ModelToLog:
-    """What :meth:`~pwa_pipeline.orchestration.tracking.MLflowTracker.log_run` logs as the
+    """What `log_run` logs as the
     run's model: the simulator, an input example (for the signature), and the training
-    data as an MLflow dataset (:func:`training_dataset`), logged as the run's dataset."""
+    data as an MLflow dataset (`training_dataset`), logged as the run's dataset."""
 
     simulator: Simulator
     input_example: pd.DataFrame
     training: "mlflow.data.pandas_dataset.PandasDataset"
 
     def fingerprint(self) -> str:
-        """:func:`predictor_fingerprint` of the simulator's model and columns, so that a
+        """`predictor_fingerprint` of the simulator's model and columns, so that a
         model is logged once however many runs score it."""
         sim = self.simulator
         return predictor_fingerprint(sim.model, sim.u_names, sim.y_names)
 
 
 def training_dataset(data: Dataset) -> "mlflow.data.pandas_dataset.PandasDataset":
-    """``data``'s :func:`~.reporting.training_table` as an MLflow dataset named ``training``,
-    digested by :attr:`~pwa_pipeline.datasets.Dataset.digest` (a hash of every sample, where
+    """``data``'s `training_table` as an MLflow dataset named ``training``,
+    digested by `digest` (a hash of every sample, where
     MLflow's own digest reads the first rows only)."""
     from mlflow.data import from_pandas
 

@@ -4,7 +4,7 @@ Partitions run one after the other, each one run of the ``sweep`` job with every
 process: a partition's steps take seconds, while Dagster's multiprocess executor starts a
 process per step (each importing Dagster, MLflow and scikit-learn), which costs more than
 it saves. Runs at once go through Dagster's own machinery: a backfill launched in the UI,
-which the daemon's run queue runs side by side, or ``--executor dask`` (:mod:`.dask_sweep`).
+which the daemon's run queue runs side by side, or ``--executor dask`` (`dask_sweep`).
 """
 
 import socket
@@ -25,7 +25,7 @@ LOCATION_TAGS = {".dagster/repository": f"__repository__@{LOCATION}"}
 
 
 def run_tags() -> dict[str, str]:
-    """The tags of the command line's runs: :data:`LOCATION_TAGS` and this host (for
+    """The tags of the command line's runs: `LOCATION_TAGS` and this host (for
     ``doctor``)."""
     return {**LOCATION_TAGS, HOST_TAG: socket.gethostname()}
 
@@ -65,8 +65,8 @@ def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterIn
                           run_config: dict) -> dg.ExecuteInProcessResult:
     """One partition's run of the ``sweep`` job in this process, so that it is listed among
     the job's runs as a run launched in the UI is (errors are the run's, not raised); tagged
-    by :func:`run_tags`. A Ctrl-C that leaves it running is sent again
-    (:func:`~.interrupts.interrupts_redelivered`)."""
+    by `run_tags`. A Ctrl-C that leaves it running is sent again
+    (`interrupts_redelivered`)."""
     with interrupts_redelivered():
         return defs.resolve_job_def(SWEEP_JOB).execute_in_process(
             partition_key=key, instance=instance, run_config=run_config, tags=run_tags(),

@@ -1,10 +1,10 @@
 """The partitions: the pairs of a data set and a hyper-parameter set that has values for it,
-keys like ``"kuka_robot|paper"`` (:class:`PartitionKey`, the one place a key is joined and
+keys like ``"kuka_robot|paper"`` (`PartitionKey`, the one place a key is joined and
 split: the command line and the assets that receive Dagster's key parse it here once and pass
-the typed value, or the partition's :class:`~pwa_pipeline.config.Configuration`, on).
+the typed value, or the partition's `Configuration`, on).
 
 Only pairs that can run are offered: a set's own table for the data set, or, for a data set
-a user registered, its ``[<set>."*"]`` table (see :mod:`pwa_pipeline.config`). The paper's
+a user registered, its ``[<set>."*"]`` table (see `pwa_pipeline.config`). The paper's
 sets give values per data set and no rule, so ``hure_vasak|robot`` or ``<your data>|paper``
 are not partitions.
 """
@@ -76,6 +76,28 @@ def check_keys(partitions_def: dg.StaticPartitionsDefinition, keys: list[str]) -
         if key not in known:
             raise ValueError(f"unknown partition {key!r}; the partitions are {known} (a set "
                              f"that has no values for a data set gives it no partition)")
+
+
+def check_runnable(keys: list[str], settings: PipelineSettings) -> None:
+    """Raise a ValueError, in one line, naming the requested partitions whose data set's files
+    are missing and why (before any run, rather than a failed run's stack traces).
+
+    Parameters
+    ----------
+    keys : list of str
+        Partition keys, each a partition of the definitions (`check_keys`).
+    settings : PipelineSettings
+        The resource of the same definitions (files and registry).
+    """
+    missing = unavailable_datasets(settings)
+    blocked: dict[str, list[str]] = {}
+    for key in keys:
+        dataset = PartitionKey.parse(key).dataset
+        if dataset in missing:
+            blocked.setdefault(dataset, []).append(key)
+    if blocked:
+        raise ValueError("; ".join(f"{', '.join(found)} cannot run: {missing[dataset]}"
+                                   for dataset, found in blocked.items()))
 
 
 def all_keys(partitions_def: dg.StaticPartitionsDefinition) -> list[str]:

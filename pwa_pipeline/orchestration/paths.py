@@ -46,13 +46,13 @@ def default_mlflow_ui_url() -> str:
 
 def default_storage_dir() -> UPath:
     """``$PWA_STORAGE`` (a folder or an fsspec URL), else ``<project>/storage``: materialised
-    assets, the caches and the exports (see :func:`.files.store_root`)."""
+    assets, the caches and the exports (see `files.store_root`)."""
     return store_root(os.environ.get(STORAGE_ENV) or project_dir() / "storage")
 
 
 def default_datasets_path() -> Path:
     """``$PWA_DATASETS``, else ``<project>/storage/datasets.json``: the user's registered data
-    sets (:class:`~pwa_pipeline.orchestration.registry.DatasetRegistry`). A local file whatever
+    sets (`DatasetRegistry`). A local file whatever
     ``$PWA_STORAGE`` says, as the files it registers are: on several machines, point
     ``$PWA_DATASETS`` at a file they share."""
     env = os.environ.get("PWA_DATASETS")

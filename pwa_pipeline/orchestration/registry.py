@@ -73,7 +73,7 @@ class DatasetRegistry:
         Raises
         ------
         FileNotFoundError, ValueError
-            From :meth:`UserDataset.load`, or the name is taken and ``replace`` is false.
+            From `UserDataset.load`, or the name is taken and ``replace`` is false.
             Nothing is written then.
         """
         data = spec.load()

@@ -65,11 +65,11 @@ def score_metrics(evaluation: Evaluation) -> dict[str, float]:
     ``one_step_outside_share`` and ``free_run_outside_share``, the share of scored samples
     whose regressor left the model's data envelope (left out for a model without an
     envelope). Per output, under
-    :data:`PER_OUTPUT`: ``<mode>_<nrmse|r2|rmse>_<output>``. A diverged free run logs no
+    `PER_OUTPUT`: ``<mode>_<nrmse|r2|rmse>_<output>``. A diverged free run logs no
     free-run score at all (a 1e30 NRMSE would set the scale of every chart of the
     experiment), neither the mean nor those of its diverged outputs nor its share outside the
     envelope (its non-finite samples count as outside: the onset says more), but where it
-    diverged (:class:`~pwa_pipeline.scoring.evaluation.Onset`): ``free_run_divergence_experiment``
+    diverged (`Onset`): ``free_run_divergence_experiment``
     and ``free_run_divergence_sample`` (the held-out experiment, from 0, and its sample, the
     warm-up counted) and ``free_run_nrmse_before_divergence``; the ``scores.csv`` artifact
     keeps every exact value.
@@ -134,9 +134,9 @@ def _sig4(value: float) -> str:
 
 def leaderboard_markdown(table: pd.DataFrame, missing: dict[str, list[str]] | None = None
                          ) -> str:
-    """The leaderboard (:func:`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
+    """The leaderboard (`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
     table per data set, numbers to 4 significant digits, a diverged free run shown as
-    :func:`score_metrics` logs it (NRMSE capped at the divergence limit, R² at 1 − limit²)
+    `score_metrics` logs it (NRMSE capped at the divergence limit, R² at 1 − limit²)
     and flagged; then the partitions never materialised (``missing``: key → methods)."""
     parts = []
     for dataset, rows in table.groupby("dataset", sort=False):

@@ -1,6 +1,6 @@
 """What one MLflow run of a method records: its parameters, metrics, tags, artifacts and
 description, built in one place from the partition's configuration, the fitted model and
-its evaluation (:func:`method_run`)."""
+its evaluation (`method_run`)."""
 
 from dataclasses import dataclass
 
@@ -19,8 +19,7 @@ from .tracking import model_description
 
 @dataclass(frozen=True)
 class MethodRun:
-    """The content of one method's MLflow run (:meth:`MLflowTracker.log_run
-    <.tracking.MLflowTracker.log_run>`'s arguments but the model)."""
+    """The content of one method's MLflow run (`MLflowTracker.log_run`'s arguments but the model)."""
 
     dataset: str
     hparams: str
@@ -36,7 +35,7 @@ class MethodRun:
 def benchmark_metric(model, data: Dataset) -> dict[str, float]:
     """A measured benchmark's own figure of merit on its held-out record
     (``benchmark/<convention>``, e.g. ``benchmark/rmse_mm_from_20``), for a data set that
-    has one (:attr:`Dataset.convention`) and a free run that did not diverge (a diverged
+    has one (`Dataset.convention`) and a free run that did not diverge (a diverged
     run has its onset among the scores instead). Prefixed, as the per-output scores, so
     that a run keeps its few unprefixed headline metrics and the chart view its few
     charts."""
@@ -53,7 +52,7 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
 
     Parameters are the model's own (``resolved_params()``: every parameter, the values the
     fit chose filled in) and the evaluation's warm-up; metrics are the scores
-    (:func:`~.reporting.score_metrics`), what the model says of itself under ``model/``
+    (`score_metrics`), what the model says of itself under ``model/``
     (sub-models, output groups, ε and the noise share where the paper's clustering ran, the
     ground truth's errors, the structure search's, the state-space export's) and the fit's
     seconds, from the model (``timings_``); tags are the data set, set and method and

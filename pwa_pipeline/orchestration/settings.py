@@ -21,7 +21,7 @@ class PipelineSettings(dg.ConfigurableResource):
         The KUKA ``.mat`` file or its folder; empty: ``$PWA_KUKA_DATA`` or
         ``../shared/data/kuka-kr300`` beside the project.
     hparams_path : str
-        The hyper-parameter file. :func:`~pwa_pipeline.orchestration.definitions.build_definitions`
+        The hyper-parameter file. `build_definitions`
         sets it to the file its partitions were read from; empty: ``$PWA_HPARAMS`` or
         ``data/hparams.toml``.
     datasets_path : str
@@ -43,7 +43,7 @@ class PipelineSettings(dg.ConfigurableResource):
     cache_scores : bool
         Reuse a model's scores and figures (prediction; for a PWA model also its switching
         and regions figures) across sets whose fitted models predict alike
-        (:func:`~pwa_pipeline.orchestration.mlflow_models.predictor_fingerprint`): a
+        (`predictor_fingerprint`): a
         baseline shared by the sets of a data set, or a PWA model that sets differing only
         in ε or MinPts end in.
     """
@@ -70,7 +70,7 @@ class PipelineSettings(dg.ConfigurableResource):
 
     def hparams(self) -> HParamsFile:
         """The hyper-parameter file, read and checked (once while it is unchanged,
-        :func:`~pwa_pipeline.config.load_hparams`)."""
+        `load_hparams`)."""
         return load_hparams(self.hparams_path or None)
 
     def registry(self) -> DatasetRegistry:
@@ -90,7 +90,7 @@ class PipelineSettings(dg.ConfigurableResource):
 
     def configuration(self, hparams: str, dataset: str) -> Configuration:
         """The resolved configuration of one partition; a registered data set brings its
-        orders (see :meth:`HParamsFile.configuration`)."""
+        orders (see `HParamsFile.configuration`)."""
         registry = self.registry()
         orders = registry.get(dataset).orders() if dataset in registry.names() else None
         return self.hparams().configuration(hparams, dataset, orders)

@@ -2,7 +2,7 @@
 
 A pickle can run code when loaded, so only files carrying a valid signature are unpickled:
 ones this store wrote. Each file is a header, an HMAC-SHA256 of the payload under the store's
-key, then the pickle (protocol 5), written atomically (:func:`.files.atomic_write`). The key
+key, then the pickle (protocol 5), written atomically (`files.atomic_write`). The key
 is ``<store>/.signing-key``, created on first use, readable by its owner only in a local
 folder (in a bucket, by whoever the bucket's policy lets read it); whoever can write that
 key can make the store load code, so keep the store private. A file without a
@@ -43,7 +43,7 @@ def save_object(path: UPath, obj, key: bytes) -> None:
 
 
 def load_object(path: UPath, key: bytes):
-    """Unpickle a file written by :func:`save_object` with the same key.
+    """Unpickle a file written by `save_object` with the same key.
 
     Raises
     ------

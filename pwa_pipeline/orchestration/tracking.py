@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 #: What a logged model needs to load elsewhere (pinned to the versions that logged it).
 REQUIREMENTS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn", "pandas")
-#: Run tags that say where a run's model is (see :meth:`MLflowTracker.log_run`).
+#: Run tags that say where a run's model is (see `MLflowTracker.log_run`).
 MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
 #: The experiment tag of MLflow 3 for classic model training (not GenAI); MLflow 3.17's UI
 #: follows its own GenAI / model-training switch instead, so links add ``MLFLOW_TRAINING_VIEW``.
@@ -175,7 +175,7 @@ class MLflowTracker(dg.ConfigurableResource):
     def _logged_model(client, exp_id: str, method: str, fingerprint: str) -> dict | None:
         """The model tags (``model_uri``, ``model_id``, ``model_run_id``) of the latest
         finished run of ``method`` that logged or reused a model with this
-        :meth:`~.mlflow_models.ModelToLog.fingerprint`, if that model is still there and
+        `fingerprint`, if that model is still there and
         ready (not deleted in the UI, say); else None."""
         from mlflow.entities import LoggedModelStatus
         from mlflow.exceptions import MlflowException
@@ -198,9 +198,9 @@ class MLflowTracker(dg.ConfigurableResource):
                    ) -> dict:
         """Log the training table as the run's dataset, and ``model`` as its model, logged
         and registered (the new version tagged with ``version_tags`` and described by
-        ``description``), unless ``logged`` (the tags of :meth:`_logged_model`) names it
+        ``description``), unless ``logged`` (the tags of `_logged_model`) names it
         already logged: then the run is linked to that model as its output. Returns the
-        run's tags for its model: :data:`MODEL_TAGS`, and for a linked model a description
+        run's tags for its model: `MODEL_TAGS`, and for a linked model a description
         (``mlflow.note.content``) that says which run logged it."""
         import mlflow
         from mlflow.entities import LoggedModelOutput
@@ -264,7 +264,7 @@ class MLflowTracker(dg.ConfigurableResource):
         ``model`` is logged as the run's MLflow model (a pyfunc with signature and input
         example, registered as ``<prefix>.<dataset>.<method>``) and its training table as the
         run's dataset, unless a finished run of the method in the data set's experiment has
-        the same model (equal :meth:`~.mlflow_models.ModelToLog.fingerprint`, e.g. a baseline
+        the same model (equal `fingerprint`, e.g. a baseline
         shared by the sets of a sweep): then it is not logged or registered again, but linked
         to this run as its output, and the run's description links the run that logged it
         (runs of other processes that score the same model at the same moment may each log
@@ -336,7 +336,7 @@ class MLflowTracker(dg.ConfigurableResource):
 
 
 class LoggedRun(NamedTuple):
-    """A run :meth:`MLflowTracker.log_run` logged (what :meth:`MLflowTracker.run_url` links
+    """A run `MLflowTracker.log_run` logged (what `MLflowTracker.run_url` links
     to, without asking the store)."""
 
     run_id: str
@@ -347,7 +347,7 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
                       ) -> str:
     """What a run scored, and its registered model version: the model, what it was fitted
     on, its headline scores on the held-out experiments (``metrics``, named as
-    :func:`~.reporting.score_metrics` names them; the mean over the outputs), and for a PWA
+    `score_metrics` names them; the mean over the outputs), and for a PWA
     model its sub-models."""
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
     shown = [f"{label} NRMSE {metrics[key]:.4g}" for label, key in (
@@ -404,7 +404,7 @@ def _reuse_note(client, logged: dict) -> str:
 
 
 def _write_artifact(path: Path, obj) -> None:
-    """Write an artifact of :meth:`MLflowTracker.log_run` to ``path``: bytes as they are, a
+    """Write an artifact of `MLflowTracker.log_run` to ``path``: bytes as they are, a
     DataFrame as CSV, text as it is, anything else as JSON (``path`` may be in a
     subfolder, e.g. ``control/...``)."""
     path.parent.mkdir(parents=True, exist_ok=True)

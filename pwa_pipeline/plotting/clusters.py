@@ -1,5 +1,5 @@
 """The local models as the clustering step clustered them, and its ε
-(:class:`ParameterClustersDisplay`, paper step 4)."""
+([`ParameterClustersDisplay`][pwa_pipeline.plotting.ParameterClustersDisplay], paper step 4)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ _AXES_HEIGHT = 2.45
 _TICKS_AND_LABEL = 0.5
 _LEGEND_COLUMNS = 3
 #: Points queried for the k-distance curve: its shape, at a fifth of the cost of the 5,000
-#: that choose ε (:func:`~pwa_pipeline.pwa.steps.clustering.k_distances`).
+#: that choose ε (`k_distances`).
 _CURVE_POINTS = 1000
 
 
@@ -31,7 +31,8 @@ def _embedding(local, step, target: np.ndarray) -> np.ndarray:
 
 class ParameterClustersDisplay:
     """The local parameter matrices θ_k as DBSCAN clustered them (step 4), and its ε, in the
-    manner of scikit-learn's displays: :meth:`from_steps` draws it, the figure is
+    manner of scikit-learn's displays:
+    [`from_steps`][pwa_pipeline.plotting.ParameterClustersDisplay.from_steps] draws it, the figure is
     ``figure_``.
 
     Left: the clustered θ_k (unit-free when the step was, embedded as in eq. 8–10, so that
@@ -54,7 +55,8 @@ class ParameterClustersDisplay:
     Attributes
     ----------
     figure_ : matplotlib.figure.Figure
-        Two axes: the projection and the k-distance curve (after :meth:`plot`).
+        Two axes: the projection and the k-distance curve (after
+        [`plot`][pwa_pipeline.plotting.ParameterClustersDisplay.plot]).
     """
 
     def __init__(self, local, clustering, target: np.ndarray):

@@ -1,5 +1,5 @@
 """The partition figure: a PWA state-space model's polyhedral regions in a 2-D slice of
-z = [x; u] (:class:`PartitionDisplay`)."""
+z = [x; u] ([`PartitionDisplay`][pwa_pipeline.plotting.PartitionDisplay])."""
 
 from __future__ import annotations
 
@@ -15,9 +15,10 @@ _LEGEND_ROWS = 22
 
 class PartitionDisplay:
     """The polyhedral partition of a PWA state-space model
-    (:class:`~pwa_pipeline.control.PWAStateSpace`) in a 2-D slice of z = [x; u], drawn from
+    ([`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace]) in a 2-D slice of z = [x; u], drawn from
     the H-representations of its regions (not from a classifier), in the manner of
-    scikit-learn's displays: :meth:`from_state_space` draws it, the figure is ``figure_``.
+    scikit-learn's displays: [`from_state_space`][pwa_pipeline.plotting.PartitionDisplay.from_state_space]
+    draws it, the figure is ``figure_``.
 
     The two coordinates are those the region boundaries lean on most (largest sum over the
     rows of |H_c| times the envelope's half-width in c, rows normalised); the others are held
@@ -36,7 +37,7 @@ class PartitionDisplay:
     Attributes
     ----------
     figure_ : matplotlib.figure.Figure
-        One axes (after :meth:`plot`).
+        One axes (after [`plot`][pwa_pipeline.plotting.PartitionDisplay.plot]).
     """
 
     def __init__(self, state_space, fixed: np.ndarray, labels: list[str] | None = None):

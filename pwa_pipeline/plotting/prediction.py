@@ -1,5 +1,5 @@
 """The prediction figure: measured output, one-step prediction and free run of a held-out
-experiment (:class:`PredictionDisplay`)."""
+experiment ([`PredictionDisplay`][pwa_pipeline.plotting.PredictionDisplay])."""
 
 from __future__ import annotations
 
@@ -38,9 +38,9 @@ def clip_range(measured: np.ndarray) -> tuple[float, float]:
 
 class PredictionDisplay:
     """Measured output, one-step prediction and free run of the first held-out experiment
-    of an evaluation (:func:`~pwa_pipeline.scoring.evaluate`), in the manner of
-    scikit-learn's displays: :meth:`from_evaluation` builds and draws it, the figure is
-    ``figure_``.
+    of an evaluation ([`evaluate`][pwa_pipeline.scoring.evaluate]), in the manner of
+    scikit-learn's displays: [`from_evaluation`][pwa_pipeline.plotting.PredictionDisplay.from_evaluation]
+    builds and draws it, the figure is ``figure_``.
 
     One subplot per output, over the experiment's first 606 samples at most (one KUKA robot
     experiment), each titled with that output's one-step and free-run NRMSE (eq. 21, 4
@@ -74,7 +74,7 @@ class PredictionDisplay:
     Attributes
     ----------
     figure_ : matplotlib.figure.Figure
-        One axes per output (after :meth:`plot`).
+        One axes per output (after [`plot`][pwa_pipeline.plotting.PredictionDisplay.plot]).
     """
 
     def __init__(self, evaluation: Evaluation, y: np.ndarray, y_names: list[str],
@@ -87,7 +87,7 @@ class PredictionDisplay:
                         context: str = "") -> PredictionDisplay:
         """The display of ``evaluation`` on ``data``'s held-out experiments (its ``y_test``,
         ``y_names`` and ``units``), drawn with ``context``
-        (:func:`~.style.context_title`) as the title's first line."""
+        (`context_title`) as the title's first line."""
         return cls(evaluation, data.y_test[0], data.y_names, len(data.y_test), warmup,
                    data.units).plot(context)
 
@@ -147,7 +147,7 @@ class PredictionDisplay:
 
 def _free_run(ax: Axes, k: np.ndarray, free: np.ndarray, measured: np.ndarray,
               diverged: bool) -> None:
-    """Draw a free run clipped to :func:`clip_range`: the line reaches the edge where the run
+    """Draw a free run clipped to `clip_range`: the line reaches the edge where the run
     leaves the range and comes back where it returns, never runs along the edge; samples out
     of range (NaN counts as above) are shaded and each exit is marked by a triangle."""
     lo, hi = clip_range(measured)

@@ -1,5 +1,5 @@
 """The regions figure: a fitted model's regions in the 2-D slice of φ where they differ
-most (:class:`RegionsDisplay`)."""
+most ([`RegionsDisplay`][pwa_pipeline.plotting.RegionsDisplay])."""
 
 from __future__ import annotations
 
@@ -18,9 +18,10 @@ _LEGEND_ROWS = 22
 @dataclass
 class RegionsDisplay:
     """The regions H_i of a fitted model as eq. (1) (``model.regions_``) in a 2-D slice of
-    φ, in the manner of scikit-learn's displays: :meth:`compute` gives the numbers (plain
-    arrays, what the pipeline caches), :meth:`plot` draws them (``figure_``),
-    :meth:`from_estimator` does both.
+    φ, in the manner of scikit-learn's displays: [`compute`][pwa_pipeline.plotting.RegionsDisplay.compute]
+    gives the numbers (plain arrays, what the pipeline caches),
+    [`plot`][pwa_pipeline.plotting.RegionsDisplay.plot] draws them (``figure_``),
+    [`from_estimator`][pwa_pipeline.plotting.RegionsDisplay.from_estimator] does both.
 
     The regions are filled, and training rows drawn on top coloured by their sub-model
     (−1 grey). Rows lie off the slice in the other regressors, so some sit in a region other
@@ -43,7 +44,7 @@ class RegionsDisplay:
     d : int
         Regressors in φ.
     figure_ : matplotlib.figure.Figure
-        After :meth:`plot`.
+        After [`plot`][pwa_pipeline.plotting.RegionsDisplay.plot].
     """
 
     i: int
@@ -112,7 +113,8 @@ class RegionsDisplay:
                        labels: np.ndarray | None = None, max_points: int = 3000,
                        context: str = "", units: Mapping[str, str] | None = None
                        ) -> RegionsDisplay:
-        """:meth:`compute` then :meth:`plot` (whose parameters these are)."""
+        """[`compute`][pwa_pipeline.plotting.RegionsDisplay.compute] then
+        [`plot`][pwa_pipeline.plotting.RegionsDisplay.plot] (whose parameters these are)."""
         if len(names) != np.shape(phi)[1]:
             raise ValueError(f"{len(names)} names for {np.shape(phi)[1]} regressors")
         return cls.compute(model, phi, labels, max_points).plot(names, context, units)
@@ -124,7 +126,7 @@ class RegionsDisplay:
         Parameters
         ----------
         names : list of str
-            The d regressor names (:func:`~pwa_pipeline.regressors.regressor_names`).
+            The d regressor names (`regressor_names`).
         context : str, optional
             The title's first line (data set, set, method).
         units : mapping of str to str, optional

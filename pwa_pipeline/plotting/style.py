@@ -1,12 +1,12 @@
-"""What every figure of :mod:`pwa_pipeline.plotting` shares: sizes that fit a laptop screen,
+"""What every figure of `pwa_pipeline.plotting` shares: sizes that fit a laptop screen,
 one colour per sub-model, and titles that say what a figure shows.
 
-- Every title opens with the line :func:`context_title` (data set, hyper-parameter set and
+- Every title opens with the line `context_title` (data set, hyper-parameter set and
   method), so that a figure seen alone in MLflow or a screenshot says what it shows.
 - Axes carry the data's units, ``name [unit]``.
-- Every figure fits a laptop screen (about 1366 × 768) at 90 dpi: at most :data:`MAX_WIDTH`
-  inches (900 px) wide and :data:`MAX_HEIGHT` inches (650 px) high.
-- Sub-model / region / cluster i is :func:`colour` (i) in every figure; DBSCAN noise grey.
+- Every figure fits a laptop screen (about 1366 × 768) at 90 dpi: at most `MAX_WIDTH`
+  inches (900 px) wide and `MAX_HEIGHT` inches (650 px) high.
+- Sub-model / region / cluster i is `colour` (i) in every figure; DBSCAN noise grey.
 
 Figures are built without pyplot (no global state, no display), matplotlib imported only
 when one is drawn: the library imports without it.
@@ -47,7 +47,7 @@ def context_title(dataset: str, hparams: str, method: str) -> str:
     dataset, hparams : str
         The data set and hyper-parameter set.
     method : str
-        The method's label (:attr:`pwa_pipeline.methods.Method.label`).
+        The method's label (`pwa_pipeline.methods.Method.label`).
 
     Examples
     --------
@@ -58,7 +58,7 @@ def context_title(dataset: str, hparams: str, method: str) -> str:
 
 
 def suptitle(fig: Figure, context: str, what: str, **kwargs) -> None:
-    """``context`` (:func:`context_title`) above ``what`` as the figure's title; ``what``
+    """``context`` (`context_title`) above ``what`` as the figure's title; ``what``
     alone without a context."""
     fig.suptitle(f"{context}\n{what}" if context else what, **kwargs)
 
@@ -87,7 +87,7 @@ def legend_below(fig: Figure) -> None:
 
 
 def shown(k: np.ndarray) -> tuple[np.ndarray, str]:
-    """The rows of the samples shown (those before :data:`MAX_SAMPLES`), and what a title
+    """The rows of the samples shown (those before `MAX_SAMPLES`), and what a title
     says of them: ``""`` when all are shown, else ``", the first 605 of 3999 samples
     shown"``."""
     rows = k < MAX_SAMPLES

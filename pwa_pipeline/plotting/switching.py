@@ -1,5 +1,5 @@
 """The switching figure: the region of each output group at each sample of a held-out
-experiment (:class:`SwitchingDisplay`)."""
+experiment ([`SwitchingDisplay`][pwa_pipeline.plotting.SwitchingDisplay])."""
 
 from __future__ import annotations
 
@@ -42,9 +42,10 @@ class Lane:
 
 class SwitchingDisplay:
     """The region of each output group (``model.groups_``) at each sample of one
-    experiment, in the manner of scikit-learn's displays: :meth:`compute` gives the numbers
-    (plain arrays, what the pipeline caches), :meth:`plot` draws them (``figure_``),
-    :meth:`from_estimator` does both.
+    experiment, in the manner of scikit-learn's displays:
+    [`compute`][pwa_pipeline.plotting.SwitchingDisplay.compute] gives the numbers (plain arrays, what the
+    pipeline caches), [`plot`][pwa_pipeline.plotting.SwitchingDisplay.plot] draws them (``figure_``),
+    [`from_estimator`][pwa_pipeline.plotting.SwitchingDisplay.from_estimator] does both.
 
     A model of one output group (the paper's route) is one lane: the estimated region H_i
     over time, or, with the true modes of a simulated system, the true mode above and each
@@ -71,7 +72,7 @@ class SwitchingDisplay:
     Attributes
     ----------
     figure_ : matplotlib.figure.Figure
-        After :meth:`plot`.
+        After [`plot`][pwa_pipeline.plotting.SwitchingDisplay.plot].
     """
 
     def __init__(self, k: np.ndarray, lanes: list[Lane], true: np.ndarray | None = None,
@@ -106,7 +107,7 @@ class SwitchingDisplay:
         Each group's region is ``group.regions.predict(φ(k))`` with φ built from (u, y) as
         in eq. (2)–(3) at the model's lags. With the true modes (simulated data, a model of
         one group) its regions are paired with the true sub-models by their parameters
-        (:func:`~pwa_pipeline.scoring.metrics.match_submodels`).
+        ([`match_submodels`][pwa_pipeline.scoring.match_submodels]).
 
         Parameters
         ----------
@@ -163,7 +164,8 @@ class SwitchingDisplay:
     @classmethod
     def from_estimator(cls, model, u: np.ndarray, y: np.ndarray, *, context: str = "",
                        **kwargs) -> SwitchingDisplay:
-        """:meth:`compute` (whose keyword parameters these are) then :meth:`plot`."""
+        """[`compute`][pwa_pipeline.plotting.SwitchingDisplay.compute] (whose keyword parameters these are)
+        then [`plot`][pwa_pipeline.plotting.SwitchingDisplay.plot]."""
         return cls.compute(model, u, y, **kwargs).plot(context)
 
     def plot(self, context: str = "") -> SwitchingDisplay:

@@ -1,13 +1,13 @@
 """The PWARX estimator and what it is built from.
 
-:class:`PWARX` (:mod:`.estimator`) fits one shape whatever its parameters: output groups,
-each with one region map and its sub-models (:mod:`.groups`, :mod:`.partitions`), predicted,
-simulated and exported by what every ARX model shares (:mod:`.arx`). Its parts, each a
-sub-package or module of its own: the paper's steps 2–6 (:mod:`.steps`: local models,
-clustering, sub-models, regions), the model structures for machines (:mod:`.structures`,
-:mod:`.scheduling`, :mod:`.structure_fit`), the structure search of :meth:`PWARX.auto`
-(:mod:`.search`), simulation-error training (:mod:`.output_error`) and the compiled kernels
-(:mod:`.kernels`).
+[`PWARX`][pwa_pipeline.PWARX] (`estimator`) fits one shape whatever its parameters: output groups,
+each with one region map and its sub-models (`groups`, `partitions`), predicted,
+simulated and exported by what every ARX model shares (`arx`). Its parts, each a
+sub-package or module of its own: the paper's steps 2–6 (`steps`: local models,
+clustering, sub-models, regions), the model structures for machines (`structures`,
+`scheduling`, `structure_fit`), the structure search of [`PWARX.auto`][pwa_pipeline.PWARX.auto]
+(`search`), simulation-error training (`output_error`) and the compiled kernels
+(`kernels`).
 """
 
 from .estimator import PWARX, STEPS

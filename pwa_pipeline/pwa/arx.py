@@ -31,19 +31,19 @@ class ARXModelBase(BaseEstimator):
 
     Subclasses take ``na``, ``nb``, ``affine`` and ``form`` as parameters and set at fit
     the one fitted shape every model shares: ``groups_``, a list of
-    :class:`~.groups.OutputGroup` (outputs that switch together, their region map and
+    [`OutputGroup`][pwa_pipeline.pwa.OutputGroup] (outputs that switch together, their region map and
     sub-models), with ``n_inputs_``, ``n_outputs_``, ``structures_`` (each output's structure
     in words), ``signal_range_`` (the training range, for the data envelope) and
-    ``timings_`` (seconds per stage of the fit). φ holds :attr:`output_lags_` output lags:
-    na, or na + 1 in the velocity form (:mod:`~.structures`).
+    ``timings_`` (seconds per stage of the fit). φ holds `output_lags_` output lags:
+    na, or na + 1 in the velocity form (`structures`).
 
-    From the groups every model has, whatever fitted it: :attr:`thetas_`, :attr:`regions_`
-    and :attr:`n_submodels_` (the model as eq. 1), :meth:`predict`, :meth:`simulate`,
-    :meth:`score` and :meth:`to_state_space`.
+    From the groups every model has, whatever fitted it: `thetas_`, `regions_`
+    and `n_submodels_` (the model as eq. 1), `predict`, `simulate`,
+    `score` and `to_state_space`.
 
     **Data envelope.** A model is known only where its training regressors went.
-    :meth:`outside_envelope` says, per sample, whether φ(k) leaves the box of the training
-    range padded by :data:`~pwa_pipeline.envelope.PADDING` (:mod:`pwa_pipeline.envelope`);
+    `outside_envelope` says, per sample, whether φ(k) leaves the box of the training
+    range padded by `PADDING` (`pwa_pipeline.envelope`);
     outside it the model extrapolates (its numbers are not clipped).
 
     **Return types.** ``predict`` and ``simulate`` take one experiment (arrays) or several
@@ -63,7 +63,7 @@ class ARXModelBase(BaseEstimator):
 
     @property
     def regions_(self) -> RegionMap:
-        """The region map of the model as eq. (1) (:func:`~.groups.modes`): the group's own
+        """The region map of the model as eq. (1) (`modes`): the group's own
         map for a model of one output group, else the product of the groups' maps (one
         region per combination of the groups' regions). ``regions_.predict(phi)`` gives the
         sub-model of each row of φ."""
@@ -179,27 +179,27 @@ class ARXModelBase(BaseEstimator):
                        padding: float = PADDING, input_names: list[str] | None = None,
                        output_names: list[str] | None = None) -> PWAStateSpace:
         """The model as a PWA state-space model x⁺ = A_i x + B_i u + f_i, y = C_i x + g_i on
-        polyhedral regions of z = [x; u] (:func:`pwa_pipeline.control.to_state_space`, whose
-        parameters these are): its output groups' regions made explicit inside the data
-        envelope (``signal_range_``, or the range of ``u`` and ``y`` when given, widened by
-        ``padding``).
+        polyhedral regions of z = [x; u]
+        ([`pwa_pipeline.control.to_state_space`][pwa_pipeline.control.to_state_space], whose parameters these
+        are): its output groups' regions made explicit inside the data envelope (``signal_range_``, or the
+        range of ``u`` and ``y`` when given, widened by ``padding``).
         """
         return to_state_space(self, u, y, padding=padding, input_names=input_names,
                               output_names=output_names)
 
     def envelope(self, padding: float = PADDING) -> tuple[np.ndarray, np.ndarray]:
         """The data envelope over φ(k) without the constant
-        (:func:`~pwa_pipeline.envelope.regressor_bounds`): each entry's channel's training range widened
+        (`regressor_bounds`): each entry's channel's training range widened
         by ``padding`` of its span.
 
         Parameters
         ----------
-        padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (5 %)
+        padding : float, default PADDING (5 %)
 
         Returns
         -------
         lower, upper : ndarrays of shape (m·L + r·nb,)
-            In φ's order (eq. 3; L = :attr:`output_lags_`).
+            In φ's order (eq. 3; L = `output_lags_`).
 
         Raises
         ------
@@ -218,7 +218,7 @@ class ARXModelBase(BaseEstimator):
     def outside_envelope(self, u: Signals, y: Signals, padding: float = PADDING
                          ) -> np.ndarray | list[np.ndarray]:
         """Whether each sample's regressor φ(k), built from ``u`` and ``y``, leaves the data
-        envelope (:meth:`envelope`): where the model is used outside its training data.
+        envelope (`envelope`): where the model is used outside its training data.
 
         Pass measured outputs for the samples of a one-step prediction, or the outputs a
         free run returned (``simulate``'s result, warm-up included) for the samples of that
@@ -230,7 +230,7 @@ class ARXModelBase(BaseEstimator):
         y : array-like of shape (N, m), or a list of such arrays
             May hold NaN or inf (a diverged simulation): a φ(k) with such an entry is
             outside.
-        padding : float, default :data:`~pwa_pipeline.envelope.PADDING` (5 %)
+        padding : float, default PADDING (5 %)
 
         Returns
         -------
@@ -267,7 +267,7 @@ class ARXModelBase(BaseEstimator):
 
     def _outside(self, u: Float2D, y: Float2D, lower: np.ndarray, upper: np.ndarray
                  ) -> np.ndarray:
-        """The flags of :meth:`outside_envelope` of one experiment, shape (N,)."""
+        """The flags of `outside_envelope` of one experiment, shape (N,)."""
         n0, n = self.n_initial_, y.shape[0]
         flag = np.zeros(n, bool)
         if n > n0:

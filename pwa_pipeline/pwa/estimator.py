@@ -24,7 +24,7 @@ from .steps.submodels import ClusterCentres, RefinedSubModels, output_lag_column
 from .structure_fit import fit_structure
 from .structures import COUPLINGS, FORMS, output_groups
 
-#: The step parameters of :class:`PWARX`, in the order the fit runs them.
+#: The step parameters of `PWARX`, in the order the fit runs them.
 STEPS = ("local_models", "clustering", "submodels", "regions")
 
 
@@ -41,31 +41,32 @@ class PWARX(ARXModelBase):
     visible in ``get_params(deep=True)`` (e.g. ``clustering__eps``) and settable by
     ``set_params``.
 
-    The library default (``PWARX()``, the same as :meth:`PWARX.default`) differs from the
-    paper where measurement showed the paper's version fails (``shared/paper/NOTES.md``):
+    The library default (``PWARX()``, the same as [`PWARX.default`][pwa_pipeline.PWARX.default]) differs from
+    the paper where measurement showed the paper's version fails (``shared/paper/NOTES.md``):
     z-scored neighbour search and at most 5,000 local models estimated
-    (:class:`~.steps.local_models.LocalLeastSquares`), unit-free θ_k,
+    ([`LocalLeastSquares`][pwa_pipeline.pwa.LocalLeastSquares]), unit-free θ_k,
     mixed local sets left out and at most 3,000 local models clustered, ε from the k-distance
-    curve (:class:`~.steps.clustering.DBSCANClustering`), and sub-models refitted, merged,
+    curve ([`DBSCANClustering`][pwa_pipeline.pwa.DBSCANClustering]), and sub-models refitted, merged,
     re-assigned by residual and region, with a search for missed modes
-    (:class:`~.steps.submodels.RefinedSubModels`), and region boundaries refined on the
-    residuals (:class:`~.steps.boundaries.ResidualRegions`). :meth:`PWARX.paper` is the paper's
-    setting.
+    ([`RefinedSubModels`][pwa_pipeline.pwa.RefinedSubModels]), and region boundaries refined on the
+    residuals ([`ResidualRegions`][pwa_pipeline.pwa.ResidualRegions]).
+    [`PWARX.paper`][pwa_pipeline.PWARX.paper] is the paper's setting.
 
-    Each step object implements the interface of its kind (:mod:`~.steps.base`:
-    :class:`~.steps.base.BaseLocalModels`, :class:`~.steps.base.BaseClustering`,
-    :class:`~.steps.base.BaseSubModels`, :class:`~.steps.base.BaseRegions`): a step of
-    one's own is one class of that kind, e.g. a region learner implements ``fit``,
-    ``predict`` and ``halfspaces`` and then predicts, simulates and exports to state space
-    as the built-in ones do.
+    Each step object implements the interface of its kind (`steps.base`:
+    [`BaseLocalModels`][pwa_pipeline.pwa.steps.base.BaseLocalModels],
+    [`BaseClustering`][pwa_pipeline.pwa.steps.base.BaseClustering],
+    [`BaseSubModels`][pwa_pipeline.pwa.steps.base.BaseSubModels],
+    [`BaseRegions`][pwa_pipeline.pwa.steps.base.BaseRegions]): a step of one's own is one class of that kind,
+    e.g. a region learner implements ``fit``, ``predict`` and ``halfspaces`` and then predicts, simulates and
+    exports to state space as the built-in ones do.
 
     ``form="velocity"``, ``outputs="decoupled"`` and ``scheduling`` give the structures of
-    :mod:`~.structure_fit` (the paper's steps run per output group on its regressor ψ when
-    ``scheduling`` is None); ``search`` (:meth:`auto`) the structure search of
-    :mod:`~.search`. Every combination ends in the same fitted shape: output groups, each
-    with one region map and its sub-models (:mod:`~.groups`), and from them ``thetas_``,
-    ``regions_``, ``n_submodels_``, :meth:`predict`, :meth:`simulate` and
-    :meth:`to_state_space`.
+    `structure_fit` (the paper's steps run per output group on its regressor ψ when
+    ``scheduling`` is None); ``search`` ([`auto`][pwa_pipeline.PWARX.auto]) the structure search of
+    `search`. Every combination ends in the same fitted shape: output groups, each
+    with one region map and its sub-models (`groups`), and from them ``thetas_``,
+    ``regions_``, ``n_submodels_``, `predict`, `simulate` and
+    `to_state_space`.
 
     Parameters
     ----------
@@ -83,23 +84,23 @@ class PWARX(ARXModelBase):
         Step 6. None: ``ResidualRegions()`` (the SVM's regions with boundaries moved to
         where the sub-models' residuals switch); the paper's is ``SVMRegions()``.
     refinement : estimator, optional
-        After step 6, an :class:`~.output_error.OutputErrorRefinement`: the θ_i refined to
+        After step 6, an `OutputErrorRefinement`: the θ_i refined to
         minimise the free-run error on the training experiments, the regions kept. None (the
         paper's route and the default): no refinement.
     form : {"level", "velocity"}, default "level"
         ``"velocity"``: each output's increment Δy(k) from na lagged increments, the level
-        y(k−1) and the inputs, integrated in simulation (:mod:`~.structures`).
+        y(k−1) and the inputs, integrated in simulation (`structures`).
     outputs : {"joint", "decoupled"}, default "joint"
         ``"decoupled"``: one MISO model per output, on its own lags and every input, with
         its own regions.
     scheduling : SignScheduling, optional
-        Regions given by the user (:class:`~.scheduling.SignScheduling`, e.g. the sign of
+        Regions given by the user (`SignScheduling`, e.g. the sign of
         each output's increment), in place of steps 2–6; sub-models by least squares per
         region, optionally a structure chosen per output on held-out training experiments.
     search : StructureSearch, optional
-        The structure chosen from the data (:class:`~.search.StructureSearch`,
-        built by :meth:`auto`): form, coupling, regions (scheduling variables it proposes,
-        or the steps' clusters), modes and orders up to ``na``, ``nb``, judged on held-out
+        The structure chosen from the data ([`StructureSearch`][pwa_pipeline.pwa.StructureSearch],
+        built by [`auto`][pwa_pipeline.PWARX.auto]): form, coupling, regions (scheduling variables it
+        proposes, or the steps' clusters), modes and orders up to ``na``, ``nb``, judged on held-out
         training experiments and refined; never worse there than its linear reference.
         Needs ``affine=True`` and leaves ``form``, ``outputs``, ``scheduling`` and
         ``refinement`` to the search.
@@ -107,14 +108,14 @@ class PWARX(ARXModelBase):
     Attributes
     ----------
     groups_ : list of OutputGroup
-        The fitted model (:class:`~.groups.OutputGroup`): outputs that switch together,
+        The fitted model ([`OutputGroup`][pwa_pipeline.pwa.OutputGroup]): outputs that switch together,
         their region map over φ and each region's parameter rows, with the fitted steps
         that found them (``group.steps``: ``local_models``, ``clustering``, ``submodels``,
         ``regions`` and ``refinement`` where they ran). The paper's route is one group.
     thetas_ : ndarray of shape (s, d, m)
         Sub-model parameter matrices θ_i (eq. 4) of the model as eq. (1): on the paper's
         route refitted with the regions by the default's step 6
-        (:class:`~.steps.boundaries.ResidualRegions`) and refined when ``refinement`` is
+        ([`ResidualRegions`][pwa_pipeline.pwa.ResidualRegions]) and refined when ``refinement`` is
         given (``groups_[0].steps["submodels"].thetas_`` keeps step 5's); with several output
         groups one per combination of their regions.
     regions_ : RegionMap
@@ -130,13 +131,13 @@ class PWARX(ARXModelBase):
         structured fit, or the search): their sum is the fit's time.
     structure_fit_ : StructureFit (structured fits and the search)
         The held-out experiments, each candidate's validation error, the refinements.
-    structure_search_ : SearchReport (with ``search`` only)
-        Every candidate the search tried, its held-out free-run NRMSE and outcome, and
-        why it chose (:class:`~.search.SearchReport`).
+    structure_search_ : SearchReport
+        With ``search`` only: every candidate the search tried, its held-out free-run NRMSE
+        and outcome, and why it chose ([`SearchReport`][pwa_pipeline.pwa.SearchReport]).
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
-        envelope of :meth:`~.arx.ARXModelBase.outside_envelope` and of
-        :meth:`to_state_space`.
+        envelope of `outside_envelope` and of
+        `to_state_space`.
 
     Examples
     --------
@@ -205,7 +206,7 @@ class PWARX(ARXModelBase):
 
     @classmethod
     def auto(cls, na: int = 2, nb: int = 2, **search: object) -> "PWARX":
-        """The structure chosen from the data (:mod:`~.search`): forms, joint or
+        """The structure chosen from the data (`search`): forms, joint or
         per-output models, regions from scheduling variables the search proposes or from
         the paper's clustering, modes per output and orders up to (``na``, ``nb``), each
         judged by its free run on held-out training experiments, refined on the free-run
@@ -223,7 +224,7 @@ class PWARX(ARXModelBase):
         na, nb : int, default 2
             The largest orders tried.
         **search
-            Parameters of :class:`~.search.StructureSearch` (e.g.
+            Parameters of [`StructureSearch`][pwa_pipeline.pwa.StructureSearch] (e.g.
             ``max_candidates=500``).
         """
         return cls(na=na, nb=nb, affine=True,
@@ -236,7 +237,7 @@ class PWARX(ARXModelBase):
         """The paper's setting: raw regressors in the neighbour search, a local model for
         every sample, DBSCAN on θ_k as it is with every local model, sub-models as cluster
         centres, the SVM trained on every clustered row (noise left out; solver tolerance
-        1e-2, see :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`).
+        1e-2, see [`SVMRegions`][pwa_pipeline.pwa.SVMRegions]).
 
         The paper gives n_ρ, ε and MinPts per data set and no rule, so they are required;
         its values are in ``data/hparams.toml`` (sets ``paper``).
@@ -280,10 +281,10 @@ class PWARX(ARXModelBase):
     def fit(self, u: Signals, y: Signals) -> "PWARX":
         """Identify the PWARX model from one or several experiments.
 
-        Every parameter combination ends in the same fitted shape (:mod:`~.groups`): the
+        Every parameter combination ends in the same fitted shape (`groups`): the
         paper's steps on φ give one output group; ``form``, ``outputs`` or ``scheduling``
-        give the structures of :mod:`~.structure_fit`; ``search`` the structure search of
-        :mod:`~.search`.
+        give the structures of `structure_fit`; ``search`` the structure search of
+        `search`.
 
         Parameters
         ----------
@@ -302,7 +303,7 @@ class PWARX(ARXModelBase):
             cluster, or for options that do not go together (named in the message).
         pwa_pipeline.pwa.memory.FitMemoryError
             At once, before any step, when the fit's estimated memory exceeds what the
-            machine has available (:func:`~pwa_pipeline.pwa.memory.check_fit_memory`); the
+            machine has available (`check_fit_memory`); the
             message gives the estimate and the setting to change.
         """
         experiments = as_experiments(u, y)
@@ -384,7 +385,7 @@ class PWARX(ARXModelBase):
         return self._run_steps(reg, eq3=False)
 
     def _fit_structure(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
-        """The structures of :mod:`~.structure_fit` (velocity form, one model per output,
+        """The structures of `structure_fit` (velocity form, one model per output,
         user regions)."""
         t0 = time.perf_counter()
         self.structure_fit_ = fit_structure(
@@ -399,7 +400,7 @@ class PWARX(ARXModelBase):
         return output_groups(outputs), described
 
     def _fit_search(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
-        """The structure search of :mod:`~.search` (:meth:`auto`)."""
+        """The structure search of `search` ([`auto`][pwa_pipeline.PWARX.auto])."""
         given = [name for name, default in (("form", "level"), ("outputs", "joint"))
                  if getattr(self, name) != default]
         given += [name for name in ("scheduling", "refinement")
@@ -447,7 +448,7 @@ class PWARX(ARXModelBase):
         return out
 
 
-#: The default step of each kind (:meth:`PWARX.step_objects`, :meth:`PWARX.set_params`).
+#: The default step of each kind (`PWARX.step_objects`, `PWARX.set_params`).
 _DEFAULT_STEPS = {"local_models": LocalLeastSquares, "clustering": DBSCANClustering,
                   "submodels": RefinedSubModels, "regions": ResidualRegions}
 _OPTION_EXAMPLES = {"refinement": "refinement=OutputErrorRefinement()",

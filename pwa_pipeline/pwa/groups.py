@@ -4,13 +4,13 @@ map and the sub-models of its regions.
 Eq. (1) gives all outputs one partition, y(k) = θ_iᵀ φ(k) for φ(k) ∈ H_i. Machines often
 switch per output (a joint's friction flips with its own velocity), so a fitted model holds
 **output groups**: the outputs of a group switch together, by one region map over φ
-(:mod:`~.partitions`), with parameter rows Θ_{g,i} over φ for each region i, so that
+(`partitions`), with parameter rows Θ_{g,i} over φ for each region i, so that
 
     ŷ_g(k) = Θ_{g,λ_g(φ(k))}ᵀ φ(k)    for every group g.
 
 The paper's route and a linear model are one group of every output; a model with a
 structure per output has a group per region map. Taken together the groups are again eq. (1)
-with one mode per combination of the groups' regions (:func:`modes`), numbered
+with one mode per combination of the groups' regions (`modes`), numbered
 lexicographically (the first group's region varies slowest).
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 from .._typing import Float2D
 from .partitions import ProductRegions, RegionMap, SingleRegion
 
-#: Modes above which :func:`modes` refuses to build the stacked parameter matrices (they
+#: Modes above which `modes` refuses to build the stacked parameter matrices (they
 #: would take gigabytes; the groups predict without them).
 MAX_MODES = 1 << 20
 
@@ -80,14 +80,14 @@ def modes(groups: Sequence[OutputGroup], n_outputs: int) -> tuple[RegionMap, np.
     Returns
     -------
     regions : RegionMap
-        The single group's map, or :class:`~.partitions.ProductRegions` of the groups'.
+        The single group's map, or `ProductRegions` of the groups'.
     thetas : ndarray of shape (S, D, m)
         θ_i of every mode i (S the product of the groups' region counts).
 
     Raises
     ------
     ValueError
-        Above :data:`MAX_MODES` modes.
+        Above `MAX_MODES` modes.
     """
     if len(groups) == 1:
         return groups[0].regions, groups[0].thetas

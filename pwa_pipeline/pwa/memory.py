@@ -1,8 +1,8 @@
 """The memory a PWARX fit needs, estimated before it starts, and what the machine has.
 
-:func:`check_fit_memory` runs before the first step of a fit: a fit whose estimate exceeds
-the memory available fails at once with a :class:`FitMemoryError` naming the estimate and
-the setting to change, instead of being killed by the operating system half-way.
+`check_fit_memory` runs before the first step of a fit: a fit whose estimate exceeds
+the memory available fails at once with a [`FitMemoryError`][pwa_pipeline.pwa.FitMemoryError] naming the
+estimate and the setting to change, instead of being killed by the operating system half-way.
 """
 
 import os
@@ -53,7 +53,7 @@ def available_memory() -> int | None:
 def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     """Estimated peak bytes of each step of a fit on n regressor rows (d regressors, m
     outputs), beyond the regressors themselves; ``steps`` are the unfitted step objects by
-    name (:meth:`pwa_pipeline.pwa.estimator.PWARX.step_objects`).
+    name ([`pwa_pipeline.pwa.estimator.PWARX.step_objects`][pwa_pipeline.PWARX.step_objects]).
 
     Counted: the arrays that grow with n (local sets, local models, candidate neighbour
     pairs, embeddings, distance blocks, residual tables, the SVM's copy of its rows), from
@@ -99,8 +99,8 @@ _KNOB = {"local_models": "local_models__n_rho (smaller local sets), local_models
 
 
 def check_fit_memory(n: int, d: int, m: int, steps: dict, base: int = 0) -> dict[str, int]:
-    """Raise :class:`FitMemoryError` when the estimated peak (:func:`fit_memory`, plus
-    ``base`` bytes already needed, e.g. the regressors) exceeds :func:`available_memory`.
+    """Raise [`FitMemoryError`][pwa_pipeline.pwa.FitMemoryError] when the estimated peak (`fit_memory`, plus
+    ``base`` bytes already needed, e.g. the regressors) exceeds `available_memory`.
 
     Returns the per-step estimates.
     """

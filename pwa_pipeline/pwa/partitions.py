@@ -2,20 +2,20 @@
 
 A PWA model chooses each output's sub-model by the region H_i that holds φ(k) (eq. 1). A
 fitted model keeps, per group of outputs that switch together, one **region map**
-(:class:`RegionMap`): ``predict(phi)`` gives the region of each row of φ, ``n_regions_``
-counts them, and ``halfspaces()`` writes each region as a polyhedron {φ : G_i φ ≤ q_i}, so
-that :func:`~pwa_pipeline.control.to_state_space` exports any region map without knowing its
+([`RegionMap`][pwa_pipeline.pwa.RegionMap]): ``predict(phi)`` gives the region of each row of φ,
+``n_regions_`` counts them, and ``halfspaces()`` writes each region as a polyhedron {φ : G_i φ ≤ q_i}, so
+that [`to_state_space`][pwa_pipeline.control.to_state_space] exports any region map without knowing its
 class. The regions are closed and may share boundaries; a point on a boundary belongs to the
 lowest-numbered region that holds it (an argmax picks the lowest index among equal scores,
 a sign test puts 0 with the negative side).
 
-The maps here are those the estimators build themselves: one region (:class:`SingleRegion`),
-the signs of scheduling variables (:class:`SignRegions`), a map fitted on an output group's
-own regressor ψ = M φ (:class:`ProjectedRegions`), and the regions of several groups at
-once (:class:`ProductRegions`). The paper's step 6 learns one from labelled rows
-(:class:`~pwa_pipeline.pwa.steps.base.BaseRegions`, e.g.
-:class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`, whose regions are an argmax of affine
-scores, :func:`argmax_halfspaces`).
+The maps here are those the estimators build themselves: one region (`SingleRegion`),
+the signs of scheduling variables (`SignRegions`), a map fitted on an output group's
+own regressor ψ = M φ (`ProjectedRegions`), and the regions of several groups at
+once (`ProductRegions`). The paper's step 6 learns one from labelled rows
+([`BaseRegions`][pwa_pipeline.pwa.steps.base.BaseRegions], e.g.
+[`SVMRegions`][pwa_pipeline.pwa.SVMRegions], whose regions are an argmax of affine
+scores, `argmax_halfspaces`).
 """
 
 import itertools
@@ -28,7 +28,7 @@ from .._typing import Float2D
 
 #: A region as rows (G, q) of G φ ≤ q over φ; None for a region that is never chosen.
 Halfspaces = tuple[Float2D, np.ndarray] | None
-#: A region map's compiled form (:meth:`RegionMap.compiled`): kind, W (v, D), b (v,).
+#: A region map's compiled form (`RegionMap.compiled`): kind, W (v, D), b (v,).
 CompiledForm = tuple[str, Float2D, np.ndarray]
 
 
@@ -53,10 +53,10 @@ class RegionMap(ABC):
         ties go to the lowest-numbered region."""
 
     def compiled(self) -> CompiledForm | None:
-        """The map as the compiled free runs read it (:mod:`~pwa_pipeline.pwa.kernels`):
+        """The map as the compiled free runs read it (`kernels`):
         ``("sign", W, b)``, region Σ_v 2^v [W_vφ + b_v > 0], or ``("argmax", W, b)``,
         region argmax_v W_vφ + b_v (the first on ties); None (the default) when it has no
-        such form, and the free runs call :meth:`predict`."""
+        such form, and the free runs call `predict`."""
         return None
 
 
@@ -110,7 +110,7 @@ class SingleRegion(RegionMap):
 
 class SignRegions(RegionMap):
     """The 2^v regions Σ_v 2^v [w_vᵀφ > 0] of the signs of v scheduling variables
-    z_v = w_vᵀφ (:class:`~pwa_pipeline.pwa.scheduling.SignScheduling`).
+    z_v = w_vᵀφ (`SignScheduling`).
 
     Parameters
     ----------

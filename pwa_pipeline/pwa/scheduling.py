@@ -4,7 +4,7 @@ A machine's modes are often known in advance: Coulomb friction changes sign with
 velocity, so the sign of the output's increment y_j(k−1) − y_j(k−2) decides the mode. Such a
 variable z(k) = wᵀφ(k) is a linear combination of the regressor of eq. (2)–(3); v variables
 give 2^v regions, region Σ_v 2^v [z_v(k) > 0]. These regions replace steps 2–6 of the paper
-(local models, clustering, sub-models, SVM) when a :class:`~.estimator.PWARX` is given
+(local models, clustering, sub-models, SVM) when a [`PWARX`][pwa_pipeline.PWARX] is given
 ``scheduling=``; the sub-models are then fitted by least squares on the rows of each region.
 """
 
@@ -29,7 +29,7 @@ class SignScheduling(BaseEstimator):
         ``"own_increment"``: for each output j its own increment y_j(k−1) − y_j(k−2), so each
         output has two regions (moving up or down; the robot's velocity sign). Otherwise a
         list of combinations shared by every output, each a dict from regressor names (as in
-        :func:`~.regressors.regressor_names` with outputs ``y1, y2, …`` and inputs
+        `regressor_names` with outputs ``y1, y2, …`` and inputs
         ``u1, u2, …``, e.g. ``{"y1(k-1)": 1.0, "y1(k-2)": -1.0}``) to coefficients.
     switch : {"all", "offset", "select"}, default "all"
         ``"all"``: every parameter of a sub-model differs between regions; ``"offset"``:
@@ -70,7 +70,7 @@ class SignScheduling(BaseEstimator):
         output : int
             Output index j.
         names : list of str
-            φ's entry names (:func:`~.regressors.regressor_names` with ``y1…``, ``u1…``).
+            φ's entry names (`regressor_names` with ``y1…``, ``u1…``).
         lags : int
             Output lags in φ.
 

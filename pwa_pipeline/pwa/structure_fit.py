@@ -1,16 +1,16 @@
-"""Fitting the structures of :mod:`~.structures`: least squares per region, per-output
+"""Fitting the structures of `structures`: least squares per region, per-output
 choice on held-out training experiments, and simulation-error refinement.
 
 The route, for the estimators' ``form``, ``outputs`` and ``scheduling`` options:
 
 1. With a refinement or a per-output choice (``SignScheduling(switch="select")``), the last
    training experiments are held out (the refinement's ``validation_fraction``, else
-   :data:`~.output_error.VALIDATION_FRACTION`); everything is fitted on the others.
+   `VALIDATION_FRACTION`); everything is fitted on the others.
 2. Per group of outputs (each output alone when decoupled, all together when joint), each
    candidate structure is fitted: least squares in the user's regions (or one region), or
    the paper's steps 2–6 on the group's regressors ψ (clusters).
 3. With a refinement, each candidate's parameters are refined on the free-run error of its
-   group (:func:`~.output_error.refine_outputs`), with the one-step error beside it when the
+   group (`refine_outputs`), with the one-step error beside it when the
    refinement's ``one_step_weight`` is positive, the iterate chosen on the held-out
    experiments.
 4. Per group, the candidate with the lowest free-run error on the held-out experiments is
@@ -45,7 +45,7 @@ class StructureFit:
     Attributes
     ----------
     outputs : list of OutputModel
-        Each output's structure and parameters (:mod:`~.structures`), in output order.
+        Each output's structure and parameters (`structures`), in output order.
     validation_experiments : list of int
         Indices (in the training list) of the held-out experiments.
     validation_cost : dict
@@ -78,12 +78,12 @@ def _candidates(scheduling: BaseEstimator | None, cluster: Callable | None, affi
 
 def clustered_models(group: list[int], reg: Regressors, parts: dict[int, tuple],
                      cluster: Callable) -> dict[int, OutputModel]:
-    """The paper's steps 2–6 (``cluster``, see :func:`fit_structure`) on a group's
+    """The paper's steps 2–6 (``cluster``, see `fit_structure`) on a group's
     regressors ψ = M φ: one model per output of ``group``, every parameter switching between
     the clusters' regions, which the outputs share (one region map, the fitted steps kept
     with it).
 
-    ``parts[j]`` is output j's ``(M, c, names)`` from :func:`.structures.output_regressors`
+    ``parts[j]`` is output j's ``(M, c, names)`` from `structures.output_regressors`
     (the same M for every output of the group); the clusters are fitted to y_j − c φ.
     """
     M = parts[group[0]][0]

@@ -2,7 +2,7 @@
 
 Every structure is written over the standard regressor φ(k) of eq. (2)–(3) (levels, L lags
 per output, nb per input, the constant), so that prediction and simulation stay those of
-:class:`~.arx.ARXModelBase`. Output j has its own regressor ψ_j(k) = M_j φ(k), target
+`ARXModelBase`. Output j has its own regressor ψ_j(k) = M_j φ(k), target
 y_j(k) − c_jᵀφ(k), regions λ_j(φ) and sub-models θ_{j,i}:
 
     ŷ_j(k) = c_jᵀ φ(k) + θ_{j,λ_j(φ(k))}ᵀ M_j φ(k).
@@ -56,7 +56,7 @@ def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, fo
     phi_lags, phi_nb : int, optional
         The output and input lags of φ when φ holds more than ψ_j needs (a structure
         search builds φ once at its largest orders and picks lower ones from it); by
-        default :func:`output_lags` of ``na`` and ``nb``.
+        default `output_lags` of ``na`` and ``nb``.
 
     Returns
     -------
@@ -115,7 +115,7 @@ class OutputModel:
         The entries of ψ whose parameters differ between regions.
     n_regions : int
     region_of : RegionMap or None
-        The map of φ rows to regions (:mod:`~.partitions`); None with one region.
+        The map of φ rows to regions (`partitions`); None with one region.
     structure : str
         ``"linear"``, ``"offset"``, ``"all"`` or ``"clustered"``.
     names : list of str
@@ -158,7 +158,7 @@ class OutputModel:
         return self.c + self.G() @ (self.p if p is None else p)
 
     def compiled_regions(self) -> tuple | None:
-        """The region map's compiled form (:meth:`~.partitions.RegionMap.compiled`; one
+        """The region map's compiled form (`RegionMap.compiled`; one
         region: no scheduling variables), None without one."""
         if self.region_of is None:
             return "sign", np.zeros((0, self.M.shape[1])), np.zeros(0)
@@ -198,14 +198,14 @@ class OutputModel:
 
 def assign_params(models: dict[int, "OutputModel"], group: list[int], p: np.ndarray) -> None:
     """Give each output j of ``group`` its p_j out of their concatenation ``p`` (the order
-    of :func:`~.output_error.refine_outputs`' parameters)."""
+    of `refine_outputs`' parameters)."""
     offsets = np.cumsum([0] + [models[j].n_params for j in group])
     for jj, j in enumerate(group):
         models[j].p = p[offsets[jj]:offsets[jj + 1]]
 
 
 def output_groups(outputs: list[OutputModel]) -> list[OutputGroup]:
-    """The fitted shape of a structured model (:mod:`~.groups`): each output's rows
+    """The fitted shape of a structured model (`groups`): each output's rows
     Θ_{j,i} over φ, outputs with the same region map in one group."""
     regions = [SingleRegion(o.M.shape[1]) if o.region_of is None else o.region_of
                for o in outputs]

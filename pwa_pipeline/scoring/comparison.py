@@ -53,7 +53,7 @@ def mean_scores(table: pd.DataFrame) -> pd.DataFrame:
     return wide
 
 
-#: Columns of :func:`leaderboard`.
+#: Columns of `leaderboard`.
 LEADERBOARD_COLUMNS = ["dataset", "rank", "method", "hparams", "one_step_nrmse", "one_step_r2",
                        "free_run_nrmse", "free_run_r2", "free_run_diverged"]
 

@@ -5,7 +5,7 @@ max − min, or none), whether the free run restarts at every experiment or runs
 record once, and the warm-up window. A number is comparable only with numbers of the same
 convention:
 
-- ``project``: this project's protocol (:func:`~pwa_pipeline.scoring.evaluation.evaluate`):
+- ``project``: this project's protocol ([`evaluate`][pwa_pipeline.scoring.evaluate]):
   RMSE / σ per output (eq. 21), restarted at every held-out experiment after a warm-up
   of 10 measured samples, averaged over outputs (eq. 23).
 - ``range_single_run``: RMSE / (max − min) of each output over the whole test record, the
@@ -65,7 +65,7 @@ def single_run_scores(model: Model, u, y, convention: Convention) -> np.ndarray:
 
     Parameters
     ----------
-    model : fitted estimator with ``simulate(u, y_init)``
+    model : fitted estimator with simulate(u, y_init)
     u, y : array-like or lists of array-likes
         The test record; a list of experiments is joined end to end into one.
     convention : Convention
@@ -93,7 +93,7 @@ def single_run_scores(model: Model, u, y, convention: Convention) -> np.ndarray:
 
 
 def convention_scores(model: Model, u, y) -> dict[str, float]:
-    """The mean free-run score in every convention of :data:`CONVENTIONS`."""
+    """The mean free-run score in every convention of `CONVENTIONS`."""
     out = {}
     for name, convention in CONVENTIONS.items():
         if convention.restart:

@@ -8,14 +8,14 @@ from the end of the warm-up to the end of the experiment, restarted at every exp
 NRMSE (eq. 21), R² (eq. 22, standard form) and RMSE (data units) are computed per output on
 the scored samples of all experiments together, and averaged over outputs (eq. 23–24).
 A free run whose NRMSE exceeds ``divergence`` (10) or is not finite is flagged diverged; its
-number is reported all the same, and :class:`Onset` says where it left the data: the first
+number is reported all the same, and `Onset` says where it left the data: the first
 scored sample whose error exceeds ``divergence`` standard deviations of its output (one
 exists whenever an NRMSE exceeds ``divergence``), and the NRMSE of the samples before it.
 
 Data envelope. A model that records its training range (``signal_range_``: a fitted PWARX
 or LinearARX) says, per scored sample and mode, whether its regressor
 φ(k) left the training data's padded box
-(:meth:`~pwa_pipeline.pwa.arx.ARXModelBase.outside_envelope`): for one-step φ holds measured
+(`outside_envelope`): for one-step φ holds measured
 outputs (the held-out data themselves lie outside the training data), for the free run the
 run's own outputs (the run wandered off, or the data did). ``outside_share`` is the share of
 the scored samples of all experiments so flagged, one value per mode (φ is shared by every
@@ -129,9 +129,10 @@ def evaluate(
 
     Parameters
     ----------
-    model : fitted PWARX, LinearARX or SubspaceSS (anything with ``predict(u, y, n_init)``
-        and ``simulate(u, y_init)``; with ``signal_range_`` and ``outside_envelope(u, y)``
-        as well, the share outside the data envelope is reported)
+    model : fitted PWARX, LinearARX or SubspaceSS
+        Anything with ``predict(u, y, n_init)`` and ``simulate(u, y_init)``; with
+        ``signal_range_`` and ``outside_envelope(u, y)`` as well, the share outside the data
+        envelope is reported.
     u, y : arrays or lists of arrays
         Held-out experiments.
     warmup : int, default 10
@@ -213,7 +214,7 @@ def _outside(model: Model, us: list[Float2D], outputs: dict[str, list[Float2D]],
 
 def _onset(ys: list[Float2D], free: list[Float2D], warmup: int, scale: np.ndarray,
            divergence: float) -> Onset:
-    """The :class:`Onset` of a diverged free run ``free`` of the experiments ``ys``, errors
+    """The `Onset` of a diverged free run ``free`` of the experiments ``ys``, errors
     normalised by ``scale`` (the standard deviation of each output's scored samples)."""
     squares, count = np.zeros(scale.shape), 0
     for e, (yy, est) in enumerate(zip(ys, free, strict=True)):

@@ -11,7 +11,7 @@ def ground_truth_scores(model, thetas: np.ndarray, u, y, modes) -> dict[str, flo
     """How close a fitted PWARX model is to the system that generated the data.
 
     The estimated sub-models are paired with the true ones by their parameters
-    (:func:`~pwa_pipeline.scoring.metrics.match_submodels`); a sample's region is right when
+    ([`match_submodels`][pwa_pipeline.scoring.match_submodels]); a sample's region is right when
     the sub-model its estimated region H_i selects (step 6) is paired with the mode that
     produced it.
 

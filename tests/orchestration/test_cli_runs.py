@@ -3,6 +3,9 @@ an interrupt keeps what was computed (Ctrl-C to a real run: tests/system/test_pr
 
 import os
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import dagster as dg
 import pandas as pd
@@ -30,7 +33,9 @@ def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
         frame.to_csv(tmp_path / f"{name}.csv", index=False)
         assert main(["add-dataset", name, str(tmp_path / f"{name}.csv"), "--u", "u1", "u2",
                      "--y", "y1", "y2"]) == 0
-    (tmp_path / "gone.csv").unlink()  # its run fails: the others' results must stay
+    # the file is there (so the run starts) but its columns are not: its run fails, and the
+    # others' results must stay
+    (tmp_path / "gone.csv").write_text("a,b\n1,2\n")
     capsys.readouterr()
     keys = ["plant|default", "mill|default", "gone|default"]
     args = ["run"] + [a for k in keys for a in ("--partition", k)]
@@ -93,3 +98,52 @@ def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
                           "http://ana:***@127.0.0.1:9 cannot be reached")
     assert "s3cret" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "storage").exists()  # no run started
+
+
+def _run_cli(args: list[str], tmp_path: Path, **env: str) -> subprocess.CompletedProcess:
+    """``python -m pwa_pipeline`` in a fresh process on stores under ``tmp_path``."""
+    root = Path(__file__).resolve().parents[2]
+    environ = {**os.environ, "PWA_PIPELINE_HOME": str(tmp_path),
+               "DAGSTER_HOME": str(tmp_path / "home"),
+               "PWA_DATASETS": str(tmp_path / "datasets.json"),
+               "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+               **env}
+    environ.pop("MLFLOW_TRACKING_URI", None)
+    return subprocess.run([sys.executable, "-m", "pwa_pipeline", *args], cwd=tmp_path,
+                          env=environ, capture_output=True, text=True, timeout=300)
+
+
+def _one_line_error(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "Traceback" not in result.stdout + result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    return lines[0]
+
+
+def test_a_partition_without_its_data_stops_the_command_in_one_line(tmp_path):
+    """The README's own example without the robot's data: one line naming the partition, the
+    path looked at and the variable to set, exit 2, before any run."""
+    missing = tmp_path / "no-kuka"
+    error = _one_line_error(_run_cli(["run", "--partition", "kuka_robot|paper"], tmp_path,
+                                     PWA_KUKA_DATA=str(missing)))
+    assert error == (f"pwa-pipeline run: error: kuka_robot|paper cannot run: no KUKA data at "
+                     f"{missing} (set PWA_KUKA_DATA)")
+    assert not (tmp_path / "storage").exists() and not (tmp_path / "home").exists()
+
+
+def test_a_registered_data_set_whose_file_was_deleted_stops_the_command_in_one_line(tmp_path):
+    d = make_hure_vasak(n_samples=300, seed=7)
+    table = tmp_path / "plant.csv"
+    pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1], "y1": d.y_train[0][:, 0],
+                  "y2": d.y_train[0][:, 1]}).to_csv(table, index=False)
+    added = _run_cli(["add-dataset", "plant", str(table), "--u", "u1", "u2", "--y", "y1", "y2"],
+                     tmp_path)
+    assert added.returncode == 0, added.stderr
+    table.unlink()
+    error = _one_line_error(_run_cli(["run", "--partition", "plant|default", "--partition",
+                                      "hure_vasak|paper", "--partition", "plant|auto"],
+                                     tmp_path))
+    assert error == (f"pwa-pipeline run: error: plant|default, plant|auto cannot run: its file "
+                     f"{table} is missing (registered in {tmp_path / 'datasets.json'})")
+    assert not (tmp_path / "storage").exists() and not (tmp_path / "home").exists()

@@ -1,6 +1,6 @@
 """Hybrid model predictive control of a PWA state-space model: the mixed-integer linear
-program (:mod:`.formulation`) and the controller that solves it at each sample
-(:mod:`.controller`)."""
+program (`formulation`) and the controller that solves it at each sample
+(`controller`)."""
 
 from .controller import ClosedLoop, HybridMPC, MPCSolution
 from .formulation import MLDProgram

@@ -1,5 +1,5 @@
-"""Hybrid model predictive control of a PWA state-space model (:class:`HybridMPC`): the
-options checked, the program of :mod:`.formulation` built once, solved at each sample, and
+"""Hybrid model predictive control of a PWA state-space model ([`HybridMPC`][pwa_pipeline.control.HybridMPC]):
+the options checked, the program of `formulation` built once, solved at each sample, and
 the receding-horizon loop run on the model itself."""
 
 import time
@@ -23,7 +23,7 @@ _STATUS = {0: "optimal", 1: "time or iteration limit reached", 2: "infeasible",
 
 @dataclass
 class MPCSolution:
-    """The optimal plan of one :meth:`HybridMPC.solve`.
+    """The optimal plan of one [`HybridMPC.solve`][pwa_pipeline.control.HybridMPC.solve].
 
     Attributes
     ----------
@@ -38,7 +38,7 @@ class MPCSolution:
     cost : float
         The optimal value of the cost.
     status : int
-        :func:`scipy.optimize.milp`'s status: 0 optimal, 1 time limit reached with a feasible
+        `scipy.optimize.milp`'s status: 0 optimal, 1 time limit reached with a feasible
         plan (then ``optimal`` is False).
     message : str
         The solver's message.
@@ -61,7 +61,8 @@ class MPCSolution:
 
 @dataclass
 class ClosedLoop:
-    """The trajectories of :meth:`HybridMPC.closed_loop`, sample t = 0 … steps − 1.
+    """The trajectories of [`HybridMPC.closed_loop`][pwa_pipeline.control.HybridMPC.closed_loop], sample t = 0
+    … steps − 1.
 
     Attributes
     ----------
@@ -74,7 +75,7 @@ class ClosedLoop:
     y_ref : ndarray of shape (steps, m)
         The reference of sample t.
     modes : ndarray of int, shape (steps,)
-        The mode the model took at t (:meth:`~.state_space.PWAStateSpace.mode_of`).
+        The mode the model took at t ([`mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of]).
     cost : ndarray of shape (steps,)
         The optimal cost of each sample's plan.
     seconds : ndarray of shape (steps,)
@@ -96,7 +97,7 @@ class HybridMPC:
     The model's dynamics, regions and envelope are constraints of a mixed-integer linear
     program in the mixed logical dynamical form of Bemporad & Morari (1999), with one binary
     per mode and step and big-M constants computed exactly from the box of z = [x; u]; the
-    1-norm cost makes it a MILP that HiGHS (:func:`scipy.optimize.milp`) solves to proven
+    1-norm cost makes it a MILP that HiGHS (`scipy.optimize.milp`) solves to proven
     optimality. See the module doc for the program.
 
     Parameters
@@ -129,7 +130,7 @@ class HybridMPC:
     horizon : int
     Q, R, u_min, u_max : ndarray
     program : MLDProgram
-        The mixed-integer linear program (:mod:`.formulation`: its box, big-M constants,
+        The mixed-integer linear program (`formulation`: its box, big-M constants,
         mode-dependent expressions and state bounds).
 
     Raises
@@ -285,7 +286,7 @@ class HybridMPC:
         u_prev : array-like of shape (r,), optional
             The input applied at the previous sample, from which the first move is counted
             (``input_penalty="delta"``). Default: as the state holds it
-            (:meth:`previous_input`).
+            ([`previous_input`][pwa_pipeline.control.HybridMPC.previous_input]).
 
         Returns
         -------
@@ -396,8 +397,8 @@ class HybridMPC:
         Raises
         ------
         ValueError
-            As :meth:`solve` (with the sample named), or if the model's step leaves the
-            envelope (which a plan through a region boundary of a discontinuous model can
+            As [`solve`][pwa_pipeline.control.HybridMPC.solve] (with the sample named), or if the model's step
+            leaves the envelope (which a plan through a region boundary of a discontinuous model can
             do, see the module doc).
         """
         if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 1:

@@ -1,14 +1,14 @@
 """Hybrid model predictive control of a PWA state-space model, as a mixed-integer linear program.
 
-:class:`~.controller.HybridMPC` computes, from the state x of a
-:class:`~..state_space.PWAStateSpace`, the
+[`HybridMPC`][pwa_pipeline.control.HybridMPC] computes, from the state x of a
+[`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace], the
 inputs u(0) … u(N−1) that minimise a 1-norm tracking cost over a horizon of N samples while
 the model's own dynamics, regions and data envelope hold. The PWA model is written as a mixed
 logical dynamical (MLD) system (Bemporad & Morari 1999): a binary δ_{i,k} says that step k is
 in mode i, and every product of a binary with an affine function of z = [x; u] is replaced by
 an auxiliary variable tied to it by four linear inequalities whose constants (the "big-M")
 are the exact bounds of that function over the box the variables live in. The resulting
-mixed-integer linear program is solved by HiGHS through :func:`scipy.optimize.milp`, so the
+mixed-integer linear program is solved by HiGHS through `scipy.optimize.milp`, so the
 returned inputs are optimal for the model (to the relative MIP gap), not a heuristic.
 
 **Prediction.** Step k = 0 … N has z_k = [x_k; u_k] (u_N := u_{N−1}, the last input held, so
@@ -36,10 +36,10 @@ non-zero input then costs nothing, so the loop tracks without offset), or |u_k| 
 
 **Boundaries.** The regions are closed, so a z on a boundary shared by two regions satisfies
 both modes' constraints and the program may take either, while
-:meth:`~.state_space.PWAStateSpace.step` takes the lowest-numbered (the fitted model's tie
+[`step`][pwa_pipeline.control.PWAStateSpace.step] takes the lowest-numbered (the fitted model's tie
 rule). A prediction through a point exactly on a boundary of a discontinuous model can thus
-differ from the model's step; :meth:`HybridMPC.closed_loop` applies the model's own step and
-solves again from the state it reached.
+differ from the model's step; [`HybridMPC.closed_loop`][pwa_pipeline.control.HybridMPC.closed_loop] applies
+the model's own step and solves again from the state it reached.
 
 Reference: A. Bemporad and M. Morari, "Control of systems integrating logic, dynamics, and
 constraints", *Automatica* 35(3), 407–427, 1999.
@@ -64,7 +64,7 @@ def affine_range(G, q, lower, upper) -> tuple[np.ndarray, np.ndarray]:
 
     Exact row by row: the extreme of a linear function over a box is reached at a corner,
     coordinate by coordinate, so min = q + Σ_j min(G_j lower_j, G_j upper_j) and the same with
-    max. These are the big-M constants of :class:`HybridMPC`.
+    max. These are the big-M constants of [`HybridMPC`][pwa_pipeline.control.HybridMPC].
 
     Parameters
     ----------
@@ -104,7 +104,7 @@ class _Rows:
 
 class MLDProgram:
     """The mixed-integer linear program of the module doc for one model, horizon, weights
-    and input bounds, built once (:meth:`solve` changes only its right-hand sides).
+    and input bounds, built once (`solve` changes only its right-hand sides).
 
     Parameters
     ----------
@@ -131,7 +131,7 @@ class MLDProgram:
         auxiliary variables.
     state_bounds : tuple of ndarray
         (lower, upper) of shape (n,) that the predicted states x_1 … x_N keep: the envelope,
-        less :data:`STATE_MARGIN` for the entries the dynamics compute.
+        less `STATE_MARGIN` for the entries the dynamics compute.
     offsets : dict
         Where the variables x, u, δ and y start in the solution vector.
     """
@@ -148,7 +148,7 @@ class MLDProgram:
 
     def _big_m(self) -> None:
         """The big-M constants: each region row's and each mode-dependent expression's range
-        over :attr:`box`, and which rows of the dynamics and outputs depend on the mode."""
+        over `box`, and which rows of the dynamics and outputs depend on the mode."""
         ss, (lower, upper) = self.ss, self.box
         n, r, m, s = ss.n_states, ss.n_inputs, ss.n_outputs, ss.n_modes
         p = n + r

@@ -51,7 +51,7 @@ from ..settings import PipelineSettings
 
 GROUP = "identification"
 #: The fitted steps the multi-asset shows, in the paper's order, by asset: the step's name in
-#: an output group's ``steps`` (:class:`~pwa_pipeline.pwa.groups.OutputGroup`).
+#: an output group's ``steps`` (`OutputGroup`).
 STEP_ASSETS = {"local_models": "local_models", "clusters": "clustering",
                "sub_models": "submodels", "svm_regions": "regions",
                "output_error_refinement": "refinement"}

@@ -1,4 +1,4 @@
-"""Compiled kernels of the ε search's cluster counts (:func:`.clustering.dbscan_cluster_counts`).
+"""Compiled kernels of the ε search's cluster counts (`clustering.dbscan_cluster_counts`).
 
 numba, because Prim's algorithm is n steps of a few passes over n points each, which numpy
 pays as n · (several calls and temporaries): about 0.2 s at n = 3000 against 0.02 s

@@ -1,4 +1,4 @@
-"""Compiled kernel of the structure search's held-out free run (:mod:`~pwa_pipeline.pwa.search`).
+"""Compiled kernel of the structure search's held-out free run (`pwa_pipeline.pwa.search`).
 
 numba, because the search measures every candidate structure by simulating the held-out
 experiments sample by sample (each sample's regressor φ̂(k) holds the outputs simulated
@@ -8,8 +8,8 @@ compiled pass per experiment takes a few milliseconds. Compiled on first use and
 disk (``cache=True``, next to this file).
 
 The candidates it runs are those whose region map has a compiled form
-(:func:`~pwa_pipeline.pwa.partitions.compiled_form`): linear, sign-scheduled
-(:class:`~pwa_pipeline.pwa.partitions.SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]) and the
+(`RegionMap.compiled`): linear, sign-scheduled
+(`SignRegions`: region Σ_v 2^v [w_vᵀφ > 0]) and the
 clusters' SVM regions (an argmax of affine scores); others are simulated by the search's
 numpy loop.
 """
@@ -24,7 +24,7 @@ SIGN, ARGMAX = 0, 1
 def pack_regions(forms: list[tuple[str, np.ndarray, np.ndarray]], d: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The kernels' region arrays (kinds, weights (G, V, D), bias (G, V), n_vars) of each
-    simulated output's compiled form (:meth:`~pwa_pipeline.pwa.partitions.RegionMap.compiled`),
+    simulated output's compiled form (`RegionMap.compiled`),
     unused rows zero."""
     v = max(1, max(len(w) for _, w, _ in forms))
     kinds = np.array([SIGN if kind == "sign" else ARGMAX for kind, _, _ in forms],
@@ -79,7 +79,7 @@ def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: i
         Each simulated output's parameter row per region over φ (R at least 2^v; unused
         rows zero).
     kinds : ndarray of shape (G,)
-        Each output's region kind (:data:`SIGN`, :data:`ARGMAX`; :func:`region_index`).
+        Each output's region kind (`SIGN`, `ARGMAX`; `region_index`).
     weights, bias : ndarrays of shape (G, V, D), (G, V)
         Each output's scheduling variables or scores w_vᵀφ + b_v (its first ``n_vars[g]``
         rows).

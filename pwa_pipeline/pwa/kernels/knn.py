@@ -1,4 +1,4 @@
-"""Compiled kernels of the exact neighbour search (:mod:`pwa_pipeline.pwa.steps.neighbours`).
+"""Compiled kernels of the exact neighbour search (`pwa_pipeline.pwa.steps.neighbours`).
 
 numba, because each is one pass that numpy can only express as several over memory: a tile
 of float32 distances is compared against both blocks' bounds and its few candidates kept in

@@ -1,5 +1,5 @@
 """Compiled Householder QR of the local least-squares problems (step 3,
-:func:`.local_models.local_least_squares`).
+`local_models.local_least_squares`).
 
 LAPACK's ``geqrf`` spends most of its time on a small matrix (72 × 30 on the robot: about
 19 µs, a sixth of the machine's speed) in the calls of its level-2 steps on short vectors.

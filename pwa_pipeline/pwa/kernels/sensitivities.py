@@ -1,5 +1,5 @@
 """Compiled kernel of the output-error refinement's free run and its sensitivities
-(:mod:`~pwa_pipeline.pwa.output_error.simulator`).
+(`simulator`).
 
 numba, because the refinement simulates the training experiments sample by sample, each
 step propagating dŷ(k)/dp through the output lags of φ̂, and numpy pays that as a dozen
@@ -11,7 +11,7 @@ Jacobian rows of the block; the caller forms JᵀJ and Jᵀr from them with one 
 Compiled on first use and cached on disk (``cache=True``, next to this file).
 
 The models it runs are per-output models on an affine φ whose region maps have a compiled
-form (:func:`~pwa_pipeline.pwa.partitions.compiled_form`: linear, sign-scheduled, the
+form (`RegionMap.compiled`: linear, sign-scheduled, the
 clusters' SVM regions); others are simulated by the numpy loop.
 """
 
@@ -52,7 +52,7 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
         ``offsets[g + 1]``).
     offsets : ndarray of shape (G + 1,)
     kinds, weights, bias, n_vars : ndarrays of shape (G,), (G, V, D), (G, V), (G,)
-        Each output's regions (:func:`~.free_run.region_index`).
+        Each output's regions (`region_index`).
     k0, k1 : int
         The block of time steps run.
     ysim : ndarray of shape (E, N, m)

@@ -34,9 +34,9 @@ region treated as locally constant), for all experiments at once, and only JᵀJ
 Jᵀr are kept, never J itself (N·m × P: hundreds of MB on a long record). J₁'s
 residuals are linear in θ, so its JᵀJ is computed once.
 
-The package holds the free run and its sensitivities (:mod:`.simulator`), the costs J, J₁ and
-J_w (:mod:`.objective`), Levenberg–Marquardt on them (:mod:`.solver`) and the step object
-(:mod:`.estimator`).
+The package holds the free run and its sensitivities (`simulator`), the costs J, J₁ and
+J_w (`objective`), Levenberg–Marquardt on them (`solver`) and the step object
+(`estimator`).
 """
 
 from .estimator import VALIDATION_FRACTION, OutputErrorRefinement, held_out

@@ -1,4 +1,4 @@
-"""Simulation-error refinement as a step object (:mod:`~pwa_pipeline.pwa.output_error`)."""
+"""Simulation-error refinement as a step object (`pwa_pipeline.pwa.output_error`)."""
 
 from collections.abc import Callable
 from numbers import Integral, Real
@@ -22,10 +22,10 @@ def held_out(n: int, fraction: float) -> int:
 
 
 class OutputErrorRefinement(BaseEstimator):
-    """Simulation-error refinement as a step object (:mod:`~pwa_pipeline.pwa.output_error`).
+    """Simulation-error refinement as a step object (`pwa_pipeline.pwa.output_error`).
 
-    The optional last step of :class:`~pwa_pipeline.pwa.estimator.PWARX` and of
-    :class:`~pwa_pipeline.baselines.linear.LinearARX` (``refinement=``): it takes their
+    The optional last step of [`PWARX`][pwa_pipeline.PWARX] and of
+    [`LinearARX`][pwa_pipeline.baselines.LinearARX] (``refinement=``): it takes their
     fitted θ_i and regions and returns θ_i that minimise the free-run error on the training
     experiments.
 
@@ -47,7 +47,7 @@ class OutputErrorRefinement(BaseEstimator):
     patience : int, default 3
         Accepted steps without a lower validation error before stopping.
     one_step_weight : float, default 0
-        w of J_w (:mod:`~pwa_pipeline.pwa.output_error`): the one-step error's weight
+        w of J_w (`pwa_pipeline.pwa.output_error`): the one-step error's weight
         beside the free-run error, each relative to its value at the start. 0 refines the
         free run alone; a large w keeps the one-step fit of the start (least squares).
         Choose it on held-out training experiments (``benchmarks/robot_structure.py
@@ -101,7 +101,7 @@ class OutputErrorRefinement(BaseEstimator):
     def fit(self, thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int, nb: int,
             affine: bool, region_of: Callable | None = None) -> "OutputErrorRefinement":
         """Refine ``thetas`` on the experiments ``(u, y)``; arguments as
-        :func:`refine_output_error`."""
+        `refine_output_error`."""
         self._validate_params()  # also when an estimator fits it nested (sklearn skips then)
         warmup = self.run_warmup(na, nb)
         n = len(u)

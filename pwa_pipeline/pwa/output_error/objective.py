@@ -1,5 +1,5 @@
 """The costs the output-error refinement minimises: the free-run error J, the one-step error
-J₁ of eq. (3) and their weighted sum J_w (:mod:`~pwa_pipeline.pwa.output_error`)."""
+J₁ of eq. (3) and their weighted sum J_w (`pwa_pipeline.pwa.output_error`)."""
 
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -11,7 +11,7 @@ from ...regressors import build_regressors
 
 
 class OneStepError:
-    """The one-step error J₁ of eq. (3) (:mod:`~pwa_pipeline.pwa.output_error`) as blocks of
+    """The one-step error J₁ of eq. (3) (`pwa_pipeline.pwa.output_error`) as blocks of
     residuals X_b x[idx_b] − t_b, linear in the parameters x (flattened), the regions taken
     from the measured φ."""
 
@@ -26,7 +26,7 @@ class OneStepError:
     def of_thetas(cls, u: list[Float2D], y: list[Float2D], na: int, nb: int, affine: bool,
                   region_of: Callable | None, shape: tuple[int, int, int]) -> "OneStepError":
         """J₁ of parameter matrices θ of ``shape`` (s, d, m), flattened as in
-        :meth:`~.simulator.FreeRuns.simulate` (region, regressor, output)."""
+        `simulate` (region, regressor, output)."""
         s, d, m = shape
         reg = build_regressors(list(zip(u, y, strict=True)), na, nb, affine)
         region = np.zeros(len(reg.phi), int) if region_of is None else region_of(reg.phi)
@@ -38,7 +38,7 @@ class OneStepError:
     def of_outputs(cls, u: list[Float2D], y: list[Float2D], lags: int, nb: int, affine: bool,
                    models: list, simulated: list[int]) -> "OneStepError":
         """J₁ of the per-output models ``models[j]``, j in ``simulated``, over their
-        concatenated p_j (as :class:`~.simulator.OutputFreeRuns`)."""
+        concatenated p_j (as `OutputFreeRuns`)."""
         reg = build_regressors(list(zip(u, y, strict=True)), lags, nb, affine)
         sizes = [models[j].n_params for j in simulated]
         starts = np.cumsum([0] + sizes)
@@ -62,7 +62,7 @@ class OneStepError:
 
 @dataclass(frozen=True)
 class RefinementErrors:
-    """The free-run error J (``free(x, sensitivities)`` as :meth:`~.simulator.FreeRuns.simulate`, over
+    """The free-run error J (``free(x, sensitivities)`` as `simulate`, over
     ``n_free`` scored values) and the one-step error J₁ of one set of experiments."""
 
     free: Callable
@@ -74,8 +74,8 @@ class RefinementErrors:
         return self.free(x, False)[0], self.one_step(x, False)[0]
 
     def weighted(self, weight: float, start: tuple[float, float]) -> Callable:
-        """J_w (:mod:`~pwa_pipeline.pwa.output_error`; ``weight`` > 0) as
-        ``(x, sensitivities)`` → (cost, JᵀJ, Jᵀr); ``start`` is :meth:`costs` at θ₀, for the
+        """J_w (`pwa_pipeline.pwa.output_error`; ``weight`` > 0) as
+        ``(x, sensitivities)`` → (cost, JᵀJ, Jᵀr); ``start`` is `costs` at θ₀, for the
         ratio J(θ₀) / J₁(θ₀)."""
         ratio = weight * start[0] / max(start[1], np.finfo(float).tiny)
 

@@ -1,5 +1,5 @@
 """The free run of an ARX-structured model and its sensitivities dŷ(k)/dθ, for the
-output-error refinement (:mod:`~pwa_pipeline.pwa.output_error`).
+output-error refinement (`pwa_pipeline.pwa.output_error`).
 
 The Jacobian of the free run is propagated forward in time (sensitivities through the output
 lags of φ̂, the region treated as locally constant), for all experiments at once, and only
@@ -128,7 +128,7 @@ class FreeRuns:
 
 class OutputFreeRuns(FreeRuns):
     """The experiments simulated with per-output models
-    (:class:`~pwa_pipeline.pwa.structures.OutputModel`): the outputs ``simulated`` run free, the others
+    (`OutputModel`): the outputs ``simulated`` run free, the others
     keep their measured values.
 
     The parameters are the concatenated p_j of the simulated outputs.
@@ -142,8 +142,8 @@ class OutputFreeRuns(FreeRuns):
         self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
 
     def simulate(self, p: np.ndarray, sensitivities: bool):
-        """As :meth:`FreeRuns.simulate`, with the concatenated p_j: compiled
-        (:mod:`~pwa_pipeline.pwa.kernels.sensitivities`) for models on an affine φ whose
+        """As `FreeRuns.simulate`, with the concatenated p_j: compiled
+        (`sensitivities`) for models on an affine φ whose
         regions have a compiled form (linear, sign-scheduled, clustered), else the numpy
         loop."""
         sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
@@ -155,7 +155,7 @@ class OutputFreeRuns(FreeRuns):
         return self._looped(thetas, sensitivities)
 
     def _looped(self, thetas: list[np.ndarray], sensitivities: bool):
-        """:meth:`simulate` by the numpy loop, for any region maps."""
+        """`simulate` by the numpy loop, for any region maps."""
         sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
 
         def step(phi):
@@ -171,8 +171,8 @@ class OutputFreeRuns(FreeRuns):
             return self._run(step, int(self.offsets[-1]), sensitivities)
 
     def _compiled(self, thetas: list[np.ndarray], forms: list, sensitivities: bool):
-        """:meth:`simulate` by the compiled kernel (``forms``: the simulated outputs'
-        compiled regions), a block of :data:`BLOCK` time steps at a time, JᵀJ and Jᵀr
+        """`simulate` by the compiled kernel (``forms``: the simulated outputs'
+        compiled regions), a block of `BLOCK` time steps at a time, JᵀJ and Jᵀr
         summed by one matrix product per block."""
         sim, n_par = self.simulated, int(self.offsets[-1])
         n_exp, n = self.y.shape[:2]

@@ -1,5 +1,5 @@
 """Levenberg–Marquardt on the output-error objectives, with the iterate chosen on held-out
-experiments (:mod:`~pwa_pipeline.pwa.output_error`)."""
+experiments (`pwa_pipeline.pwa.output_error`)."""
 
 import time
 from collections.abc import Callable
@@ -60,12 +60,12 @@ def levenberg_marquardt(x0: np.ndarray, train: Callable, held: Callable | None =
         Starting parameters (any shape; the steps keep it).
     train : callable
         ``train(x, sensitivities)`` → (cost, JᵀJ, Jᵀr) on the fitting experiments, JᵀJ and
-        Jᵀr None unless ``sensitivities`` (as :meth:`~.simulator.FreeRuns.simulate`).
+        Jᵀr None unless ``sensitivities`` (as `simulate`).
     held : callable, optional
         ``held(x)`` → the cost on held-out experiments: the result is the iterate with the
         lowest, and the search stops after ``patience`` accepted steps without a new lowest.
     max_iter, max_seconds, tol, patience
-        As :func:`refine_output_error`.
+        As `refine_output_error`.
 
     Raises
     ------
@@ -153,7 +153,7 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
                         validation: tuple[list[Float2D], list[Float2D]] | None = None,
                         patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
     """Minimise the free-run error over the training experiments, or J_w with a one-step
-    weight (:mod:`~pwa_pipeline.pwa.output_error`).
+    weight (`pwa_pipeline.pwa.output_error`).
 
     Parameters
     ----------
@@ -179,7 +179,7 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
         steps without a new lowest.
     patience : int
     one_step_weight : float
-        w of J_w (:mod:`~pwa_pipeline.pwa.output_error`); 0: the free-run error alone.
+        w of J_w (`pwa_pipeline.pwa.output_error`); 0: the free-run error alone.
 
     Returns
     -------
@@ -211,8 +211,8 @@ def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list
                    max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
                    patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
     """Refine the p_j of the per-output models ``models[j]``, j in ``simulated``, on their
-    free-run error, or J_w with ``one_step_weight`` (:mod:`~pwa_pipeline.pwa.output_error`, with the models of
-    :mod:`~pwa_pipeline.pwa.structures`); the regions stay fixed as functions of φ.
+    free-run error, or J_w with ``one_step_weight`` (`pwa_pipeline.pwa.output_error`, with the models of
+    `pwa_pipeline.pwa.structures`); the regions stay fixed as functions of φ.
 
     Returns
     -------

@@ -1,5 +1,5 @@
-"""The structure search of :meth:`PWARX.auto <pwa_pipeline.pwa.PWARX.auto>`: a machine's
-model structure chosen from its data alone (:mod:`.search`)."""
+"""The structure search of [`PWARX.auto`][pwa_pipeline.PWARX.auto]: a machine's
+model structure chosen from its data alone (`search`)."""
 
 from .search import (
     SEARCH_LOG,

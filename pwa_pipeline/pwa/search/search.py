@@ -1,20 +1,20 @@
 """Structure search: the model structure of a machine chosen from its data alone
-(:meth:`~.estimator.PWARX.auto`).
+([`auto`][pwa_pipeline.PWARX.auto]).
 
 The paper's route (clustering local models, eq. 6–10, then an SVM) finds the modes of
 systems whose sub-models differ a lot; on machines the switching is often a small change
 (a friction offset that flips with the velocity's sign, an overflow, a saturating valve)
 that the clustering misses, and a linear ARX model then wins. The search tries the
-structures of :mod:`~.structures` and keeps what the data support:
+structures of [`structures`][pwa_pipeline.pwa.SearchReport.structures] and keeps what the data support:
 
 1. **Hold out.** The last ``validation_fraction`` of the training experiments are held out
-   (one record alone is split in time, :func:`split_experiments`); everything is fitted on
+   (one record alone is split in time, `split_experiments`); everything is fitted on
    the others and judged by the free-run NRMSE (RMSE over the standard deviation, per
    output) on the held-out ones. The test record plays no part. With ``n_folds`` above 1
    the shortlisted structures of steps 5–7 are also fitted without each earlier block and
-   judged on it in turn (:func:`folds`), and the lowest mean wins. A record longer than
+   judged on it in turn (`folds`), and the lowest mean wins. A record longer than
    ``max_rows`` regressor rows is searched on an even subsample of its rows and refined on
-   windows of it (:func:`windows`); the shortlisted structures are fitted on every row.
+   windows of it (`windows`); the shortlisted structures are fitted on every row.
 2. **Linear.** Least-squares linear models over every form (level, velocity) and every
    order pair within the bounds, joint (eq. 1) or one model per output (each output its
    own form and orders): the best is the linear reference, and its coupling the one the
@@ -31,20 +31,20 @@ structures of :mod:`~.structures` and keeps what the data support:
    estimator's steps), a candidate beside the scheduled regions.
 5. **Refinement.** The last two structures the greedy step kept (the richest and the one
    before), the clustered one and the linear reference are refined on the free-run error
-   with the one-step error kept in the objective (:mod:`~.output_error`,
+   with the one-step error kept in the objective (`output_error`,
    ``one_step_weight``), the iterate chosen on the held-out experiments: on a machine the
    least-squares free run can rank structures otherwise than the refined one.
 6. **Never worse than linear.** Per output group, the refined structure with the lowest
    held-out free-run NRMSE is kept only if it beats the refined linear reference;
    otherwise the linear model is returned, and the report says so.
-7. **Never worse than the default.** The library default :class:`~.estimator.PWARX` of the
+7. **Never worse than the default.** The library default [`PWARX`][pwa_pipeline.PWARX] of the
    largest orders (the paper's steps 2–6 on eq. (3)'s φ), fitted on the same experiments,
    and the same with the constant (by the search's clustering steps), replace the
    search's choice when their held-out free run is better: a user never gets a worse
    model from the search than the default one.
 
-Every candidate is a row of :attr:`SearchReport.table`, with its held-out NRMSE and what
-became of it (kept, not better by ``min_gain``, diverged, skipped and why). A candidate
+Every candidate is a row of [`SearchReport.table`][pwa_pipeline.pwa.SearchReport.table], with its held-out
+NRMSE and what became of it (kept, not better by ``min_gain``, diverged, skipped and why). A candidate
 whose free run diverges is skipped.
 
 The search is budgeted in work, not seconds, so that the same data give the same model on
@@ -86,15 +86,15 @@ from ..structures import (
     phi_names,
 )
 
-#: Which parameters differ between scheduled regions (see :class:`~.structures.OutputModel`).
+#: Which parameters differ between scheduled regions (see `OutputModel`).
 SWITCHES = ("offset", "all")
 #: Quantiles of a signal's training values at which thresholds are proposed.
 QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
 #: Held-out NRMSE above which a free run counts as diverged (as the evaluation's).
 DIVERGED = 10.0
-#: Hinge steps at most per kept oblique boundary (:meth:`_Search.hinge`).
+#: Hinge steps at most per kept oblique boundary (`_Search.hinge`).
 HINGE_STEPS = 3
-#: Samples per window of a long record's refinement (:func:`windows`, ``max_rows``).
+#: Samples per window of a long record's refinement (`windows`, ``max_rows``).
 WINDOW = 2000
 #: Fewest training rows a scheduled region needs per parameter it switches.
 ROWS_PER_PARAMETER = 3
@@ -212,7 +212,7 @@ class SearchReport:
 
 def split_experiments(experiments: list, fraction: float, min_samples: int
                       ) -> tuple[list, list, str]:
-    """The experiments to fit on and those held out (the first of :func:`folds`).
+    """The experiments to fit on and those held out (the first of `folds`).
 
     The last ``round(fraction · n)`` experiments (at least one) are held out. A single
     record is split in time instead: its last ``fraction`` of samples becomes a held-out
@@ -250,7 +250,7 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
 def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
           ) -> list[tuple[list, list]]:
     """Blocked cross-validation folds: (fit, held) pairs, the first that of
-    :func:`split_experiments`, each next one holding out the block before.
+    `split_experiments`, each next one holding out the block before.
 
     Blocks keep time order (no sample is predicted from its future's fit, and a drift is
     judged over a whole block): with several experiments a block is ``round(fraction·n)``
@@ -300,9 +300,9 @@ class _HeldOut:
 
     def nrmse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
         """Free-run NRMSE of each output of ``group`` (the others measured), inf where the
-        run diverges: compiled (:mod:`~pwa_pipeline.pwa.kernels.free_run`) for models whose
+        run diverges: compiled (`free_run`) for models whose
         regions have a compiled form (linear, sign-scheduled, clustered), else by
-        :meth:`simulated_sse`."""
+        `simulated_sse`."""
         forms = [models[j].compiled_regions() for j in group]
         if all(f is not None for f in forms):
             sse = self.compiled_sse(models, group, forms)
@@ -369,7 +369,7 @@ def windows(experiments: list, max_samples: int | None, length: int = WINDOW) ->
 
 class _Fold:
     """One cross-validation fold: the regressors of its fitting experiments, the
-    experiments its refinements run on (:func:`windows`) and its held-out block."""
+    experiments its refinements run on (`windows`) and its held-out block."""
 
     def __init__(self, fit: list, held: list, lags: int, nb: int, warmup: int,
                  max_samples: int | None):
@@ -386,9 +386,8 @@ class _Fold:
 class StructureSearch(BaseEstimator):
     """Search of a PWARX structure on held-out training experiments (see the module doc).
 
-    The search step of :class:`~.estimator.PWARX` (``search=``; :meth:`PWARX.auto
-    <.estimator.PWARX.auto>` builds one): the estimator's ``na`` and ``nb`` are the largest
-    orders tried.
+    The search step of [`PWARX`][pwa_pipeline.PWARX] (``search=``; [`PWARX.auto`][pwa_pipeline.PWARX.auto]
+    builds one): the estimator's ``na`` and ``nb`` are the largest orders tried.
 
     Parameters
     ----------
@@ -418,7 +417,7 @@ class StructureSearch(BaseEstimator):
         Share of the training experiments held out (the last ones).
     n_folds : int, default 1
         Held-out blocks the shortlisted structures are judged on in turn (blocked
-        cross-validation, :func:`folds`): the search proposes on the first (the last
+        cross-validation, `folds`): the search proposes on the first (the last
         ``validation_fraction`` of the data), then the linear reference, the refined
         candidates and the default PWARX are fitted again without each other block,
         refined and judged on it, and the lowest mean held-out NRMSE wins. At most as many
@@ -433,7 +432,7 @@ class StructureSearch(BaseEstimator):
         run on: past it the candidates are fitted on one row in k (an even subsample,
         each row keeping its own lags) and the shortlisted ones fitted again on every row,
         and the refinements run on windows of 2,000 samples (or whole shorter
-        experiments) evenly spread over the data (:func:`windows`); the held-out blocks
+        experiments) evenly spread over the data (`windows`); the held-out blocks
         are simulated whole. A 400,000-sample record is then searched in about 35 s. The
         default leaves the robot's 32,000 rows and EMPS's 20,000 whole: on the robot's
         training experiments 20,000 gave 0.708 against 0.697. None: every row and
@@ -451,14 +450,14 @@ class StructureSearch(BaseEstimator):
         The search's budget of work: candidate structures measured at most (each a
         least-squares fit and a held-out free run; the linear stage is measured whole
         whatever the budget). Once spent, the search stops proposing, the best candidate
-        measured is kept (refined as usual) and :class:`SearchBudgetSpent` warned. The
-        default lets the robot's search (six outputs, six inputs, orders up to 2: about
+        measured is kept (refined as usual) and [`SearchBudgetSpent`][pwa_pipeline.pwa.SearchBudgetSpent]
+        warned. The default lets the robot's search (six outputs, six inputs, orders up to 2: about
         1,120 candidates) finish.
     max_seconds : float, default 900
         A safety net, not the budget: past it (a fit may pass it by the candidate and the
         refinement under way) the remaining candidates compete unrefined, the best is kept
-        and :class:`SearchTimeLimit` warned: a result that then depends on the machine's
-        speed.
+        and [`SearchTimeLimit`][pwa_pipeline.pwa.SearchTimeLimit] warned: a result that then depends on the
+        machine's speed.
     """
 
     _parameter_constraints: dict = {
@@ -555,7 +554,7 @@ class StructureSearch(BaseEstimator):
 
 
 class _Search:
-    """One run of :meth:`StructureSearch.search`."""
+    """One run of [`StructureSearch.search`][pwa_pipeline.pwa.StructureSearch.search]."""
 
     def __init__(self, params: StructureSearch, experiments: list, na: int, nb: int,
                  cluster: Callable | None, default: Callable | None):
@@ -675,7 +674,7 @@ class _Search:
 
     def fold_scores(self, group: list[int], shortlist: list[tuple]) -> list[float]:
         """The shortlisted candidates' scores: the held-out NRMSE of the first fold alone,
-        or its mean over every fold (:meth:`cross_validated`, each recorded as a row);
+        or its mean over every fold (`cross_validated`, each recorded as a row);
         inf where a fold diverges."""
         if len(self.folds) == 1:
             return [c[0] for c in shortlist]
@@ -942,7 +941,7 @@ class _Search:
         """Breiman's hinge finding on output j's one boundary: two affine pieces of a
         continuous map meet where θ₁ᵀφ = θ₀ᵀφ, so the boundary is moved there
         (w ← θ₁ − θ₀ over φ) and both pieces refitted, while the held-out NRMSE falls by
-        ``min_gain`` (at most :data:`HINGE_STEPS` times). A discontinuous switch (a
+        ``min_gain`` (at most `HINGE_STEPS` times). A discontinuous switch (a
         friction offset) gains nothing and keeps its boundary. Updates ``specs[j]`` and
         ``models[j]`` in place; returns the held-out NRMSE."""
         for _ in range(HINGE_STEPS):
@@ -1023,7 +1022,7 @@ class _Search:
                 f"{best['validation_nrmse']:#.4g}{where}.")
 
     def default_stage(self, final: float) -> tuple[float, dict, str] | None:
-        """The library default :class:`~.estimator.PWARX` of the largest orders (level form,
+        """The library default [`PWARX`][pwa_pipeline.PWARX] of the largest orders (level form,
         joint outputs, the paper's steps 2–6 on eq. (3)'s φ) fitted on the fitting
         experiments, and the same with the constant by the search's own clustering steps
         (``cluster``: the default's with at most 3 re-assignment sweeps and no search for

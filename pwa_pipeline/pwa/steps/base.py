@@ -1,10 +1,10 @@
-"""The interfaces of the steps :class:`~pwa_pipeline.pwa.estimator.PWARX` runs (paper steps 2–6).
+"""The interfaces of the steps [`PWARX`][pwa_pipeline.PWARX] runs (paper steps 2–6).
 
 Each step kind is an abstract scikit-learn estimator whose ``fit`` takes what the steps
 before it produced, so that the estimator calls every step of a kind alike. A step object of
 one's own subclasses the base of its kind and implements its abstract methods; its
 parameters follow scikit-learn's conventions (``__init__`` stores them, fitted attributes end
-in ``_``). A region step is also a region map (:class:`~pwa_pipeline.pwa.partitions.RegionMap`):
+in ``_``). A region step is also a region map ([`RegionMap`][pwa_pipeline.pwa.RegionMap]):
 with ``fit``, ``predict`` and ``halfspaces`` it predicts, simulates and exports to state space
 as the built-in ones do.
 """
@@ -102,7 +102,7 @@ class BaseRegions(RegionMap, BaseEstimator, metaclass=ABCMeta):
             The sub-models, one per region.
         output_lags : ndarray of shape (d,), optional
             Output of each column of φ, −1 for the others
-            (:func:`~pwa_pipeline.pwa.steps.submodels.output_lag_columns`).
+            (`output_lag_columns`).
         experiment : ndarray of shape (n,), optional
             Experiment of each row (rows in time order within each).
         """
@@ -114,7 +114,7 @@ class BaseRegions(RegionMap, BaseEstimator, metaclass=ABCMeta):
     @abstractmethod
     def halfspaces(self) -> list[Halfspaces]:
         """Each region as rows (G, q) of G φ ≤ q (None: never chosen), for the state-space
-        form (:meth:`RegionMap.halfspaces <pwa_pipeline.pwa.partitions.RegionMap.halfspaces>`)."""
+        form ([`RegionMap.halfspaces`][pwa_pipeline.pwa.RegionMap.halfspaces])."""
 
 
 class BaseSubModels(BaseEstimator, metaclass=ABCMeta):

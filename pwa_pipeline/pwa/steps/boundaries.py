@@ -1,21 +1,21 @@
 """Region boundaries placed where the sub-models' residuals switch (the default's step 6).
 
-The region SVM of :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions` learns from hard labels and
+The region SVM of [`SVMRegions`][pwa_pipeline.pwa.SVMRegions] learns from hard labels and
 a soft margin; near a boundary, where noise blurs which sub-model produced a row, its
 hyperplanes sit a little off (98.4–99.6 % of fresh samples right with the true θ_i on the
 section 5 system), and on switching systems that error dominates the free-run error.
-:class:`ResidualRegions` starts from the SVM's hyperplanes and moves them to maximise the
-likelihood of the outputs under the sub-models, the regions acting as a softmax gate of a
-mixture of experts (:func:`refine_boundaries`): the boundary settles where the residuals of
+[`ResidualRegions`][pwa_pipeline.pwa.ResidualRegions] starts from the SVM's hyperplanes and moves them to
+maximise the likelihood of the outputs under the sub-models, the regions acting as a softmax gate of a
+mixture of experts (`refine_boundaries`): the boundary settles where the residuals of
 the two sub-models switch. A few EM steps then refit each sub-model on its rows weighted by
-their posterior probability (:func:`mixture_of_experts`), so that rows near a boundary,
+their posterior probability (`mixture_of_experts`), so that rows near a boundary,
 which a hard label gives wholly to one side, weigh on each sub-model as the data say.
 
 The modes switch on the noise-free regressors, but the measured output lags in φ carry the
 output noise, which blurs the gate and costs about 0.3–0.5 % of fresh samples (with the true
 θ_i and modes, the gate scores 99.46 % on measured φ of the section 5 system at 30 dB and
 99.8 % on noise-free φ). From the first EM step on, the gate therefore sees φ with its
-output lags denoised (:func:`denoised_regressors`): each measured y(k−1) averaged with the
+output lags denoised (`denoised_regressors`): each measured y(k−1) averaged with the
 mixture's one-step prediction of it (with the true θ_i and modes one such step leaves
 32–45 % of the noise variance on that system; each EM step repeats it on the last φ̃).
 """
@@ -35,14 +35,14 @@ from .submodels import bias_compensated_refit, robust_noise_var
 
 def _log_likelihood(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
     """−½ Σ_p r_ikp² / σ̂_p² of every row k under every sub-model i, shape (n, s); σ̂_p² is
-    :func:`~pwa_pipeline.pwa.steps.submodels.robust_noise_var` of each row's best residual."""
+    `robust_noise_var` of each row's best residual."""
     sq = (target[None] - phi @ thetas) ** 2  # (s, n, m)
     sigma2 = robust_noise_var(sq[np.argmin(sq.sum(axis=2), axis=0), np.arange(phi.shape[0])])
     return -0.5 * (sq / sigma2).sum(axis=2).T
 
 
 def gate_log_likelihood(z: Float2D, log_lik: np.ndarray, ridge: float):
-    """Objective and gradient of :func:`refine_boundaries` for L-BFGS.
+    """Objective and gradient of `refine_boundaries` for L-BFGS.
 
     Returns a function of the flattened gate parameters V (s, d + 1) giving
     −(1/n) Σ_k log Σ_i softmax_i(V z_k) exp(ℓ_ik) + (ridge/2)‖V without the last column‖²
@@ -72,7 +72,7 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
 
     The regions are read as a gate p_i(φ) = softmax_i(w_i·φ + b_i) of a mixture of the
     sub-models, each with Gaussian residuals of the noise variance σ̂_p²
-    (:func:`~pwa_pipeline.pwa.steps.submodels.robust_noise_var` of each row's best residual), and
+    (`robust_noise_var` of each row's best residual), and
     (w, b) maximise the likelihood Σ_k log Σ_i p_i(φ_k) exp(−½ Σ_p r_ikp² / σ̂_p²) (the
     gating of a mixture of experts), by L-BFGS from the given hyperplanes, on z-scored φ
     with a small ridge on the slopes. The softmax is sharpened only as far as the data
@@ -86,13 +86,13 @@ def refine_boundaries(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: F
     target : ndarray of shape (n, m)
     thetas : ndarray of shape (s, d, m)
     coef, intercept : ndarrays of shape (s, d) and (s,)
-        The starting hyperplanes, e.g. an :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`'s.
+        The starting hyperplanes, e.g. an [`SVMRegions`][pwa_pipeline.pwa.SVMRegions]'s.
     ridge : float, default 1e-7
         Penalty on the squared slopes in z-scored units.
     max_iter : int, default 200
         L-BFGS iterations.
     gate_phi : ndarray of shape (n, d), optional
-        The regressors the gate sees, when not φ (:func:`denoised_regressors`); the
+        The regressors the gate sees, when not φ (`denoised_regressors`); the
         residuals are φ's.
 
     Returns
@@ -144,7 +144,7 @@ def denoised_regressors(phi: Float2D, target: Float2D, thetas: np.ndarray, post:
     sigma2 : ndarray of shape (m,)
         Output noise variances.
     lag_output : ndarray of shape (d,)
-        :func:`~.submodels.output_lag_columns`.
+        `output_lag_columns`.
     previous : ndarray of shape (n,)
         Index of the row one sample earlier in the same experiment, −1 where none.
     gate_phi : ndarray of shape (n, d)
@@ -165,7 +165,7 @@ def denoised_regressors(phi: Float2D, target: Float2D, thetas: np.ndarray, post:
 
 def previous_rows(experiment: np.ndarray) -> np.ndarray:
     """Index of the row one sample earlier in the same experiment (rows in time order within
-    each, as :func:`~.regressors.build_regressors` stacks them), −1 for each first row."""
+    each, as `build_regressors` stacks them), −1 for each first row."""
     previous = np.arange(-1, experiment.size - 1)
     previous[np.flatnonzero(np.diff(experiment, prepend=np.nan) != 0)] = -1
     return previous
@@ -179,18 +179,18 @@ def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: 
     """Regions and sub-models re-estimated together, as a mixture of experts gated by the
     regions, by ``n_em`` EM steps.
 
-    Each step places the boundaries (:func:`refine_boundaries`), takes the posterior
+    Each step places the boundaries (`refine_boundaries`), takes the posterior
     probability of each row under each sub-model, q_ik ∝ p_i(φ_k) exp(−½ Σ_p r_ikp² / σ̂_p²),
     and refits every θ_i by least squares weighted by q_ik; the boundaries are placed once
     more at the end. A sub-model whose rows weigh less than d + 1 keeps its θ_i.
 
-    With ``lag_output`` (:func:`~.submodels.output_lag_columns`), the refit is
+    With ``lag_output`` (`output_lag_columns`), the refit is
     bias-compensated for the measurement noise in the output lags
-    (:func:`~.submodels.bias_compensated_refit`, with the same weights); where its guard
+    (`bias_compensated_refit`, with the same weights); where its guard
     rejects the compensation the θ_i are weighted least squares. With ``previous`` too
-    (:func:`previous_rows`), every placement after the first fits the gate on φ with its
+    (`previous_rows`), every placement after the first fits the gate on φ with its
     output lags denoised by the refitted θ_i, the posterior and the compensation's σ̂²
-    (:func:`denoised_regressors`, its last result feeding the next prediction); the
+    (`denoised_regressors`, its last result feeding the next prediction); the
     residuals stay φ's. Where σ̂² is implausible the gate keeps the last φ̃.
 
     Returns
@@ -234,23 +234,23 @@ def mixture_of_experts(phi: Float2D, target: Float2D, thetas: np.ndarray, coef: 
 
 
 class ResidualRegions(SVMRegions):
-    """The library default's step 6: the regions of :class:`~.regions.SVMRegions`, then
+    """The library default's step 6: the regions of [`SVMRegions`][pwa_pipeline.pwa.SVMRegions], then
     their boundaries moved to where the sub-models' residuals switch
-    (:func:`refine_boundaries`).
+    (`refine_boundaries`).
 
     Given the outputs and the sub-models (``target`` and ``thetas`` at fit, which the
     estimator passes), the SVM's hyperplanes start the refinement, and the sub-models are
-    refitted with the regions by ``n_em`` EM steps (:func:`mixture_of_experts`); the
+    refitted with the regions by ``n_em`` EM steps (`mixture_of_experts`); the
     estimator then uses those sub-models (``thetas_``). Without them (as inside the
-    sub-model refinement's sweeps, :func:`~.submodels.refine`) it is the SVM alone.
+    sub-model refinement's sweeps, `refine`) it is the SVM alone.
     Predicts as the SVM does, φ ∈ H_i ⇔ i = argmax_j (w_j·φ + b_j).
 
     Parameters
     ----------
     C, max_rows, random_state, tol
-        Those of :class:`~.regions.SVMRegions`.
+        Those of [`SVMRegions`][pwa_pipeline.pwa.SVMRegions].
     gate_ridge : float, default 1e-7
-        ``ridge`` of :func:`refine_boundaries`. 1e-5 held the slopes back from the sharp
+        ``ridge`` of `refine_boundaries`. 1e-5 held the slopes back from the sharp
         boundaries the data support (median region accuracy 0.2–0.5 points lower on tuning
         seeds with the true θ_i); 0 does as well as 1e-7 but is unbounded on separable rows.
     gate_max_rows : int, optional, default 20000
@@ -261,19 +261,19 @@ class ResidualRegions(SVMRegions):
         EM steps refitting the sub-models (0: boundaries only, the sub-models kept).
     compensate_bias : bool, default True
         Refit the sub-models in the EM steps by bias-compensated least squares
-        (:func:`~.submodels.bias_compensated_refit`): measurement noise on the outputs also
+        (`bias_compensated_refit`): measurement noise on the outputs also
         sits in φ's output lags and biases least squares towards zero on them. Needs
         ``output_lags`` at fit (the estimator passes them on the joint level route only);
         without, least squares.
     denoise : bool, default True
-        Fit the gate on φ with its output lags denoised (:func:`denoised_regressors`) from
+        Fit the gate on φ with its output lags denoised (`denoised_regressors`) from
         the first EM step on. Needs ``output_lags`` and ``experiment`` at fit and
         ``compensate_bias`` (for σ̂²); the estimator passes them on the joint level route.
 
     Attributes
     ----------
     coef_, intercept_, n_regions_
-        As :class:`~.regions.SVMRegions`'s, after the refinement.
+        As [`SVMRegions`][pwa_pipeline.pwa.SVMRegions]'s, after the refinement.
     svm_coef_, svm_intercept_ : ndarrays
         The SVM's hyperplanes before it.
     thetas_ : ndarray of shape (s, d, m)
@@ -332,13 +332,13 @@ class ResidualRegions(SVMRegions):
         Parameters
         ----------
         phi, labels, n_regions, sample_weight
-            As :meth:`SVMRegions.fit <.regions.SVMRegions.fit>`.
+            As [`SVMRegions.fit`][pwa_pipeline.pwa.SVMRegions.fit].
         target : ndarray of shape (n, m), optional
             y(k) of each row.
         thetas : ndarray of shape (s, d, m), optional
             The sub-models, one per region.
         output_lags : ndarray of shape (d,), optional
-            :func:`~.submodels.output_lag_columns` of φ, for ``compensate_bias``.
+            `output_lag_columns` of φ, for ``compensate_bias``.
         experiment : ndarray of shape (n,), optional
             Experiment of each row (rows in time order within each), for ``denoise``.
 

@@ -20,7 +20,7 @@ from .embedding import EMBEDDINGS
 
 _EPS_SAMPLE = 5000
 _DENSE = 1 << 24
-"""Largest n² for which :func:`dbscan_cluster_counts` keeps every distance (128 MB)."""
+"""Largest n² for which `dbscan_cluster_counts` keeps every distance (128 MB)."""
 
 
 def confident_models(residual_var: np.ndarray, factor: float) -> np.ndarray:
@@ -52,13 +52,14 @@ def k_distances(emb: np.ndarray, min_pts: int, seed: int = 0,
 def k_distance_eps(emb: np.ndarray, min_pts: int, n_grid: int = 20) -> float:
     """ε from the k-distance curve: the candidate that separates the most clusters.
 
-    Candidates are the 2 % … 60 % quantiles of :func:`k_distances`. The number of DBSCAN
+    Candidates are the 2 % … 60 % quantiles of `k_distances`. The number of DBSCAN
     clusters at every candidate comes from one minimum spanning tree of the mutual
-    reachability distances (:func:`dbscan_cluster_counts`), and the largest ε giving the
+    reachability distances (`dbscan_cluster_counts`), and the largest ε giving the
     most clusters wins. Over-splitting a mode is harmless where sub-models that predict
-    alike are merged afterwards (as :class:`pwa_pipeline.pwa.steps.submodels.RefinedSubModels`
-    does); merging two modes is not repairable, and the classic knee of the curve does that
-    when one mode is much larger than another.
+    alike are merged afterwards (as
+    [`pwa_pipeline.pwa.steps.submodels.RefinedSubModels`][pwa_pipeline.pwa.RefinedSubModels] does); merging
+    two modes is not repairable, and the classic knee of the curve does that when one mode is much larger than
+    another.
     """
     dist = k_distances(emb, min_pts)
     # Distances below 1e-6 of the parameters' size are rounding error (noise-free data).
@@ -76,7 +77,7 @@ def dbscan_cluster_counts(x: np.ndarray, grid: np.ndarray, min_pts: int) -> np.n
     (their core distance c_p), and the clusters are the connected components of the core
     points under "within ε": the components of the graph of mutual reachability distances
     max(c_p, c_q, ‖p − q‖) ≤ ε. One minimum spanning tree of that graph (Prim's algorithm,
-    compiled: :mod:`._cluster_kernels`) gives them all: clusters(ε) = #{c_p ≤ ε} − #{tree
+    compiled: `_cluster_kernels`) gives them all: clusters(ε) = #{c_p ≤ ε} − #{tree
     edges ≤ ε}. Distances are rounded as scikit-learn's radius search at the largest ε
     rounds them (its k-d tree up to 15 dimensions: Σ_j (x_pj − x_qj)² in feature order; its
     brute force above: (‖p‖² − 2 p·q) + ‖q‖² clipped at 0) and compared with ε as its
@@ -113,7 +114,7 @@ def cluster_local_models(
 ) -> tuple[np.ndarray, float]:
     """Cluster local parameter matrices with DBSCAN on the Vθ distance (eq. 8–10).
 
-    DBSCAN is :func:`pwa_pipeline.pwa.steps.dbscan.dbscan` (scikit-learn's labels, border points
+    DBSCAN is `pwa_pipeline.pwa.steps.dbscan.dbscan` (scikit-learn's labels, border points
     included, in bounded memory).
 
     Parameters
@@ -121,12 +122,12 @@ def cluster_local_models(
     theta : ndarray of shape (n, d, m)
         Local parameter matrices (possibly rescaled by the caller).
     eps : float or None
-        DBSCAN radius; None chooses it with :func:`k_distance_eps`.
+        DBSCAN radius; None chooses it with `k_distance_eps`.
     min_pts : int
         DBSCAN MinPts (the point itself counts, as in scikit-learn's ``min_samples``).
     embedding : {"exact", "literal"}
         ``"literal"`` is Vθ of eq. (9); ``"exact"`` the d·m-dimensional map with the same
-        distances (:func:`pwa_pipeline.pwa.steps.embedding.exact_embedding`).
+        distances (`pwa_pipeline.pwa.steps.embedding.exact_embedding`).
     clustered : ndarray of bool, optional
         Which local models to cluster; the others are labelled noise.
 
@@ -169,7 +170,7 @@ class DBSCANClustering(BaseClustering):
     Parameters
     ----------
     eps : float, optional
-        DBSCAN radius ε. None: chosen from the k-distance curve (:func:`k_distance_eps`).
+        DBSCAN radius ε. None: chosen from the k-distance curve (`k_distance_eps`).
     min_pts : int, optional
         DBSCAN MinPts (the point itself counts). None: 2·d.
     embedding : {"exact", "literal"}, default "exact"
@@ -180,7 +181,7 @@ class DBSCANClustering(BaseClustering):
         the channels. The paper clusters θ_k as it is (False).
     confidence : float, optional, default 3
         Leave out local models whose residual variance exceeds ``confidence`` × the median
-        (:func:`confident_models`: mixed local sets). None (the paper) clusters every one.
+        (`confident_models`: mixed local sets). None (the paper) clusters every one.
     max_clustered : int, optional, default 3000
         Cluster at most this many local models (a seeded random subset of the confident
         ones), so DBSCAN's cost stays bounded on long records. None (the paper): all.
@@ -238,7 +239,7 @@ class DBSCANClustering(BaseClustering):
 
         Parameters
         ----------
-        local : fitted :class:`~pwa_pipeline.pwa.steps.local_models.LocalLeastSquares`
+        local : fitted LocalLeastSquares
             Its ``theta_``, ``residual_var_``, ``phi_scale_``, ``degenerate_``,
             ``estimated_`` and ``original_`` are used; only estimated local models are
             clustered, degenerate ones never, and each distinct sample is clustered once
@@ -287,5 +288,5 @@ class DBSCANClustering(BaseClustering):
         return self
 
     def resolved_params(self) -> dict:
-        """:meth:`get_params` with the values chosen at fit filled in (ε, MinPts)."""
+        """`get_params` with the values chosen at fit filled in (ε, MinPts)."""
         return {**self.get_params(), "eps": self.eps_, "min_pts": self.min_pts_}

@@ -1,7 +1,7 @@
 """Exact DBSCAN in memory linear in the number of points (step 4, paper section 4).
 
 scikit-learn's DBSCAN stores every ε-neighbourhood before clustering: 255 M pairs and 6 GB on
-the robot's 40k local models. :func:`dbscan` gives the same clustering from blocks of
+the robot's 40k local models. `dbscan` gives the same clustering from blocks of
 distances, never holding more than one block, and skips most pairs with the triangle
 inequality.
 """
@@ -38,7 +38,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     core point and a border point within ``eps`` of core points of several clusters goes to
     the cluster of lowest such number (the first to reach it). Ties at ``eps``: a pair within
     rounding of ``eps`` (as when ε is a k-distance, see
-    :func:`~pwa_pipeline.pwa.steps.clustering.k_distance_eps`) is decided by
+    `k_distance_eps`) is decided by
     Σ_j (x_pj − x_qj)² ≤ ε² summed in feature order on the points as given, scikit-learn's
     k-d tree test bit for bit. The labels are then scikit-learn's, cluster numbers included,
     where it searches with its k-d tree (up to 15 dimensions; tested on ties in
@@ -62,7 +62,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     Parameters
     ----------
     x : ndarray of shape (n, d)
-        The points (e.g. :func:`pwa_pipeline.pwa.steps.embedding.exact_embedding`).
+        The points (e.g. `pwa_pipeline.pwa.steps.embedding.exact_embedding`).
     eps : float
         Neighbourhood radius ε > 0.
     min_pts : int
@@ -76,7 +76,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
     labels : ndarray of shape (n,)
         Cluster 0 … s−1 of each point, −1 for noise; clusters are numbered by their
         lowest-indexed core point, as scikit-learn numbers them
-        (:func:`pwa_pipeline._arrays.relabel_by_size` numbers them by size).
+        (`pwa_pipeline._arrays.relabel_by_size` numbers them by size).
 
     Raises
     ------
@@ -93,7 +93,7 @@ def dbscan(x: Float2D, eps: float, min_pts: int, block: int | None = None) -> np
 
 def _dbscan(x: Float2D, eps: float, min_pts: int,
             block: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`dbscan`'s labels and which points are core."""
+    """`dbscan`'s labels and which points are core."""
     if eps <= 0 or min_pts < 1:
         raise ValueError(f"need eps > 0 and min_pts >= 1, got eps = {eps}, min_pts = {min_pts}")
     x = np.asarray(x, dtype=float)
@@ -176,7 +176,7 @@ class _Geometry:
         return acc <= self.eps2
 
     def near(self, rows: np.ndarray | slice, cols: slice) -> np.ndarray:
-        """Boolean block ``‖x[rows] − x[cols]‖ <= ε``, pairs near ε by :meth:`within_eps`."""
+        """Boolean block ``‖x[rows] − x[cols]‖ <= ε``, pairs near ε by `within_eps`."""
         rows = np.arange(len(self.x))[rows]
         prod = self.left[rows] @ self.right[cols].T
         top = self.norm[cols].max()

@@ -34,7 +34,7 @@ def exact_transform(m: int) -> np.ndarray:
 def exact_embedding(theta: np.ndarray) -> np.ndarray:
     """An embedding of θ_k in d·m dimensions with exactly the distances of eq. (8)–(10).
 
-    m² times smaller than :func:`literal_embedding` (e.g. 144 instead of 864 entries for
+    m² times smaller than `literal_embedding` (e.g. 144 instead of 864 entries for
     d = 24, m = 6), hence faster DBSCAN, with the same labels.
 
     Returns

@@ -23,8 +23,8 @@ _CHUNK = 256
 """Local sets per task of the solve (its θ_k and, where singular, R blocks: 256 × d × (d + m)
 floats each); the results do not depend on it, bit for bit."""
 _PER_SAMPLE = {"neighbours_": -1, "theta_": np.nan, "residual_var_": np.nan}
-"""The per-sample arrays of :class:`LocalLeastSquares` and their value on the samples whose
-local model was not estimated."""
+"""The per-sample arrays of [`LocalLeastSquares`][pwa_pipeline.pwa.LocalLeastSquares] and their value on the
+samples whose local model was not estimated."""
 _CONSTANT = "every regressor column is constant (the data do not vary): no local sets"
 
 
@@ -57,7 +57,7 @@ def local_sets(phi: Float2D, n_rho: int, standardize: bool, rows: np.ndarray | N
     -------
     ndarray of shape (n, n_ρ) or (q, n_ρ), int
 
-    Above 12 dimensions the search is :func:`~pwa_pipeline.pwa.steps.neighbours.nearest_neighbours`
+    Above 12 dimensions the search is `nearest_neighbours`
     (exact, blocked float32 products; equal distances go to the lower row index), below it
     SciPy's k-d tree on every CPU (the neighbours of scikit-learn's, 4x faster on 400k rows).
     """
@@ -100,7 +100,7 @@ def local_least_squares(
     matrix Φ_k with the targets appended as columns, [Φ_k | Y_k] = QR: the leading block
     R₁₁ is Φ_k's R, θ_k solves R₁₁ θ_k = R₁₂, and what the reflections leave below R₁₂
     has the residual norms. Only R is formed (Householder reflections and the back
-    substitution compiled, :mod:`._qr_kernels`, on blocks of local sets, one thread
+    substitution compiled, `_qr_kernels`, on blocks of local sets, one thread
     each). With ``ridge > 0`` the rows √ridge·I are appended (Tikhonov
     regularisation in scaled units). A local set whose Φ_k is rank-deficient (e.g. every
     row inside one hold of a piecewise-constant input) has no unique θ_k: it gets the
@@ -175,7 +175,8 @@ class LocalLeastSquares(BaseLocalModels):
     least-squares parameter matrix θ_k (eq. 6–7).
 
     A sample that repeats an earlier one exactly (equal φ(k) and y(k)) counts once: the local
-    sets hold distinct samples, and a copy gets its original's local model (:meth:`fit`).
+    sets hold distinct samples, and a copy gets its original's local model
+    ([`fit`][pwa_pipeline.pwa.LocalLeastSquares.fit]).
 
     Parameters
     ----------
@@ -261,7 +262,7 @@ class LocalLeastSquares(BaseLocalModels):
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
-        """Local sets (:func:`local_sets`) and local least squares (:func:`local_least_squares`)
+        """Local sets (`local_sets`) and local least squares (`local_least_squares`)
         on the distinct samples (φ(k), y(k)); a repeated sample gets its first occurrence's.
 
         A sample that repeats another exactly (the same experiment given twice, a record
@@ -286,7 +287,7 @@ class LocalLeastSquares(BaseLocalModels):
         return self
 
     def _fit(self, phi: Float2D, target: Float2D) -> "LocalLeastSquares":
-        """:meth:`fit` without the cache."""
+        """[`fit`][pwa_pipeline.pwa.LocalLeastSquares.fit] without the cache."""
         n, d = phi.shape
         self.n_rho_ = self.n_rho if self.n_rho is not None else 3 * d
         check_n_rho(self.n_rho_, d)
@@ -330,11 +331,11 @@ class LocalLeastSquares(BaseLocalModels):
         return self
 
     def resolved_params(self) -> dict:
-        """:meth:`get_params` with the values chosen at fit filled in (n_ρ)."""
+        """`get_params` with the values chosen at fit filled in (n_ρ)."""
         return {**self.get_params(), "n_rho": self.n_rho_}
 
     def __getstate__(self) -> dict:
-        """The state to pickle, the per-sample arrays (:data:`_PER_SAMPLE`) on the estimated
+        """The state to pickle, the per-sample arrays (`_PER_SAMPLE`) on the estimated
         samples only: their other rows hold no information, so a stored or cached step fitted
         with ``max_sets`` takes about ``max_sets`` / n of the room."""
         state = dict(super().__getstate__())
@@ -344,7 +345,7 @@ class LocalLeastSquares(BaseLocalModels):
         return state
 
     def __setstate__(self, state: dict) -> None:
-        """The pickled state (:meth:`__getstate__`), its per-sample arrays spread back to
+        """The pickled state (`__getstate__`), its per-sample arrays spread back to
         every sample."""
         estimated = state.get("estimated_")
         if estimated is not None and len(state.get("theta_", estimated)) < len(estimated):

@@ -1,10 +1,10 @@
 """Exact k nearest neighbours by blocks of float32 matrix products (local sets, step 2).
 
 scikit-learn's brute-force search ranks every row of the distance matrix in float64 (about
-7 s on the robot's 40k regressor rows in 24 dimensions at k = 72). :func:`nearest_neighbours`
+7 s on the robot's 40k regressor rows in 24 dimensions at k = 72). `nearest_neighbours`
 gives the same neighbours from float32 products on tiles that fit in cache, each computed
 once for both of its row blocks, with two threads, deciding in float64 only the pairs that
-float32 cannot rank. BLAS computes the tiles; compiled kernels (:mod:`._knn_kernels`) read
+float32 cannot rank. BLAS computes the tiles; compiled kernels (`_knn_kernels`) read
 each tile once to keep its candidates and rank each row's.
 """
 
@@ -127,7 +127,7 @@ def distinct_rows(x: Float2D) -> tuple[np.ndarray, np.ndarray]:
 
 def _distinct(x: Float2D, k: int, workers: int, queries: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`nearest_neighbours` of distinct points, and their exact squared distances."""
+    """`nearest_neighbours` of distinct points, and their exact squared distances."""
     if queries is not None:
         return _queried(x, k, workers, queries)
     n = x.shape[0]
@@ -213,9 +213,9 @@ def _bound32(bound: np.ndarray) -> np.ndarray:
 
 def _queried(x: Float2D, k: int, workers: int, queries: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_distinct` of the rows ``queries`` only: each block of them (in the spatial
+    """`_distinct` of the rows ``queries`` only: each block of them (in the spatial
     order, so that a block is compact) against every block of points, the rows' side of each
-    tile kept; bounds, candidates and selection as :func:`_distinct`'s."""
+    tile kept; bounds, candidates and selection as `_distinct`'s."""
     n = x.shape[0]
     order, xs, left, right, err = _tile_factors(x)
     place = np.empty(n, dtype=np.intp)

@@ -109,7 +109,7 @@ class SVMRegions(BaseRegions):
             Weight of each row in the SVM loss; rows weighted 0 are left out.
         target, thetas, output_lags, experiment : optional
             Not used: the SVM separates the labels alone. Accepted so that every region
-            step is fitted alike (:class:`~.base.BaseRegions`).
+            step is fitted alike ([`BaseRegions`][pwa_pipeline.pwa.steps.base.BaseRegions]).
         """
         labels = np.asarray(labels)
         d = phi.shape[1]
@@ -164,7 +164,7 @@ class SVMRegions(BaseRegions):
         return np.argmax(phi @ self.coef_.T + self.intercept_, axis=1)
 
     def compiled(self) -> CompiledForm:
-        """argmax_i w_i·φ + b_i (the scores of :meth:`predict`); with one region, no
+        """argmax_i w_i·φ + b_i (the scores of `predict`); with one region, no
         scores."""
         check_is_fitted(self)
         if self.n_regions_ == 1:
@@ -172,8 +172,8 @@ class SVMRegions(BaseRegions):
         return "argmax", self.coef_, self.intercept_
 
     def halfspaces(self) -> list[Halfspaces]:
-        """H_i = {φ : (w_j − w_i)·φ ≤ b_i − b_j for every j ≠ i} (:func:`~..partitions.
-        argmax_halfspaces`); with one region, all of φ-space."""
+        """H_i = {φ : (w_j − w_i)·φ ≤ b_i − b_j for every j ≠ i} (` argmax_halfspaces`); with one region, all
+        of φ-space."""
         check_is_fitted(self)
         if self.n_regions_ == 1:
             return [(np.zeros((0, self.coef_.shape[1])), np.zeros(0))]

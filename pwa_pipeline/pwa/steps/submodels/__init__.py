@@ -1,10 +1,10 @@
 """Sub-model parameter matrices θ_i from clusters (paper step 5) and their refinement.
 
-Two step objects: :class:`ClusterCentres`, the paper's step 5 (:mod:`.centres`), and
-:class:`RefinedSubModels`, the library default (:mod:`.refined`), built from least-squares
-refits (:mod:`.least_squares`), merging (:mod:`.merge`), re-assignment by residual and region
-(:mod:`.reassign`) and the split search (:mod:`.split_search`). Bias-compensated least
-squares for noisy output lags (:mod:`.bias_compensation`) serves step 6's residual
+Two step objects: [`ClusterCentres`][pwa_pipeline.pwa.ClusterCentres], the paper's step 5 (`centres`), and
+[`RefinedSubModels`][pwa_pipeline.pwa.RefinedSubModels], the library default (`refined`), built from
+least-squares refits (`least_squares`), merging (`merge`), re-assignment by residual and region
+(`reassign`) and the split search (`split_search`). Bias-compensated least
+squares for noisy output lags (`bias_compensation`) serves step 6's residual
 boundaries. The region estimator (step 6) is passed in by the caller, so this package
 imports no other step.
 """

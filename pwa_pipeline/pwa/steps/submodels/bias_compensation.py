@@ -8,7 +8,7 @@ from ...._typing import Float2D
 
 def output_lag_columns(n_outputs: int, na: int, d: int) -> np.ndarray:
     """Output of each φ column in the order of eq. (3) (per output its na lags first, as
-    :func:`~pwa_pipeline.regressors.lagged_matrix` builds φ), −1 for input lags and the
+    `lagged_matrix` builds φ), −1 for input lags and the
     constant."""
     return np.concatenate([np.repeat(np.arange(n_outputs), na),
                            np.full(d - n_outputs * na, -1)])
@@ -40,7 +40,7 @@ def bias_compensated_refit(phi: Float2D, target: Float2D, weights: np.ndarray,
     weights : ndarray of shape (n, s)
         Weight of each row in each sub-model's fit (e.g. posterior probabilities).
     lag_output : ndarray of shape (d,)
-        :func:`output_lag_columns`: output of each column, −1 where noise-free.
+        `output_lag_columns`: output of each column, −1 where noise-free.
 
     Returns
     -------

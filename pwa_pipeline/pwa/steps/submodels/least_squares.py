@@ -33,9 +33,9 @@ def least_squares(phi: Float2D, target: Float2D) -> np.ndarray:
 
 
 def _normal_solves(grams: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """The normal-equation solves of :func:`least_squares` for a stack of ΦᵀΦ (k, d, d) and
+    """The normal-equation solves of `least_squares` for a stack of ΦᵀΦ (k, d, d) and
     ΦᵀY (k, d, m) at once (LU, not Cholesky: the same θ up to rounding); NaN where
-    :func:`least_squares` would fall back to ``lstsq``."""
+    `least_squares` would fall back to ``lstsq``."""
     scale = np.sqrt(np.maximum(np.diagonal(grams, axis1=1, axis2=2), 0.0))
     out = np.full(rhs.shape, np.nan)
     ok = np.flatnonzero(np.all(scale > 0, axis=1))
@@ -64,7 +64,7 @@ def refit(phi: Float2D, target: Float2D, labels: np.ndarray, s: int,
           memo: dict | None = None) -> np.ndarray:
     """Least-squares θ_i on all rows labelled i, i = 0 … s−1 (NaN where a label has < d rows).
 
-    Each θ_i is :func:`least_squares` of its rows. With ``memo`` (a dict kept over calls on
+    Each θ_i is `least_squares` of its rows. With ``memo`` (a dict kept over calls on
     the same ``phi`` and ``target``) each row set's θ is stored under a hash of its rows and
     taken from there when the rows come again (the sub-models a merge leaves as they were).
     """

@@ -10,16 +10,16 @@ from .least_squares import _row_set_key, _rows_by_label, refit
 from .residuals import _cost, _sq_residuals, robust_noise_var
 
 _GAP_ENTRIES = 1 << 22
-"""Largest number of predictions :func:`_prediction_gaps` holds at once (32 MB)."""
+"""Largest number of predictions `_prediction_gaps` holds at once (32 MB)."""
 
 
 def _prediction_gaps(phi: Float2D, thetas: np.ndarray, labels: np.ndarray,
                      sigma2: np.ndarray) -> np.ndarray:
-    """The statistic of :func:`merge_indistinguishable` for every pair of sub-models: entry
+    """The statistic of `merge_indistinguishable` for every pair of sub-models: entry
     (i, j) is the mean over the rows labelled i or j of Σ_p (ŷ_i,p − ŷ_j,p)² / σ̂_p², ŷ_i = φᵀθ_i.
 
     Each label's rows are predicted by every sub-model at once (in groups of sub-models that
-    keep the predictions within :data:`_GAP_ENTRIES`) and summed against their own
+    keep the predictions within `_GAP_ENTRIES`) and summed against their own
     sub-model's: time O(s·n·d·m) with a Python step per label rather than per pair (a fit
     may start from a hundred clusters, thousands of pairs).
     """
@@ -47,11 +47,11 @@ def merge_indistinguishable(
 
     For sub-models i, j (least-squares fits on their rows) the statistic is the mean over the
     rows of both of Σ_p ((θ_i − θ_j)ᵀφ)_p² / σ̂_p², the squared difference of their
-    predictions in units of the noise variance σ̂_p² (:func:`robust_noise_var`). A pair is
+    predictions in units of the noise variance σ̂_p² (`robust_noise_var`). A pair is
     mergeable when the statistic is below ``tol``, or below ``copy_tol`` while a linear
     classifier on φ (``regions``, an unfitted region estimator such as
-    :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`) cannot tell their rows apart
-    (:func:`separable` is false): then they are
+    [`SVMRegions`][pwa_pipeline.pwa.SVMRegions]) cannot tell their rows apart
+    (`separable` is false): then they are
     copies of one mode that a residual-based assignment split along the noise, not modes of
     distinct regions. The mergeable pair with the smallest statistic is merged, until none is.
     An effect size and not a significance test: with thousands of rows, the slightly

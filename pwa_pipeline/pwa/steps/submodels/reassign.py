@@ -27,11 +27,11 @@ def refine(
     dropped (their rows re-assigned), and every sub-model is refitted by least squares on its
     rows. Rows labelled −1 (DBSCAN noise) are assigned from the first sweep on. With
     ``regions`` (an unfitted region estimator) each sweep then fits the regions on the
-    residual labels (rows weighted by :func:`margin_weights`) and re-labels every row by its
+    residual labels (rows weighted by `margin_weights`) and re-labels every row by its
     region, so that the sub-models' rows are region-consistent. The assignment is stable
     when a sweep keeps the number of sub-models and moves at most ``tol`` × n rows (0: none),
     or, with ``settle`` > 0, changes no θ_i by more than ``settle`` of its standard errors
-    (:func:`theta_shift`): with moderate noise rows near a boundary move in every sweep and
+    (`theta_shift`): with moderate noise rows near a boundary move in every sweep and
     the sub-models wander within their own uncertainty without settling.
 
     A sweep is a function of the labels it starts from (its sub-models are their
@@ -91,7 +91,7 @@ def theta_shift(phi: Float2D, before: np.ndarray, after: np.ndarray, labels: np.
     of θ_i, each in the standard error of its least-squares estimate
     (Cov θ̂_i,p = σ_p² (Φ_iᵀΦ_i)⁻¹), so that 1 is a change as large as the noise makes the
     estimate uncertain. NaN when the two stacks differ in shape or hold NaN (they must number
-    the sub-models alike; :func:`refine` tests it only when a sweep keeps their count).
+    the sub-models alike; `refine` tests it only when a sweep keeps their count).
     """
     if before.shape != after.shape:
         return np.nan
@@ -103,7 +103,7 @@ def theta_shift(phi: Float2D, before: np.ndarray, after: np.ndarray, labels: np.
 
 def _sweep(phi: Float2D, target: Float2D, thetas: np.ndarray, min_size: int, regions
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One sweep of :func:`refine` from the least-squares sub-models ``thetas`` of its
+    """One sweep of `refine` from the least-squares sub-models ``thetas`` of its
     starting labels: the new labels, their sub-models and the noise variance σ̂² used."""
     thetas = thetas[~np.isnan(thetas).any(axis=(1, 2))]
     sq = _sq_residuals(phi, target, thetas)

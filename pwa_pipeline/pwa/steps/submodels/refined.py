@@ -20,7 +20,7 @@ from .reassign import refine
 from .residuals import _cost, _own_sq_residuals, margin_weights, robust_noise_var, unexplained_cost
 from .split_search import split_gain
 
-#: Sub-models tried per split search (:meth:`RefinedSubModels._best_split`).
+#: Sub-models tried per split search (`RefinedSubModels._best_split`).
 SPLIT_CANDIDATES = 2
 
 
@@ -29,21 +29,21 @@ class RefinedSubModels(BaseSubModels):
     predict alike, rows re-assigned by residual and by region until stable, and a search for
     modes too small to form a cluster.
 
-    1. DBSCAN clusters that predict alike are merged (:func:`merge_indistinguishable`:
+    1. DBSCAN clusters that predict alike are merged (`merge_indistinguishable`:
        predictions closer than ``merge_tol`` noise variances, or closer than ``copy_tol``
        while no linear classifier on φ tells their rows apart, i.e. copies of one mode);
-       then rows are re-assigned by residual alone until stable (:func:`refine`), merging
+       then rows are re-assigned by residual alone until stable (`refine`), merging
        again, until nothing merges.
     2. Rows are re-assigned by residual and by the regions, and sub-models refitted, until
-       stable (:func:`refine` with the region estimator); sub-models that now predict alike
+       stable (`refine` with the region estimator); sub-models that now predict alike
        are merged and step 2 repeats.
     3. A sub-model whose rows hold two modes that a hyperplane separates is split
-       (:func:`split_gain` above ``split_tol``; the largest gain first), and step 2 repeats;
+       (`split_gain` above ``split_tol``; the largest gain first), and step 2 repeats;
        at most ``n_split`` splits, and rows whose split step 2 undid are not split again.
        Moderate noise (20–25 dB) blurs local models so that DBSCAN can put two modes a few
        noise standard deviations apart into one cluster.
     4. A mode whose local sets were too few to form a cluster shows as rows no sub-model
-       explains (:func:`unexplained_cost` above the χ²(m) 99.9 % quantile): local models are
+       explains (`unexplained_cost` above the χ²(m) 99.9 % quantile): local models are
        estimated again among those rows alone (where local sets are purer) with the same
        local-model step, clustered with ε from the data, the new clusters join as
        sub-models, and step 2 repeats; at most ``n_search`` searches, and only while each
@@ -60,24 +60,24 @@ class RefinedSubModels(BaseSubModels):
         Merge them below this statistic too when their rows are not separable on φ. None:
         never.
     n_refine : int, default 20
-        Largest number of re-assignment sweeps per :func:`refine` call.
+        Largest number of re-assignment sweeps per `refine` call.
     n_search : int, default 3
         Largest number of searches for missed modes.
     split_tol : float, optional, default 1
-        Split a sub-model when :func:`split_gain` exceeds this. None: never.
+        Split a sub-model when `split_gain` exceeds this. None: never.
     n_split : int, default 4
         Largest number of splits.
     split_sweep_tol : float, default 0
-        A split search's re-assignment (:func:`split_gain`, up to 5 sweeps per start) is
+        A split search's re-assignment (`split_gain`, up to 5 sweeps per start) is
         stable when a sweep moves at most this share of the rows (``tol`` of
-        :func:`refine`; 0: when none moves). With moderate noise a few per cent of the rows
+        `refine`; 0: when none moves). With moderate noise a few per cent of the rows
         near a boundary move in every sweep, so most starts run to their last sweep; a
         positive value saves those sweeps but can change which split is found, so the
         default keeps 0.
     settle_tol : float, default 2
         The re-assignments with the regions (steps 2–3 and the split search) also end at a
         sweep that keeps the number of sub-models and changes no θ_i by more than this many
-        of its standard errors (``settle`` of :func:`refine`, :func:`theta_shift`): with
+        of its standard errors (``settle`` of `refine`, `theta_shift`): with
         moderate noise tens of rows near the boundaries move in every sweep and the
         sub-models wander within their own uncertainty, so the sweeps would run to
         ``n_refine``. 0: only when no row moves (or ``split_sweep_tol``).
@@ -96,7 +96,7 @@ class RefinedSubModels(BaseSubModels):
     labels_ : ndarray of shape (n,)
         Sub-model of every row.
     weights_ : ndarray of shape (n,)
-        Region-SVM weight of each row (:func:`margin_weights`).
+        Region-SVM weight of each row (`margin_weights`).
     n_submodels_ : int
     n_merged_ : int
         Merges done.
@@ -141,11 +141,11 @@ class RefinedSubModels(BaseSubModels):
         ----------
         phi : ndarray of shape (n, d)
         target : ndarray of shape (n, m)
-        local : fitted :class:`~pwa_pipeline.pwa.steps.local_models.LocalLeastSquares`
+        local : fitted LocalLeastSquares
             Cloned (with its parameters) for the missed-mode search.
-        clustering : fitted :class:`~pwa_pipeline.pwa.steps.clustering.DBSCANClustering`
+        clustering : fitted DBSCANClustering
             Its labels start the refinement; cloned for the missed-mode search.
-        regions : unfitted :class:`~pwa_pipeline.pwa.steps.regions.SVMRegions`
+        regions : unfitted SVMRegions
             The region estimator of step 6, used to keep rows region-consistent.
         """
         min_pts = clustering.min_pts_
@@ -177,11 +177,11 @@ class RefinedSubModels(BaseSubModels):
 
     def _best_split(self, phi, target, labels, local_theta, min_size, regions, searched,
                     split_once):
-        """``labels`` with the sub-model of largest :func:`split_gain` above ``split_tol``
+        """``labels`` with the sub-model of largest `split_gain` above ``split_tol``
         split in two, or None.
 
-        The :data:`SPLIT_CANDIDATES` sub-models whose rows fit worst are tried (largest mean
-        Σ_p r_p² / σ̂_p² over their rows, σ̂_p² the :func:`robust_noise_var` of every row
+        The `SPLIT_CANDIDATES` sub-models whose rows fit worst are tried (largest mean
+        Σ_p r_p² / σ̂_p² over their rows, σ̂_p² the `robust_noise_var` of every row
         under its own sub-model: two modes in one sub-model, or a small mode inside a large
         one, inflate it), so that the search costs little on records with many sub-models;
         each split is refined with at most 5 sweeps. ``searched`` (a dict kept over one fit)
@@ -222,7 +222,7 @@ class RefinedSubModels(BaseSubModels):
 
 
 def _search_steps(local, clustering) -> tuple[BaseEstimator, BaseEstimator]:
-    """The unfitted steps 2–4 of the missed-mode search (:func:`_missed_mode_clusters`): the
+    """The unfitted steps 2–4 of the missed-mode search (`_missed_mode_clusters`): the
     fitted ``local`` step's with its n_ρ, and the fitted ``clustering``'s with its MinPts and
     ε from the data."""
     return (clone(local).set_params(n_rho=local.n_rho_),
@@ -232,7 +232,7 @@ def _search_steps(local, clustering) -> tuple[BaseEstimator, BaseEstimator]:
 def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
                           ) -> np.ndarray | None:
     """Steps 2–4 again on the rows no sub-model explains, with the unfitted steps ``local``
-    and ``clustering`` (:func:`_search_steps`): the cluster label of each row, or None when
+    and ``clustering`` (`_search_steps`): the cluster label of each row, or None when
     there are too few rows or no cluster."""
     n_distinct = len(distinct_rows(np.hstack([phi, target]))[0])  # as step 2 counts them
     n_rho = min(local.n_rho, n_distinct - 1)
@@ -248,12 +248,12 @@ def _missed_mode_clusters(phi: Float2D, target: Float2D, local, clustering
 def _from_consolidated(step: RefinedSubModels, phi: Float2D, target: Float2D,
                        labels: np.ndarray, local_theta: np.ndarray, local_key: str | None,
                        min_pts: int, search_local, search_clustering, regions) -> tuple:
-    """Steps 2–4 of :class:`RefinedSubModels` ``step`` (its ``memory`` None) from the
-    consolidated ``labels``: the sub-models, every row's label and margin (:func:`refine`),
+    """Steps 2–4 of [`RefinedSubModels`][pwa_pipeline.pwa.RefinedSubModels] ``step`` (its ``memory`` None)
+    from the consolidated ``labels``: the sub-models, every row's label and margin (`refine`),
     the merges, sweeps and splits done.
 
     A function of its arguments alone, so that ``RefinedSubModels.memory`` can cache it;
-    ``local_key`` (:func:`~pwa_pipeline._arrays.array_digest` of ``local_theta``, the local
+    ``local_key`` (`array_digest` of ``local_theta``, the local
     models' θ_k of eq. 6) stands for ``local_theta`` in the cache's key.
     """
     min_size = max(phi.shape[1] + 1, min_pts)

@@ -58,7 +58,7 @@ def robust_noise_var(sq_res: np.ndarray) -> np.ndarray:
 def unexplained_cost(phi: Float2D, target: Float2D, thetas: np.ndarray) -> np.ndarray:
     """Noise-normalised residual Σ_p r_p² / σ̂_p² of each row under its best sub-model.
 
-    σ̂_p² is :func:`robust_noise_var` of those best residuals, so that rows no sub-model
+    σ̂_p² is `robust_noise_var` of those best residuals, so that rows no sub-model
     explains do not inflate the noise estimate that is to expose them.
     """
     sq = _sq_residuals(phi, target, thetas)

@@ -11,7 +11,7 @@ from .least_squares import _normal_solves, refit
 from .reassign import refine
 from .residuals import _argmin_labels, _cost, _own_sq_residuals, _sq_residuals, robust_noise_var
 
-#: Screening of a large split search (:func:`split_gain`): above ``SCREEN_SIZE`` entries of
+#: Screening of a large split search (`split_gain`): above ``SCREEN_SIZE`` entries of
 #: the searched φ, the search first runs with the region SVM's tolerance at ``SCREEN_TOL``,
 #: and a gain below ``SCREEN`` × the caller's bar ends it. A loose SVM tolerance costs a
 #: fraction of a tight one on a large search and gives nearly the same gain (splits that
@@ -27,13 +27,13 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray,
                settle: float = 0.0) -> tuple[float, np.ndarray | None]:
     """Whether the rows of one sub-model hold two modes that the regions separate.
 
-    Three starts, refined by residual and by region (:func:`refine` with ``regions``) so
+    Three starts, refined by residual and by region (`refine` with ``regions``) so
     that the two parts are the two sides of a hyperplane in φ: the rows' local models θ_k
-    (z-scored) split in two by k-means (two modes of similar size; :func:`_kmeans_start`),
+    (z-scored) split in two by k-means (two modes of similar size; `_kmeans_start`),
     the rows that one
-    sub-model fitted to all of them leaves unexplained (:func:`robust_noise_var`-normalised
+    sub-model fitted to all of them leaves unexplained (`robust_noise_var`-normalised
     residual above the χ²(m) 90 % quantile; a small mode inside a large one), and the best
-    split at a threshold of one regressor (:func:`_axis_start`; two modes whose local models
+    split at a threshold of one regressor (`_axis_start`; two modes whose local models
     noise has blurred together, as two 5 % modes of the section 5 system at 20 dB). The
     start of larger gain is kept. The gain is the Gaussian log-likelihood ratio of the two
     sub-models against one, ½ n Σ_p ln(RSS_1,p / RSS_2,p), in units of
@@ -41,13 +41,13 @@ def split_gain(phi: Float2D, target: Float2D, local_theta: np.ndarray,
     (a split point chosen from the data earns more than a regular parameter). One mode split
     in two gains little (below 0.3 on the section 5 system at 30 dB); two modes 1–3 noise
     standard deviations apart, merged at 20 dB, gain 2–11. A split whose two sub-models
-    predict alike (the statistic of :func:`merge_indistinguishable` below ``merge_tol``)
+    predict alike (the statistic of `merge_indistinguishable` below ``merge_tol``)
     would be merged again and gains nothing. Above ``max_rows`` rows the split is searched
     on a seeded random ``max_rows`` of them and extended to all by the regions fitted to it,
     when the gain exceeds ``at_least`` (a split the caller would reject is not extended).
-    With ``at_least`` > 0 a large search is screened first (:data:`SCREEN_SIZE`; ``regions``
-    with a ``tol`` parameter, as :class:`~.regions.SVMRegions`). ``tol`` and ``settle`` are
-    those of :func:`refine`. ``local_theta`` holds the rows' θ_k (eq. 6), shape (n, d, m),
+    With ``at_least`` > 0 a large search is screened first (`SCREEN_SIZE`; ``regions``
+    with a ``tol`` parameter, as [`SVMRegions`][pwa_pipeline.pwa.SVMRegions]). ``tol`` and ``settle`` are
+    those of `refine`. ``local_theta`` holds the rows' θ_k (eq. 6), shape (n, d, m),
     NaN where a row has no local model.
 
     Returns
@@ -130,7 +130,7 @@ def _axis_start(phi: Float2D, target: Float2D, min_size: int,
 
     Per column the rows are sorted once, the normal equations of each side are summed from
     those of the blocks between cuts, and every side's θ is solved at once (as
-    :func:`least_squares` does, up to rounding; ``lstsq`` on its rows where ill-conditioned).
+    `least_squares` does, up to rounding; ``lstsq`` on its rows where ill-conditioned).
     """
     n, d = phi.shape
     floor = max(min_size, d + 1)
@@ -165,10 +165,10 @@ def _axis_start(phi: Float2D, target: Float2D, min_size: int,
 def _split_search(phi: Float2D, target: Float2D, starts: list, rss1: np.ndarray,
                   min_size: int, n_iter: int, regions, merge_tol: float, tol: float,
                   settle: float) -> tuple[float, np.ndarray | None]:
-    """The log-likelihood ratio and labels of the best split of :func:`split_gain` from
+    """The log-likelihood ratio and labels of the best split of `split_gain` from
     ``starts`` ((−inf, None) when none keeps two sub-models that predict apart); ``rss1``
     is the residual sum of squares of one sub-model, per output. The starts share one
-    :func:`refine` memo: starts that reach the same labels share their further sweeps."""
+    `refine` memo: starts that reach the same labels share their further sweeps."""
     tiny = np.finfo(float).tiny
     best, memo = (-np.inf, None), {}
     for start in starts:
