@@ -5,10 +5,9 @@ The cascaded tanks (free-run RMSE in V of the test record from its 6th sample) a
 alone (pwa_pipeline.datasets.measured), with this project's NRMSE (eq. 21, the same window)
 beside the official figure. Methods: the sets of data/hparams.toml that have values for the
 benchmark (``default``, ``output_error``) with their linear ARX twins, the structure search
-``PWARX.auto(2, 2)`` (the set ``auto`` of the tanks; EMPS has no such set, to keep the first
-command's time), the best linear ARX of orders ≤ 4 with a constant (orders chosen by the
-free run on the last fifth of the estimation record), the subspace baseline, and the
-published figures in the same convention (PUBLISHED, sources in docs/measured.md). Writes
+``PWARX.auto(2, 2)`` (the set ``auto``), the best linear ARX of orders ≤ 4 with a constant
+(orders chosen by the free run on the last fifth of the estimation record), the subspace
+baseline, and the published figures in the same convention (PUBLISHED, sources in docs/measured.md). Writes
 results/measured.csv and results/measured.md (with the machine's load while it ran).
 
 Usage: python -m benchmarks.measured [--datasets cascaded_tanks emps]

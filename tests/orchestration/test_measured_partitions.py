@@ -40,7 +40,8 @@ def test_the_tanks_are_partitions_scored_in_their_own_convention(
     partitions, settings = partitions_of(defs), defs.resources["settings"]
     offered = all_keys(partitions)
     assert {"cascaded_tanks|default", "cascaded_tanks|auto",
-            "cascaded_tanks|output_error", "emps|default", "emps|output_error"} <= set(offered)
+            "cascaded_tanks|output_error", "emps|default", "emps|auto",
+            "emps|output_error"} <= set(offered)
     keys, skipped = runnable_keys(partitions, settings)
     assert "cascaded_tanks|default" in keys and not any(k.startswith("emps|") for k in keys)
     assert skipped["emps"].startswith("no emps data: ") and "set PWA_EMPS_DATA" in skipped["emps"]
