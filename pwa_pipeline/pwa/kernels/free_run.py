@@ -36,6 +36,23 @@ def pack_regions(forms: list[tuple[str, np.ndarray, np.ndarray]], d: int
 
 
 @njit(nogil=True, cache=True)
+def fill_phi(phi: np.ndarray, y: np.ndarray, u: np.ndarray, k: int, lags: int, nb: int
+             ) -> None:
+    """Write eq. (3)'s φ̂(k) of one experiment into ``phi``: per output of ``y`` (N, m) its
+    ``lags`` lags (most recent first), per input of ``u`` (N, r) its ``nb`` lags, then 1."""
+    i = 0
+    for q in range(y.shape[1]):
+        for lag in range(1, lags + 1):
+            phi[i] = y[k - lag, q]
+            i += 1
+    for q in range(u.shape[1]):
+        for lag in range(1, nb + 1):
+            phi[i] = u[k - lag, q]
+            i += 1
+    phi[len(phi) - 1] = 1.0
+
+
+@njit(nogil=True, cache=True)
 def region_index(phi: np.ndarray, weights: np.ndarray, bias: np.ndarray, n_vars: int,
                  kind: int) -> int:
     """The region of φ: Σ_v 2^v [w_vᵀφ > 0] (``SIGN``), or the first v of largest
@@ -91,7 +108,6 @@ def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: i
         Sums of squared errors; inf for every output once any simulated value is not
         finite (the run diverged).
     """
-    m, r = y.shape[2], u.shape[2]
     d = thetas.shape[2]
     g = len(outputs)
     sse = np.zeros(g)
@@ -100,16 +116,7 @@ def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: i
     for e in range(y.shape[0]):
         ysim = y[e].copy()
         for k in range(warmup, lengths[e]):
-            i = 0
-            for q in range(m):
-                for lag in range(1, lags + 1):
-                    phi[i] = ysim[k - lag, q]
-                    i += 1
-            for q in range(r):
-                for lag in range(1, nb + 1):
-                    phi[i] = u[e, k - lag, q]
-                    i += 1
-            phi[d - 1] = 1.0
+            fill_phi(phi, ysim, u[e], k, lags, nb)
             for jj in range(g):
                 region = region_index(phi, weights[jj], bias[jj], n_vars[jj], kinds[jj])
                 s = 0.0

@@ -18,7 +18,7 @@ clusters' SVM regions); others are simulated by the numpy loop.
 import numpy as np
 from numba import njit
 
-from .free_run import region_index
+from .free_run import fill_phi, region_index
 
 
 @njit(nogil=True, cache=True)
@@ -69,7 +69,7 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
     float
         The block's sum of squared errors (not finite once the run diverged).
     """
-    n_exp, m, r = y.shape[0], y.shape[2], u.shape[2]
+    n_exp = y.shape[0]
     n_out, d, n_par = len(outputs), thetas.shape[2], gmat.shape[3]
     phi = np.empty(d)
     yk = np.empty(n_out)
@@ -83,16 +83,7 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
                     rows[base:base + n_out] = 0.0
                     residuals[base:base + n_out] = 0.0
                 continue
-            i = 0
-            for q in range(m):
-                for lag in range(1, lags + 1):
-                    phi[i] = ysim[e, k - lag, q]
-                    i += 1
-            for q in range(r):
-                for lag in range(1, nb + 1):
-                    phi[i] = u[e, k - lag, q]
-                    i += 1
-            phi[d - 1] = 1.0
+            fill_phi(phi, ysim[e], u[e], k, lags, nb)
             for jj in range(n_out):
                 lam = region_index(phi, weights[jj], bias[jj], n_vars[jj], kinds[jj])
                 region[jj] = lam
