@@ -23,14 +23,12 @@ from benchmarks._ui import (
     LOCATION,
     VIEWPORT,
     chart_numbers,
-    chromium,
     collapse_chart_sections,
     compare_all_runs,
     dismiss_mlflow_popups,
     duration_seconds,
     image_state,
     launch_from_sweep,
-    missing_browser,
     mlflow_experiment_id,
     mlflow_popups,
     mlflow_run_page,
@@ -76,13 +74,6 @@ def _defs():
 
 def _tags(run: dict) -> dict:
     return {t["key"]: t["value"] for t in run["tags"]}
-
-
-@pytest.fixture(scope="module")
-def browser(system_package):
-    system_package("the browser tests need playwright and chromium", missing_browser())
-    with chromium() as browser:
-        yield browser
 
 
 @pytest.fixture(scope="module")

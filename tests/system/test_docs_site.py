@@ -27,7 +27,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks._ui import VIEWPORT, chromium, missing_browser
+from benchmarks._ui import VIEWPORT
 
 pytestmark = [pytest.mark.browser, pytest.mark.xdist_group("docs-site")]
 
@@ -129,13 +129,6 @@ def served(site) -> str:
 class _QuietHandler(http.server.SimpleHTTPRequestHandler):
     def log_message(self, format, *args):
         pass
-
-
-@pytest.fixture(scope="module")
-def browser(system_package):
-    system_package("the browser tests need playwright and chromium", missing_browser())
-    with chromium() as browser:
-        yield browser
 
 
 @pytest.fixture(scope="module")
