@@ -587,6 +587,10 @@ class _Search:
         if len(self.folds) > 1:
             self.split += (f"; the shortlisted structures judged on {len(self.folds)} "
                            f"held-out blocks in turn")
+        if len(self.folds) < params.n_folds:
+            self.split += (f" (n_folds={params.n_folds} asked: only {len(self.folds)} whole "
+                           f"block{'s' if len(self.folds) > 1 else ''} of the held-out "
+                           f"size fit in the data)")
         self.names = phi_names(self.m, self.r, self.lags, nb, True)
         self.rows: list[dict] = []
         self.n_candidates = 0

@@ -232,6 +232,13 @@ def test_folds_hold_out_each_block_of_experiments_in_turn():
     assert len(folds(exps, 0.3, n_folds=9, min_samples=3)) == 3  # 3 whole blocks of 3
 
 
+def test_more_folds_than_whole_blocks_are_said_so():
+    u, y = friction_machine()
+    report = PWARX.auto(na=2, nb=1, n_folds=9, **FAST).fit(u, y).structure_search_
+    assert "the shortlisted structures judged on 6 held-out blocks in turn (n_folds=9 " \
+        "asked: only 6 whole blocks of the held-out size fit in the data)" in report.choice
+
+
 def test_folds_cut_one_record_in_blocks_fitting_what_lies_either_side():
     u, y = np.arange(1000.0)[:, None], np.arange(1000.0)[:, None]
     blocks = folds([(u, y)], 0.2, n_folds=9, min_samples=30)
@@ -294,6 +301,7 @@ def test_the_choice_is_the_lowest_mean_over_the_folds_not_the_first_block(monkey
     switching = rows[~rows.structure.str.endswith("linear")]
     first = [float(t.split(": ")[1].split(", ")[0]) for t in rows.outcome]
     assert first[1] < first[0]  # the switching candidate was better on the first block
+    assert "the shortlisted structures judged on 5 held-out blocks in turn." in five.choice
     for row in rows.itertuples():  # each row's figure is the mean of its folds
         figures = [float(x) for x in row.outcome.split(": ")[1].split(", ")]
         assert len(figures) == 5
