@@ -4,6 +4,7 @@ its JSON, MPT3 script and stability report hold what they say."""
 
 import copy
 import json
+import re
 
 import numpy as np
 import pytest
@@ -488,6 +489,50 @@ def test_mpt3_script_builds_the_pwa_system_from_the_matrices(default_ss, tmp_pat
     # the mode's A matrix, row by row, as MATLAB reads it
     a1 = "A1 = [" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in default_ss.A[0]) + "];"
     assert a1 in script
+
+
+def _renamed(ss: PWAStateSpace, inputs: list[str], outputs: list[str],
+             source: dict | None = None) -> PWAStateSpace:
+    """``ss`` with other signal names (and source)."""
+    lower, upper = ss.envelope
+    return PWAStateSpace(ss.A, ss.B, ss.f, ss.C, ss.g, ss.regions, lower, upper,
+                         output_lags=ss.output_lags, input_lags=ss.input_lags,
+                         affine=ss.affine, input_names=inputs, output_names=outputs,
+                         mode_regions=ss.mode_regions, dropped_modes=ss.dropped_modes,
+                         source=source if source is not None else ss.source)
+
+
+#: The only statements the MPT3 script holds: the sample time, the envelope, each mode's
+#: matrices, systems and domains, and the PWA system.
+_STATEMENT = re.compile(r"(Ts|z_min|z_max|[ABfCDgHh]\d+|sys\d+|pwa) = [^%']*;"
+                        r"|sys\d+ = LTISystem\(('[A-Za-z]+', [A-Za-z]+\d*(, )?)+\);"
+                        r"|sys\d+\.setDomain\('xu', Polyhedron\('A', H\d+, 'b', h\d+\)\);")
+
+
+def test_names_never_become_matlab_code(default_ss):
+    """A name with a line break, quotes or a comment sign stays inside its comment line,
+    written with Python's escapes, so the script holds only its own statements."""
+    hostile = ["u\nsystem('touch pwned')", "it's \"q\"\r%{\rx"]
+    outputs = ["y\u2028disp(1)", "a\\nb\x85!rm"]
+    ss = _renamed(default_ss, hostile, outputs,
+                  source={"class": "PWARX\nsystem('id')", "na": 1})
+    script = ss.to_mpt3()
+    lines = script.split("\n")[:-1]
+    assert script.splitlines() == lines  # no other line break (\r, \u2028, \x85)
+    code = [line for line in lines if not line.startswith("%")]
+    assert [line for line in code if not _STATEMENT.fullmatch(line)] == []
+    assert len(code) == sum(not line.startswith("%") for line in default_ss.to_mpt3().splitlines())
+    assert "% inputs u: u\\nsystem('touch pwned'), it's \"q\"\\r%{\\rx" in lines
+    assert "% outputs y: y\\u2028disp(1), a\\\\nb\\x85!rm" in lines
+    assert lines[0].endswith(": class=PWARX\\nsystem('id'), na=1")
+
+
+@pytest.mark.parametrize("Ts", [0.0, -1, float("nan"), float("inf"), True, "1"])
+def test_mpt3_refuses_a_sample_time_that_is_not_positive_and_finite(default_ss, Ts):
+    with pytest.raises(ValueError, match=r"Ts must be a finite number > 0 \(the sampling "
+                                         r"time\), got " + re.escape(repr(Ts))):
+        default_ss.to_mpt3(Ts=Ts)
+    assert "Ts = 0.01;" in default_ss.to_mpt3(Ts=0.01)
 
 
 # --- stability ---------------------------------------------------------------------------
