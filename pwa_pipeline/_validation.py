@@ -18,14 +18,19 @@ MIN_MAGNITUDE = 1e-150
 MAX_CHANNELS = 256
 #: Names of data sets, hyper-parameter sets and assets: they become paths and partition keys.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
+#: Their longest: a name is one component of several file paths and MLflow names (with a
+#: prefix and suffix each), which file systems cap at 255 bytes.
+MAX_NAME_LENGTH = 64
 
 
 def check_name(name: str, what: str) -> str:
-    """``name`` if it matches :data:`NAME_PATTERN`, else a ValueError naming ``what``."""
-    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
-        raise ValueError(
-            f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"
-        )
+    """``name`` if it matches :data:`NAME_PATTERN` within :data:`MAX_NAME_LENGTH`
+    characters, else a ValueError naming ``what``."""
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name) \
+            or len(name) > MAX_NAME_LENGTH:
+        shown = name if not isinstance(name, str) or len(name) <= 80 else name[:77] + "..."
+        raise ValueError(f"invalid {what} name {shown!r}: use letters, digits, '_' and '-' "
+                         f"only, at most {MAX_NAME_LENGTH} characters")
     return name
 
 

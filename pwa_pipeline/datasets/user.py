@@ -17,6 +17,10 @@ from .tables import Table, read_table
 
 #: Share of the data held out for testing when no split is given.
 DEFAULT_TEST_FRACTION = 0.25
+#: The largest order (na, nb) a registration or a hyper-parameter file accepts: lags per
+#: channel, so φ has m·na + r·nb entries and every local set needs three times as many
+#: samples; a larger one usually means a sampling rate to lower.
+MAX_ORDER = 20
 
 
 def parse_units(pairs: list[str] | None) -> dict[str, str]:
@@ -86,9 +90,9 @@ class UserDataset:
     Raises
     ------
     ValueError
-        A bad name, empty or repeated columns, orders below 1, a fraction outside (0, 1),
-        both split rules at once, or a unit for a column that is not an input or output, or
-        an empty one.
+        A bad name, empty or repeated columns, orders outside 1 … :data:`MAX_ORDER`, a
+        fraction outside (0, 1), both split rules at once, or a unit for a column that is
+        not an input or output, or an empty one.
     """
 
     name: str
@@ -129,8 +133,10 @@ class UserDataset:
                                  f"the units to give it none")
         for key in ("na", "nb"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{key} must be an integer >= 1, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) \
+                    or not 1 <= value <= MAX_ORDER:
+                raise ValueError(f"{key} must be an integer from 1 to {MAX_ORDER} (lags per "
+                                 f"channel), got {value!r}")
         if self.test_experiments and self.test_fraction is not None:
             raise ValueError("give either test experiments or a test fraction, not both")
         if self.test_experiments and self.experiment is None:

@@ -8,6 +8,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 """
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -278,6 +279,18 @@ def doctor(args: argparse.Namespace) -> int:
     return 1 if orphans else 0
 
 
+def _minutes(text: str) -> float:
+    """``--older-than``'s value: a finite number of minutes >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of minutes >= 0, got "
+                                         f"{text!r}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
     parser = argparse.ArgumentParser(
@@ -356,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
                        "processes are gone, and the temporary files that interrupted runs "
                        "left; --repair marks the runs failed/killed and deletes the files")
     p_doc.add_argument("--repair", action="store_true", help="fix what is found")
-    p_doc.add_argument("--older-than", type=float, default=60.0, metavar="MINUTES",
+    p_doc.add_argument("--older-than", type=_minutes, default=60.0, metavar="MINUTES",
                        help="temporary files, and runs of other machines (whose processes "
                             "cannot be seen from here), only when older than this (default "
                             "60)")
