@@ -111,6 +111,53 @@ def test_too_few_rows_for_the_local_sets_and_clashing_names_are_refused(registry
     assert registry.get("p").na == 1
 
 
+_RULE = (r"MLflow's metric names, which hold it, allow only letters, digits, '_', '-', '\.' "
+         r"and spaces, at most 100 characters")
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    (dict(u=("temp(degC)", "u2")),
+     r"input column 'temp\(degC\)' cannot be used: " + _RULE + r"; rename it \(e.g. "
+     r"'temp_degC'\)"),
+    (dict(y=("y1", "valve%")), r"output column 'valve%' cannot be used: .*e.g. 'valve'"),
+    (dict(y=("a:b", "y2")), r"output column 'a:b' cannot be used"),
+    (dict(y=("y/1", "y2")), r"output column 'y/1' cannot be used"),
+    (dict(y=("y\nsystem(1)", "y2")), r"output column 'y\\nsystem\(1\)' cannot be used"),
+    (dict(y=("y" * 101, "y2")), r"output column 'yyy.* cannot be used: .*at most 100"),
+    (dict(name="p" * 300), r"invalid data set name 'ppp.*': use letters, digits, '_' and '-' "
+                           r"only, at most 64 characters"),
+    (dict(na=50), r"na must be an integer from 1 to 20 \(lags per channel\), got 50"),
+    (dict(nb=True), r"nb must be an integer from 1 to 20 \(lags per channel\), got True"),
+])
+def test_names_and_orders_that_would_fail_later_are_refused_at_registration(tmp_path, kwargs,
+                                                                           message):
+    """What a run would fail on minutes later (MLflow's metric names, a file name too long,
+    an order beyond any local set) is refused when the data set is registered."""
+    with pytest.raises(ValueError, match=message):
+        UserDataset(**{"name": "plant", "path": tmp_path / "plant.csv", **COLUMNS, **kwargs})
+
+
+def test_the_column_names_allowed_are_metric_names_mlflow_takes(tmp_path, mlflow_template):
+    """Every name the rule lets through, in the longest metric key built from it, is logged
+    by MLflow; the names it refuses are those MLflow refuses (or, ':' and '/', would make
+    another key or a path on some platforms)."""
+    import shutil
+
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.reporting import PER_OUTPUT
+
+    names = ["Joint 1.torque-Nm", "µm_x", "y" * 100, "T_amb"]
+    spec = UserDataset("plant", tmp_path / "plant.csv", u=("u1",), y=tuple(names))
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    run = client.create_run(client.create_experiment("names"))
+    for name in spec.y:
+        client.log_metric(run.info.run_id, f"{PER_OUTPUT}free_run_nrmse_{name}", 0.5)
+    assert len(client.get_run(run.info.run_id).data.metrics) == len(names)
+
+
 def test_the_cli_registers_lists_and_removes(tmp_path, csv, capsys, monkeypatch):
     from pwa_pipeline.orchestration.cli import main
 
