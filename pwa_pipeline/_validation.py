@@ -163,7 +163,8 @@ def as_experiments(
     Raises
     ------
     ValueError
-        On NaN or inf, mismatched lengths, wrong dimensions, or inconsistent widths.
+        On NaN or inf, mismatched lengths, an experiment without samples, wrong dimensions,
+        or inconsistent widths.
     """
     u_list = list(u) if _is_experiment_list(u) else [u]
     y_list = list(y) if _is_experiment_list(y) else [y]
@@ -181,6 +182,9 @@ def as_experiments(
                 f"{u_name} and {y_name}{tag} have different lengths: "
                 f"{ua.shape[0]} and {ya.shape[0]} samples"
             )
+        if ua.shape[0] == 0:
+            raise ValueError(f"{u_name} and {y_name}{tag} have no samples (shapes {ua.shape} "
+                             f"and {ya.shape}): an experiment needs at least one")
         pairs.append((ua, ya))
     r, m = pairs[0][0].shape[1], pairs[0][1].shape[1]
     for i, (ua, ya) in enumerate(pairs):
