@@ -44,6 +44,10 @@ def run(args: argparse.Namespace) -> int:
     if args.partition:
         keys = args.partition
         check_keys(partitions_def, keys)  # a clear error for a mistyped key before any run
+        registry = defs.resources["settings"].registry()
+        for dataset in sorted({PartitionKey.parse(k).dataset for k in keys}
+                              & set(registry.names())):
+            registry.get(dataset)  # an entry breaking a rule made since: refused in one line
     else:
         keys, skipped = runnable_keys(partitions_def, defs.resources["settings"],
                                       None if args.all else DEFAULT_SETS)
@@ -216,7 +220,8 @@ def add_dataset(args: argparse.Namespace) -> int:
 
 
 def list_datasets(args: argparse.Namespace) -> int:
-    """Print the registered data sets with their columns, split, orders and units."""
+    """Print the registered data sets with their columns, split, orders and units; an entry
+    that breaks a rule made since it was registered is listed with the rule and the fix."""
     from pathlib import Path
 
     from .registry import DatasetRegistry
@@ -225,7 +230,11 @@ def list_datasets(args: argparse.Namespace) -> int:
     names = registry.names()
     print(f"{len(names)} registered data set(s) in {registry.path}")
     for name in names:
-        spec = registry.get(name)
+        try:
+            spec = registry.get(name)
+        except ValueError as exc:
+            print(f"  {name}: [CANNOT BE RUN] {exc}")
+            continue
         split = (f"test experiments {list(spec.test_experiments)}" if spec.test_experiments
                  else f"test fraction {spec.test_fraction or DEFAULT_TEST_FRACTION:g}")
         state = "" if Path(spec.path).is_file() else "  [FILE MISSING]"
@@ -240,8 +249,8 @@ def remove_dataset(args: argparse.Namespace) -> int:
     from .registry import DatasetRegistry
 
     registry = DatasetRegistry(default_datasets_path())
-    spec = registry.remove(args.name)
-    print(f"removed {spec.name!r} from {registry.path} (its file {spec.path} and its results "
+    file = registry.remove(args.name)
+    print(f"removed {args.name!r} from {registry.path} (its file {file} and its results "
           f"in the stores are kept); reload the code location in a running Dagster UI")
     return 0
 

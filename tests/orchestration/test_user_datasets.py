@@ -48,7 +48,7 @@ def test_registration_round_trips_and_splits_by_experiment(registry, csv, table)
     held = table[table.run == "b"]
     np.testing.assert_array_equal(data.u_test[0], held[["u1", "u2"]].to_numpy())
     np.testing.assert_array_equal(data.y_train[1], table[table.run == "c"][["y1", "y2"]])
-    assert registry.remove("plant") == spec and registry.names() == []
+    assert registry.remove("plant") == spec.path and registry.names() == []
 
 
 def test_default_split_holds_out_the_last_experiments_or_the_end_of_one_record(
@@ -323,3 +323,40 @@ def test_a_registry_written_before_units_loads_without_them(tmp_path, csv, capsy
                  "--units", "y2=V", "--replace"]) == 0
     assert registry.get("plant").units == {"y2": "V"}
     assert json.loads(path.read_text())["datasets"]["plant"]["units"] == {"y2": "V"}
+
+
+def test_an_entry_registered_before_a_rule_is_listed_and_refused_not_fatal(tmp_path, csv,
+                                                                           capsys,
+                                                                           monkeypatch):
+    """An entry written before the column-name rule (``temp(degC)``) leaves the rest of the
+    registry usable: listed with the rule it breaks and the fix, skipped by a run of every
+    data set, refused in one line by a run of its own, and removable."""
+    import json
+
+    from pwa_pipeline.orchestration.cli import main
+
+    path = tmp_path / "datasets.json"
+    good = UserDataset("plant", csv, **COLUMNS, experiment="run").describe()
+    old = {**good, "name": "old", "u": ["temp(degC)", "u2"]}
+    path.write_text(json.dumps({"version": 1, "datasets": {"plant": good, "old": old}}))
+    monkeypatch.setenv("PWA_DATASETS", str(path))
+    assert main(["list-datasets"]) == 0
+    out = capsys.readouterr().out
+    assert "2 registered data set(s)" in out and "  plant: " in out
+    line = next(s for s in out.splitlines() if s.startswith("  old: "))
+    assert "input column 'temp(degC)' cannot be used" in line
+    assert "Rename the column in" in line and "add-dataset old" in line and "--replace" in line
+    defs = build_definitions(BUNDLED_HPARAMS, path)
+    keys, skipped = runnable_keys(partitions_of(defs), defs.resources["settings"])
+    assert "plant|default" in keys and not any(k.startswith("old|") for k in keys)
+    assert "input column 'temp(degC)' cannot be used" in skipped["old"]
+    for variable, value in (("PWA_HPARAMS", BUNDLED_HPARAMS), ("PWA_PIPELINE_HOME", tmp_path),
+                            ("DAGSTER_HOME", tmp_path / "home")):
+        monkeypatch.setenv(variable, str(value))  # stores of this test's own, if it ran
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    assert main(["run", "--partition", "old|default"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline run: error: data set 'old' registered in ")
+    assert "input column 'temp(degC)' cannot be used" in err and err.count("\n") == 1
+    assert main(["remove-dataset", "old"]) == 0
+    assert DatasetRegistry(path).names() == ["plant"]
