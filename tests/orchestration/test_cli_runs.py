@@ -80,6 +80,23 @@ def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_pat
     assert not (tmp_path / ".dagster_home").exists()  # nothing started
 
 
+def test_a_store_that_lives_only_in_memory_is_refused_before_any_run(tmp_path, monkeypatch,
+                                                                    capsys):
+    """``PWA_STORAGE=memory://…`` would run (exit 0) and lose every asset and export when the
+    process ends: refused at the start, in one line saying why (exit 2)."""
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    monkeypatch.setenv("PWA_STORAGE", "memory://pwa-lost/assets")
+    assert main(["run", "--partition", "hure_vasak|paper"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline run: error: the asset store memory://pwa-lost/assets "
+                          "is kept only in this process's memory")
+    assert "lost when the process ends" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / ".dagster_home").exists()  # nothing started
+
+
 def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
         tmp_path, monkeypatch, capsys):
     from pwa_pipeline.orchestration.cli import main
