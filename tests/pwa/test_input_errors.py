@@ -274,3 +274,22 @@ def test_min_pts_above_the_local_models_is_said_so_not_taken_for_memory():
         with pytest.raises(ValueError, match=rf"clustering min_pts = {min_pts} is larger than "
                                              r"the 399 local models there are to cluster"):
             model.fit(u, y)
+
+
+@pytest.mark.parametrize("lengths", [(400, 400, 1), (400, 400, 12), (1, 400, 400, 1)])
+def test_a_held_out_experiment_too_short_for_the_search_is_named(lengths):
+    """A held-out experiment too short to score a free run is named with the samples it
+    needs, not reported as "every linear candidate diverges"."""
+    rng = np.random.default_rng(0)
+    n = sum(lengths)
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for k in range(1, n):
+        y[k] = 0.5 * y[k - 1] + u[k - 1] - 0.3 * np.sign(y[k - 1])
+    cuts = np.cumsum(lengths)[:-1]
+    short = len(lengths) - 1
+    with pytest.raises(ValueError, match=rf"held-out experiment {short} has {lengths[-1]} "
+                                         rf"sample\(s\): the structure search scores the free "
+                                         rf"run of each held-out experiment after a warm-up of "
+                                         rf"10 samples and needs at least 30"):
+        PWARX.auto(na=1, nb=1, max_candidates=5).fit(np.split(u, cuts), np.split(y, cuts))
