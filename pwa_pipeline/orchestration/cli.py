@@ -300,6 +300,19 @@ def _minutes(text: str) -> float:
     return value
 
 
+def _workers(text: str) -> int:
+    """``--workers``' value: a whole number of worker processes >= 1 (a LocalCluster of none
+    would only wait for a worker that never comes)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number of worker processes >= 1, "
+                                         f"got {text!r}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
     parser = argparse.ArgumentParser(
@@ -330,9 +343,9 @@ def main(argv: list[str] | None = None) -> int:
                             f"the same stores: $PWA_STORAGE, a folder or fsspec URL such as "
                             f"s3://bucket/pwa, the Dagster instance on PostgreSQL "
                             f"($PWA_DAGSTER_POSTGRES_URL) and an MLflow tracking server")
-    p_run.add_argument("--workers", type=int, default=2, metavar="N",
+    p_run.add_argument("--workers", type=_workers, default=2, metavar="N",
                        help="worker processes of the LocalCluster, when no scheduler is given "
-                            "(default 2)")
+                            "(at least 1; default 2)")
     p_run.add_argument("--tracking-uri", default="",
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")

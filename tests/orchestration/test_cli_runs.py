@@ -6,6 +6,7 @@ import shutil
 
 import dagster as dg
 import pandas as pd
+import pytest
 
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
@@ -110,3 +111,27 @@ def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
                           "http://ana:***@127.0.0.1:9 cannot be reached")
     assert "s3cret" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "storage").exists()  # no run started
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "two"])
+def test_a_local_cluster_without_workers_is_refused_by_the_parser(value, tmp_path,
+                                                                  monkeypatch, capsys):
+    """``--workers 0`` started a LocalCluster of no workers, waited 30 s, then said to start
+    a worker: refused at once by the argument parser (exit 2)."""
+    import time
+
+    from pwa_pipeline.orchestration import dask_sweep
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("PWA_DASK_SCHEDULER", raising=False)
+    monkeypatch.setattr(dask_sweep, "WORKER_TIMEOUT", 3)  # a reproduction that fails fast
+    t0 = time.perf_counter()
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "--executor", "dask", "--workers", value, "--partition",
+              "hure_vasak|paper"])
+    assert stop.value.code == 2 and time.perf_counter() - t0 < 2
+    assert (f"argument --workers: must be a whole number of worker processes >= 1, got "
+            f"{value!r}" in capsys.readouterr().err)
+    assert not (tmp_path / "home").exists()  # nothing started
