@@ -75,9 +75,10 @@ class DatasetRegistry:
         except ValueError as exc:
             file = entry.get("path", "FILE")
             raise ValueError(f"data set {name!r} registered in {self.path} breaks a rule made "
-                             f"since: {exc}. Rename the column in {file} and register it "
-                             f"again (python -m pwa_pipeline add-dataset {name} {file} --u … "
-                             f"--y … --replace), or remove it (remove-dataset {name})") from None
+                             f"since: {exc}. Register it again following the rule (a column "
+                             f"renamed in {file} first: python -m pwa_pipeline add-dataset "
+                             f"NAME {file} --u … --y … --replace), or remove it "
+                             f"(remove-dataset {name})") from None
 
     def add(self, spec: UserDataset, replace: bool = False) -> Dataset:
         """Check ``spec`` by loading its file, then register it.

@@ -345,7 +345,8 @@ def test_an_entry_registered_before_a_rule_is_listed_and_refused_not_fatal(tmp_p
     assert "2 registered data set(s)" in out and "  plant: " in out
     line = next(s for s in out.splitlines() if s.startswith("  old: "))
     assert "input column 'temp(degC)' cannot be used" in line
-    assert "Rename the column in" in line and "add-dataset old" in line and "--replace" in line
+    assert "a column renamed in" in line and "add-dataset NAME" in line and "--replace" in line
+    assert "remove-dataset old" in line
     defs = build_definitions(BUNDLED_HPARAMS, path)
     keys, skipped = runnable_keys(partitions_of(defs), defs.resources["settings"])
     assert "plant|default" in keys and not any(k.startswith("old|") for k in keys)
