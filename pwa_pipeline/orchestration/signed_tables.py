@@ -55,5 +55,5 @@ def load_table(path: UPath, key: bytes) -> pd.DataFrame:
         raise UnsignedFileError(
             f"{path} does not match its signature {sig.name} (cut short, edited, written by "
             f"another store or before tables were signed); it was not read. Materialise the "
-            f"partition again to rewrite it")
+            f"asset (its partition) again to rewrite it")
     return pd.read_parquet(io.BytesIO(data))

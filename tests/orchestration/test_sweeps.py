@@ -264,8 +264,8 @@ def test_a_truncated_or_edited_scores_file_is_named_and_left_out_not_fatal(
     cut.write_bytes(cut.read_bytes()[:100])
     scores.assign(nrmse=0.01).to_parquet(edited, index=False)
     for path, key in ((cut, KEYS[0]), (edited, KEYS[1])):
-        with pytest.raises(UnsignedFileError, match=f"{path}.*Materialise the partition "
-                                                    f"again"):
+        with pytest.raises(UnsignedFileError, match=f"{path}.*Materialise the asset "
+                                                    r"\(its partition\) again"):
             store.load(dg.AssetKey("pwa_scores"), key)
     instance = dg.DagsterInstance.ephemeral()
     board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
