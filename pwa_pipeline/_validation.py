@@ -18,14 +18,19 @@ MIN_MAGNITUDE = 1e-150
 MAX_CHANNELS = 256
 #: Names of data sets, hyper-parameter sets and assets: they become paths and partition keys.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_-]+")
+#: Their longest: a name is one component of several file paths and MLflow names (with a
+#: prefix and suffix each), which file systems cap at 255 bytes.
+MAX_NAME_LENGTH = 64
 
 
 def check_name(name: str, what: str) -> str:
-    """``name`` if it matches `NAME_PATTERN`, else a ValueError naming ``what``."""
-    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
-        raise ValueError(
-            f"invalid {what} name {name!r}: use letters, digits, '_' and '-' only"
-        )
+    """``name`` if it matches `NAME_PATTERN` within `MAX_NAME_LENGTH`
+    characters, else a ValueError naming ``what``."""
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name) \
+            or len(name) > MAX_NAME_LENGTH:
+        shown = name if not isinstance(name, str) or len(name) <= 80 else name[:77] + "..."
+        raise ValueError(f"invalid {what} name {shown!r}: use letters, digits, '_' and '-' "
+                         f"only, at most {MAX_NAME_LENGTH} characters")
     return name
 
 
@@ -158,7 +163,8 @@ def as_experiments(
     Raises
     ------
     ValueError
-        On NaN or inf, mismatched lengths, wrong dimensions, or inconsistent widths.
+        On NaN or inf, mismatched lengths, an experiment without samples, wrong dimensions,
+        or inconsistent widths.
     """
     u_list = list(u) if _is_experiment_list(u) else [u]
     y_list = list(y) if _is_experiment_list(y) else [y]
@@ -176,6 +182,9 @@ def as_experiments(
                 f"{u_name} and {y_name}{tag} have different lengths: "
                 f"{ua.shape[0]} and {ya.shape[0]} samples"
             )
+        if ua.shape[0] == 0:
+            raise ValueError(f"{u_name} and {y_name}{tag} have no samples (shapes {ua.shape} "
+                             f"and {ya.shape}): an experiment needs at least one")
         pairs.append((ua, ya))
     r, m = pairs[0][0].shape[1], pairs[0][1].shape[1]
     for i, (ua, ya) in enumerate(pairs):

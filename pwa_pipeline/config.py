@@ -33,6 +33,8 @@ from pathlib import Path
 from sklearn.base import BaseEstimator
 
 from ._validation import check_name
+from .baselines.subspace import SubspaceSS
+from .datasets.user import MAX_ORDER
 from .methods import METHODS
 from .pwa.estimator import PWARX
 from .pwa.output_error import OutputErrorRefinement
@@ -55,6 +57,22 @@ _EXAMPLES = {"refinement": "max_iter = 30", "scheduling": 'switch = "select"',
              "search": "max_candidates = 500"}
 _PAPER_VALUES = {("local_models", "n_rho"): "n_rho", ("clustering", "eps"): "eps",
                  ("clustering", "min_pts"): "min_pts"}
+#: The largest value the file accepts for each count (keys as the file writes them), and
+#: what it counts: beyond these a run fails or runs for hours part-way, so the file is refused
+#: when it is read. (The library itself takes any value its data allow.)
+LIMITS = {
+    "na": (MAX_ORDER, "lags per channel; φ has m·na + r·nb entries and each local set needs "
+                      "three times as many samples"),
+    "nb": (MAX_ORDER, "lags per channel; φ has m·na + r·nb entries and each local set needs "
+                      "three times as many samples"),
+    "local_models.n_rho": (10_000, "samples in each local set; the paper uses 18 to 61"),
+    "clustering.min_pts": (10_000, "local models in a DBSCAN neighbourhood; the paper uses "
+                                   "20 to 22"),
+    "subspace.order": (100, "states of the subspace model"),
+    "subspace.horizon": (100, "block rows of its Hankel matrices, whose size grows as its "
+                              "square"),
+    "warmup": (10_000, "samples of each held-out experiment that start its simulation"),
+}
 
 
 @dataclass(frozen=True)
@@ -109,6 +127,42 @@ def _flatten(table: dict, prefix: str = "") -> dict:
     return out
 
 
+def _check_values(table: dict, owner, prefix: str = "") -> None:
+    """Refuse what the estimators' own checks let through: a boolean for a parameter that
+    takes none (Python counts TOML's ``true`` as the integer 1), and a count above its
+    `LIMITS`.
+
+    Parameters
+    ----------
+    table : dict
+        Parameters of ``owner`` as the file gives them, with sub-tables for its step objects.
+    owner : estimator or estimator class
+        Whose ``_parameter_constraints`` say which parameters take booleans.
+    prefix : str
+        Prepended to the keys in messages and in `LIMITS` (e.g. ``"subspace."``).
+
+    Raises
+    ------
+    ValueError
+        Naming the key, its value and the rule.
+    """
+    for key, value in table.items():
+        name = prefix + key
+        if isinstance(value, dict):
+            step = getattr(owner, key, None)
+            if isinstance(step, BaseEstimator):
+                _check_values(value, step, f"{name}.")
+            continue
+        constraints = owner._parameter_constraints.get(key)
+        if isinstance(value, bool) and constraints is not None and "boolean" not in constraints:
+            raise ValueError(f"{name} = {str(value).lower()} is a boolean, which {key} does "
+                             f"not take (Python would read it as {int(value)})")
+        limit, meaning = LIMITS.get(name, (None, ""))
+        if limit is not None and isinstance(value, int | float) and value > limit:
+            raise ValueError(f"{name} = {value} is above {limit}, the largest this file "
+                             f"accepts ({meaning})")
+
+
 def build_pwarx(table: dict) -> PWARX:
     """The PWARX estimator a ``[<set>.<dataset>]`` table describes (see the module doc)."""
     table = {k: (dict(v) if isinstance(v, dict) else v) for k, v in table.items()}
@@ -154,6 +208,16 @@ def build_pwarx(table: dict) -> PWARX:
     return model
 
 
+def _check_min_pts(clustering) -> None:
+    """MinPts no larger than the number of local models DBSCAN is given."""
+    min_pts = getattr(clustering, "min_pts", None)
+    max_clustered = getattr(clustering, "max_clustered", None)
+    if min_pts is not None and max_clustered is not None and min_pts > max_clustered:
+        raise ValueError(f"clustering.min_pts = {min_pts} is above clustering.max_clustered = "
+                         f"{max_clustered}: DBSCAN clusters at most max_clustered local "
+                         f"models, so no neighbourhood could hold min_pts of them")
+
+
 class HParamsFile:
     """A hyper-parameter file, read, built and validated once.
 
@@ -173,8 +237,9 @@ class HParamsFile:
     FileNotFoundError
         Naming the path.
     ValueError
-        Invalid TOML (with the line), a bad name, an unknown parameter or preset, or a
-        value outside its range; the message names the file, set and data set.
+        Invalid TOML (with the line), a bad name, an unknown parameter or preset, a value
+        outside its range, a boolean for a number or a count above `LIMITS`; the
+        message names the file, set and data set (or ``[baselines.<dataset>]``).
     """
 
     def __init__(self, path: str | os.PathLike | None = None):
@@ -205,6 +270,12 @@ class HParamsFile:
                     f"{self.path}, [{BASELINES}.{dataset}]: "
                     + ("must be a table" if unknown is None else f"unknown key(s) {unknown}")
                     + f"; its keys are {sorted(BASELINE_KEYS)} (e.g. subspace.order = 4)")
+            try:
+                _check_values({k: v for k, v in table.items() if k != "subspace"}, SubspaceSS)
+                if isinstance(table.get("subspace"), dict):
+                    _check_values(table["subspace"], SubspaceSS, "subspace.")
+            except ValueError as exc:
+                raise ValueError(f"{self.path}, [{BASELINES}.{dataset}]: {exc}") from None
         try:
             self.sets = [check_name(name, "hyper-parameter set") for name in tables]
             for per_dataset in tables.values():
@@ -232,6 +303,8 @@ class HParamsFile:
             dataset, self._baselines.get(ANY_DATASET, {}))}
         try:
             pwa = build_pwarx(table)
+            _check_values(table, pwa)
+            _check_min_pts(pwa.clustering)
             estimators = {m.name: m.build(pwa, base) for m in METHODS.values()}
             for est in estimators.values():
                 est._validate_params()

@@ -131,6 +131,51 @@ def test_bad_files_are_refused_when_read(tmp_path, text, message):
         HParamsFile(_write(tmp_path, text))
 
 
+@pytest.mark.parametrize(("text", "message"), [
+    ("[a.hure_vasak]\nna = true\n",
+     r"\[a.hure_vasak\]: na = true is a boolean, which na does not take \(Python would "
+     r"read it as 1\)"),
+    ("[a.hure_vasak]\nclustering.min_pts = true\n",
+     "clustering.min_pts = true is a boolean"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nwarmup = true\n",
+     r"\[baselines.hure_vasak\]: warmup = true is a boolean"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nsubspace.order = true\n",
+     r"\[baselines.hure_vasak\]: subspace.order = true is a boolean"),
+    ("[a.hure_vasak]\nna = 50\n",
+     r"\[a.hure_vasak\]: na = 50 is above 20, the largest this file accepts \(lags per "
+     r"channel"),
+    ("[a.hure_vasak]\nlocal_models.n_rho = 100000000000000000\n",
+     "local_models.n_rho = 100000000000000000 is above 10000"),
+    ("[a.hure_vasak]\nclustering.min_pts = 1000000000\n",
+     "clustering.min_pts = 1000000000 is above 10000"),
+    ("[a.hure_vasak]\nclustering.min_pts = 5000\n",
+     r"clustering.min_pts = 5000 is above clustering.max_clustered = 3000: DBSCAN clusters "
+     r"at most max_clustered local models"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nsubspace.order = 100000\n",
+     r"\[baselines.hure_vasak\]: subspace.order = 100000 is above 100"),
+    ("[a.hure_vasak]\n[baselines.\"*\"]\nsubspace.horizon = 1000\n",
+     r"\[baselines.\*\]: subspace.horizon = 1000 is above 100"),
+    ("[a.hure_vasak]\n[baselines.hure_vasak]\nwarmup = 1000000\n",
+     r"warmup = 1000000 is above 10000"),
+    ('[a."*"]\nlocal_models.n_rho = 20000\n',
+     r'\[a.\*\]: local_models.n_rho = 20000 is above 10000'),
+])
+def test_booleans_and_absurd_sizes_are_refused_when_read(tmp_path, text, message):
+    """TOML's true is not the count 1, and a count beyond its stated limit fails at load, not
+    after minutes of a run."""
+    with pytest.raises(ValueError, match=message):
+        HParamsFile(_write(tmp_path, text))
+
+
+def test_the_limits_let_the_largest_sane_values_through(tmp_path):
+    hp = HParamsFile(_write(tmp_path, "[a.hure_vasak]\nna = 20\nnb = 20\naffine = true\n"
+                                      "local_models.n_rho = 10000\nclustering.min_pts = 3000\n"
+                                      "[baselines.hure_vasak]\nwarmup = 10000\n"
+                                      "subspace.order = 100\nsubspace.horizon = 100\n"))
+    config = hp.configuration("a", "hure_vasak")
+    assert (config.pwa.na, config.pwa.affine, config.warmup) == (20, True, 10000)
+    assert config.estimators["subspace"].order == 100
+
 def test_missing_file_names_the_path(tmp_path):
     with pytest.raises(FileNotFoundError, match="hyper-parameter file not found: .*none.toml"):
         HParamsFile(tmp_path / "none.toml")

@@ -113,3 +113,27 @@ def test_readme_links_resolve(page):
             if anchor not in {_github_anchor(h) for h in headings}:
                 broken.append(target)
     assert not broken, broken
+
+
+TRUST = "guarantees.md#loading-a-registered-mlflow-model"
+
+
+def test_every_page_that_loads_an_mlflow_model_says_what_loading_trusts():
+    """A registered model is a cloudpickle, and loading it runs code: the guarantees say so
+    in their own section, and every page (and the module doc) that tells users to load
+    ``models:/…`` says it there and links to that section."""
+    import pwa_pipeline.orchestration.mlflow_models as mlflow_models
+
+    guarantees = (ROOT / "docs" / "guarantees.md").read_text()
+    section = guarantees.split("## Loading a registered MLflow model", 1)[1].split("\n## ")[0]
+    for words in ("cloudpickle", "runs code", "python_model.pkl", "only load models from "
+                  "stores you trust"):
+        assert words in section.replace("\n", " ")
+    pages = [p for p in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+             if p.name != "guarantees.md"
+             and ("models:/" in p.read_text() or "load_model(" in p.read_text())]
+    assert pages  # docs/pipeline.md
+    for page in pages:
+        text = page.read_text()
+        assert "runs code" in text and TRUST.split("#")[1] in text, page
+    assert "runs code" in mlflow_models.__doc__ and "guarantees" in mlflow_models.__doc__

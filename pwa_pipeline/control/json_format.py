@@ -24,7 +24,12 @@ Numbers are written with 17 significant digits, so a round trip is exact.
 
 import json
 from collections.abc import Callable
+from itertools import combinations
 from pathlib import Path
+
+import numpy as np
+
+from .polyhedra import EMPTY_RADIUS, Box, chebyshev_ball
 
 #: Identifies the JSON document.
 SCHEMA = "pwa-pipeline/pwa-state-space"
@@ -33,6 +38,15 @@ SCHEMA = "pwa-pipeline/pwa-state-space"
 SCHEMA_VERSION = 2
 #: The versions it reads.
 READ_VERSIONS = (1, 2)
+
+#: The fields of a document (version 1 has all but ``D``).
+FIELDS = ("schema", "schema_version", "n_modes", "n_states", "n_inputs", "n_outputs",
+          "output_lags", "input_lags", "affine", "state_names", "input_names", "output_names",
+          "A", "B", "f", "C", "D", "g", "regions", "envelope", "mode_regions",
+          "dropped_modes", "source")
+
+#: Each numeric field and its number of list levels.
+_ARRAYS = {"A": 3, "B": 3, "f": 2, "C": 3, "D": 3, "g": 2}
 
 
 def to_document(ss) -> dict:
@@ -72,60 +86,194 @@ def read_json(source: str | Path, model: Callable):
     ``model`` (the state-space class, called with the document's matrices, regions and
     options).
 
+    Every field is required (``D`` from version 2 on) and of its own JSON type: nothing is
+    converted (``"false"`` is not a boolean, 1.7 not a whole number) and nothing takes a
+    default. The regions must each hold a ball inside the envelope, and no two may overlap
+    there (a region without rows, all of z, only in a model of one mode), as
+    `to_state_space` makes them.
+
     Parameters
     ----------
     source : str or Path
-    The JSON text, or the path of a file holding it.
+        The JSON text, or the path of a file holding it. A str that is not JSON text is a
+        path; pass a ``Path`` for a file whose name is itself JSON (``3``, ``null``).
     model : callable
     [`PWAStateSpace`][pwa_pipeline.control.PWAStateSpace].
 
     Raises
     ------
     ValueError
-    If the document is not JSON, is of another schema or schema version, lacks a
-    field, or a field does not have the shape the others imply (the message names
-    the field).
+        If the document is not JSON, not an object, nested too deeply, of another schema
+        or schema version, lacks a field, a field is not of its type or does not have the
+        shape the others imply, or the regions are empty or overlap (the message names
+        the field).
     """
-    if isinstance(source, Path) or not str(source).lstrip().startswith("{"):
-        source = Path(source).read_text()
-    try:
-        doc = json.loads(source)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"not a JSON document: {exc}") from None
-    if not isinstance(doc, dict):
-        raise ValueError("the JSON document must be an object")
+    doc = _document(source)
     if doc.get("schema") != SCHEMA:
         raise ValueError(f"not a PWA state-space document: schema is "
-                         f"{doc.get('schema')!r}, expected {SCHEMA!r}")
-    if doc.get("schema_version") not in READ_VERSIONS:
-        raise ValueError(f"schema version {doc.get('schema_version')!r} is not supported: "
+                         f"{_show(doc.get('schema'))}, expected {SCHEMA!r}")
+    version = doc.get("schema_version")
+    if isinstance(version, bool) or version not in READ_VERSIONS:
+        raise ValueError(f"schema version {version!r} is not supported: "
                          f"this version of pwa-pipeline reads versions {list(READ_VERSIONS)}")
-    required = ("A", "B", "f", "C", "g", "regions", "envelope", "output_lags",
-                "input_lags")
-    missing = [k for k in required if k not in doc]
+    missing = [k for k in FIELDS if k not in doc and not (k == "D" and version == 1)]
     if missing:
         raise ValueError(f"the document lacks field(s) {missing}")
-    envelope = doc["envelope"]
-    if not isinstance(envelope, dict) or not {"lower", "upper"} <= set(envelope):
-        raise ValueError("envelope must be an object with 'lower' and 'upper'")
+    _check_fields(doc)
+    envelope, regions = doc["envelope"], doc["regions"]
+    ss = model(doc["A"], doc["B"], doc["f"], doc["C"], doc["g"],
+               [(r["H"], r["h"]) for r in regions], envelope["lower"], envelope["upper"],
+               output_lags=doc["output_lags"], input_lags=doc["input_lags"],
+               affine=doc["affine"], D=doc.get("D"),
+               input_names=doc["input_names"], output_names=doc["output_names"],
+               state_names=None if doc["output_lags"] is not None else doc["state_names"],
+               padding=envelope["padding"], mode_regions=doc["mode_regions"],
+               dropped_modes=doc["dropped_modes"], source=doc["source"])
+    for key, expected in (("n_modes", ss.n_modes), ("n_states", ss.n_states),
+                          ("n_inputs", ss.n_inputs), ("n_outputs", ss.n_outputs)):
+        if doc[key] != expected:
+            raise ValueError(f"{key} is {doc[key]!r} but the matrices give {expected}")
+    if doc["state_names"] != ss.state_names:
+        raise ValueError(f"state_names {doc['state_names']} do not match the orders and "
+                         f"names, which give {ss.state_names}")
+    _check_regions(ss)
+    return ss
+
+
+def _document(source: str | Path) -> dict:
+    """The parsed document of ``source`` (see `read_json`), an object."""
+    if isinstance(source, Path):
+        doc = _loads(source.read_text())
+    else:
+        text = str(source)
+        if text.lstrip().startswith(("{", "[")):
+            doc = _loads(text)
+        else:
+            try:  # a JSON value that cannot be a document (null, 3, "…"), refused below
+                doc = _loads(text)
+            except ValueError:
+                doc = _loads(Path(text).read_text())
+    if not isinstance(doc, dict):
+        raise ValueError(f"the JSON document is {_kind(doc)}, not an object")
+    return doc
+
+
+def _loads(text: str):
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("not a JSON document: nested too deeply (a PWA state-space "
+                         "document has at most five levels)") from None
+    except ValueError as exc:  # JSONDecodeError, or an integer of too many digits
+        raise ValueError(f"not a JSON document: {exc}") from None
+
+
+def _kind(value) -> str:
+    """The JSON type of a parsed value, in words."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true/false"
+    return {dict: "an object", list: "a list", str: "a string"}.get(type(value), "a number")
+
+
+def _show(value) -> str:
+    """A parsed value as JSON writes it, shortened; containers by their kind."""
+    if isinstance(value, dict | list):
+        return _kind(value)
+    text = json.dumps(value)
+    return text if len(text) <= 40 else text[:37] + "…"
+
+
+def _is_number(value) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return "not a number"
+    if isinstance(value, int) and abs(value) > 1.7976931348623157e308:
+        return "beyond float64's range"
+    return None
+
+
+def _is_whole(value) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        return "not a whole number >= 0"
+    return None
+
+
+def _nested(value, name: str, levels: int, leaf: Callable) -> None:
+    """Check that ``value`` is lists ``levels`` deep (iteratively: any depth of nesting
+    is refused, never recursed into) whose entries pass ``leaf`` (which returns the
+    problem, or None)."""
+    stack = [(value, name, 0)]
+    while stack:
+        item, where, level = stack.pop()
+        if level < levels:
+            if not isinstance(item, list):
+                raise ValueError(f"{where} is {_show(item)}, expected a list")
+            stack.extend((entry, f"{where}[{i}]", level + 1)
+                         for i, entry in reversed(list(enumerate(item))))
+        elif isinstance(item, dict | list):
+            raise ValueError(f"{where} is {_kind(item)}, expected a number")
+        elif (problem := leaf(item)) is not None:
+            raise ValueError(f"{where} is {_show(item)}, {problem}")
+
+
+def _check_fields(doc: dict) -> None:
+    """Each field of its JSON type (shapes are the model's to check)."""
+    for key in ("n_modes", "n_states", "n_inputs", "n_outputs"):
+        if _is_whole(doc[key]) is not None:
+            raise ValueError(f"{key} must be a whole number, got {_show(doc[key])}")
+    for key in ("output_lags", "input_lags"):
+        if doc[key] is not None and _is_whole(doc[key]) is not None:
+            raise ValueError(f"{key} must be a whole number or null, got {_show(doc[key])}")
+    if not isinstance(doc["affine"], bool):
+        raise ValueError(f"affine must be true or false, got {_show(doc['affine'])}")
+    for key in ("state_names", "input_names", "output_names"):
+        if not isinstance(doc[key], list) or not all(isinstance(v, str) for v in doc[key]):
+            raise ValueError(f"{key} must be a list of strings, got {_show(doc[key])}")
+    for key, levels in _ARRAYS.items():
+        if key in doc:
+            _nested(doc[key], key, levels, _is_number)
     regions = doc["regions"]
     if not isinstance(regions, list) or not all(
             isinstance(r, dict) and {"H", "h"} <= set(r) for r in regions):
         raise ValueError("regions must be a list of objects with 'H' and 'h'")
-    ss = model(doc["A"], doc["B"], doc["f"], doc["C"], doc["g"],
-             [(r["H"], r["h"]) for r in regions], envelope["lower"], envelope["upper"],
-             output_lags=doc["output_lags"], input_lags=doc["input_lags"],
-             affine=doc.get("affine", False), D=doc.get("D"),
-             input_names=doc.get("input_names"), output_names=doc.get("output_names"),
-             state_names=None if doc["output_lags"] is not None else doc.get("state_names"),
-             padding=envelope.get("padding"),
-             mode_regions=doc.get("mode_regions"), dropped_modes=doc.get("dropped_modes"),
-             source=doc.get("source"))
-    for key, expected in (("n_modes", ss.n_modes), ("n_states", ss.n_states),
-                          ("n_inputs", ss.n_inputs), ("n_outputs", ss.n_outputs)):
-        if key in doc and doc[key] != expected:
-            raise ValueError(f"{key} is {doc[key]!r} but the matrices give {expected}")
-    if "state_names" in doc and doc["state_names"] != ss.state_names:
-        raise ValueError(f"state_names {doc['state_names']} do not match the orders and "
-                         f"names, which give {ss.state_names}")
-    return ss
+    for i, region in enumerate(regions):
+        _nested(region["H"], f"region {i} H", 2, _is_number)
+        _nested(region["h"], f"region {i} h", 1, _is_number)
+    envelope = doc["envelope"]
+    if not isinstance(envelope, dict):
+        raise ValueError(f"envelope must be an object, got {_show(envelope)}")
+    missing = [k for k in ("lower", "upper", "padding") if k not in envelope]
+    if missing:
+        raise ValueError(f"the envelope lacks field(s) {missing}")
+    for key in ("lower", "upper"):
+        _nested(envelope[key], f"envelope {key}", 1, _is_number)
+    padding = envelope["padding"]
+    if padding is not None and (_is_number(padding) is not None or padding < 0):
+        raise ValueError(f"envelope padding must be a number >= 0 or null, got "
+                         f"{_show(padding)}")
+    for key in ("mode_regions", "dropped_modes"):
+        _nested(doc[key], key, 2, _is_whole)
+    if not isinstance(doc["source"], dict):
+        raise ValueError(f"source must be an object, got {_show(doc['source'])}")
+
+
+def _check_regions(ss) -> None:
+    """Each region holds a ball inside the envelope and no two overlap there (they may
+    share a boundary), by the Chebyshev balls of `polyhedra`."""
+    box = Box(*ss.envelope)
+    units = [box.to_unit(H, h) for H, h in ss.regions]
+    for i, (H, h) in enumerate(ss.regions):
+        if not len(h) and ss.n_modes > 1:
+            raise ValueError(f"region {i} has no rows: all of z, which overlaps the other "
+                             f"{ss.n_modes - 1} regions")
+        if chebyshev_ball(*units[i])[0] <= EMPTY_RADIUS:
+            raise ValueError(f"region {i} is empty inside the envelope (it holds no ball "
+                             f"of radius {EMPTY_RADIUS:g} half-widths), so it is no mode")
+    for i, j in combinations(range(ss.n_modes), 2):
+        radius, _ = chebyshev_ball(np.vstack([units[i][0], units[j][0]]),
+                                   np.concatenate([units[i][1], units[j][1]]))
+        if radius > EMPTY_RADIUS:
+            raise ValueError(f"regions {i} and {j} overlap inside the envelope (they share a "
+                             f"ball of radius {radius:.3g} half-widths), so the regions no "
+                             f"longer partition it")

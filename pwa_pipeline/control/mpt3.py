@@ -1,9 +1,23 @@
 """The PWA state-space model as an MPT3 script (MATLAB): `mpt3_script`, what
-[`PWAStateSpace.to_mpt3`][pwa_pipeline.control.PWAStateSpace.to_mpt3] writes."""
+`PWAStateSpace.to_mpt3` writes.
 
+Names (of signals and states, and the model's source) appear only in comments, each written
+by `comment_text` on one line, so no name can become a MATLAB statement."""
+
+import math
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
+
+
+def comment_text(text: str) -> str:
+    """``text`` as it can stand in a MATLAB comment: every character that is not printable
+    (line breaks such as ``\\n``, ``\\r``, U+2028, other control characters) and the
+    backslash written with Python's escapes (``\\n``, ``\\u2028``, ``\\\\``), so the
+    comment ends where its line does and the name can be read back unambiguously."""
+    return "".join(c if c.isprintable() and c != "\\"
+                   else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
@@ -20,12 +34,19 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
         path : str or Path, optional
             Also write the script there (e.g. ``model_pwa.m``).
         Ts : float, default 1
-            Sampling time (the model counts samples).
+            Sampling time (the model counts samples), a finite number > 0.
 
         Returns
         -------
         str
+
+        Raises
+        ------
+        ValueError
+            If ``Ts`` is not a finite number > 0.
     """
+    if isinstance(Ts, bool) or not isinstance(Ts, Real) or not math.isfinite(Ts) or Ts <= 0:
+        raise ValueError(f"Ts must be a finite number > 0 (the sampling time), got {Ts!r}")
     def mat(a: np.ndarray) -> str:
         a = np.atleast_2d(a)
         if a.size == 0:
@@ -33,15 +54,15 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
         return "[" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in a) + "]"
 
     lower, upper = ss.envelope
-    source = ", ".join(f"{k}={v}" for k, v in ss.source.items())
+    source = comment_text(", ".join(f"{k}={v}" for k, v in ss.source.items()))
     lines = [
         "% PWA state-space model exported by pwa-pipeline (pwa_pipeline.control)"
         + (f": {source}" if source else ""),
         "%   x(k+1) = A_i x(k) + B_i u(k) + f_i,  y(k) = C_i x(k) + D_i u(k) + g_i,",
         "%   valid where [x(k); u(k)] lies in {z : H_i z <= h_i}.",
-        f"% states x: {', '.join(ss.state_names)}",
-        f"% inputs u: {', '.join(ss.input_names)}",
-        f"% outputs y: {', '.join(ss.output_names)}",
+        f"% states x: {comment_text(', '.join(ss.state_names))}",
+        f"% inputs u: {comment_text(', '.join(ss.input_names))}",
+        f"% outputs y: {comment_text(', '.join(ss.output_names))}",
         f"% {ss.n_modes} mode(s); the regions are bounded by the data envelope "
         f"z_min <= [x; u] <= z_max.",
         f"Ts = {Ts:.17g};",
@@ -69,5 +90,5 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
                  + "]);")
     text = "\n".join(lines) + "\n"
     if path is not None:
-        Path(path).write_text(text)
+        Path(path).write_text(text, encoding="utf-8")
     return text

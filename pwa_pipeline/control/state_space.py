@@ -47,7 +47,7 @@ OUTSIDE = ("raise", "nearest")
 def _array(value, name: str, ndim: int) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ValueError(f"{name} must be a numeric array: {exc}") from None
     if arr.ndim != ndim:
         raise ValueError(f"{name} must have {ndim} dimension(s), got shape {arr.shape}")
@@ -536,8 +536,10 @@ class PWAStateSpace:
         Raises
         ------
         ValueError
-            If the document is not JSON, is of another schema or version, lacks a field, or
-            a field does not have the shape the others imply (the message names it).
+            If the document is not JSON or not an object, is of another schema or version,
+            lacks a field, a field is not of its JSON type or does not have the shape the
+            others imply, or a region is empty or overlaps another inside the envelope (the
+            message names the field).
         """
         return read_json(source, cls)
 

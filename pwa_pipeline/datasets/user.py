@@ -6,6 +6,7 @@ split into training and held-out experiments, and its model orders
 """
 
 import math
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -18,6 +19,17 @@ from .tables import Table, read_table
 
 #: Share of the data held out for testing when no split is given.
 DEFAULT_TEST_FRACTION = 0.25
+#: The largest order (na, nb) a registration or a hyper-parameter file accepts: lags per
+#: channel, so φ has m·na + r·nb entries and every local set needs three times as many
+#: samples; a larger one usually means a sampling rate to lower.
+MAX_ORDER = 20
+#: What an input or output column's name may hold: it ends MLflow's metric names
+#: (``per_output/free_run_nrmse_<name>``), which allow letters, digits, ``_``, ``-``, ``.``,
+#: spaces, and on some platforms ``:`` and ``/`` (kept out here: no path, same on every
+#: platform).
+COLUMN_PATTERN = re.compile(r"[\w .-]+")
+#: The longest such name: MLflow's metric names hold at most 250 characters.
+MAX_COLUMN_LENGTH = 100
 
 
 def parse_units(pairs: list[str] | None) -> dict[str, str]:
@@ -50,6 +62,27 @@ def parse_units(pairs: list[str] | None) -> dict[str, str]:
             raise ValueError(f"--units gives {name!r} twice ({name}={units[name]}, {pair})")
         units[name] = unit
     return units
+
+
+def check_column(name: str, kind: str) -> str:
+    """``name`` if it can name an input or output (`COLUMN_PATTERN`, at most
+    `MAX_COLUMN_LENGTH` characters), else a ValueError stating the rule and a name
+    that follows it.
+
+    Examples
+    --------
+    >>> check_column("temp(degC)", "input")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: input column 'temp(degC)' cannot be used: ... (e.g. 'temp_degC')
+    """
+    if COLUMN_PATTERN.fullmatch(name) and len(name) <= MAX_COLUMN_LENGTH:
+        return name
+    fixed = re.sub(r"[^\w .-]+", "_", name).strip("_")[:MAX_COLUMN_LENGTH] or kind[0] + "1"
+    shown = name if len(name) <= 80 else name[:77] + "..."
+    raise ValueError(f"{kind} column {shown!r} cannot be used: MLflow's metric names, which "
+                     f"hold it, allow only letters, digits, '_', '-', '.' and spaces, at most "
+                     f"{MAX_COLUMN_LENGTH} characters; rename it (e.g. {fixed!r})")
 
 
 @dataclass(frozen=True)
@@ -87,9 +120,11 @@ class UserDataset:
     Raises
     ------
     ValueError
-        A bad name, empty or repeated columns, orders below 1, a fraction outside (0, 1),
-        both split rules at once, or a unit for a column that is not an input or output, or
-        an empty one.
+        A bad name (`check_name`), an input or output
+        column name that MLflow could not log (`check_column`), empty or repeated
+        columns, orders outside 1 … `MAX_ORDER`, a
+        fraction outside (0, 1), both split rules at once, or a unit for a column that is
+        not an input or output, or an empty one.
     """
 
     name: str
@@ -116,6 +151,9 @@ class UserDataset:
         if not self.u or not self.y:
             raise ValueError(f"data set {self.name!r} needs at least one input (--u) and one "
                              f"output (--y) column")
+        for kind, names in (("input", self.u), ("output", self.y)):
+            for column in names:
+                check_column(column, kind)
         columns = [*self.u, *self.y, *(c for c in (self.experiment, self.time) if c)]
         repeated = sorted({c for c in columns if columns.count(c) > 1})
         if repeated:
@@ -130,8 +168,10 @@ class UserDataset:
                                  f"the units to give it none")
         for key in ("na", "nb"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{key} must be an integer >= 1, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) \
+                    or not 1 <= value <= MAX_ORDER:
+                raise ValueError(f"{key} must be an integer from 1 to {MAX_ORDER} (lags per "
+                                 f"channel), got {value!r}")
         if self.test_experiments and self.test_fraction is not None:
             raise ValueError("give either test experiments or a test fraction, not both")
         if self.test_experiments and self.experiment is None:

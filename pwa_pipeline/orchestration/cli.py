@@ -8,6 +8,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 """
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -43,6 +44,10 @@ def run(args: argparse.Namespace) -> int:
     if args.partition:
         keys = args.partition
         check_keys(partitions_def, keys)  # a clear error for a mistyped key before any run
+        registry = defs.resources["settings"].registry()
+        for dataset in sorted({PartitionKey.parse(k).dataset for k in keys}
+                              & set(registry.names())):
+            registry.get(dataset)  # an entry breaking a rule made since: refused in one line
         check_runnable(keys, defs.resources["settings"])  # and for data that are not there
     else:
         keys, skipped = runnable_keys(partitions_def, defs.resources["settings"],
@@ -216,7 +221,8 @@ def add_dataset(args: argparse.Namespace) -> int:
 
 
 def list_datasets(args: argparse.Namespace) -> int:
-    """Print the registered data sets with their columns, split, orders and units."""
+    """Print the registered data sets with their columns, split, orders and units; an entry
+    that breaks a rule made since it was registered is listed with the rule and the fix."""
     from pathlib import Path
 
     from .registry import DatasetRegistry
@@ -225,7 +231,11 @@ def list_datasets(args: argparse.Namespace) -> int:
     names = registry.names()
     print(f"{len(names)} registered data set(s) in {registry.path}")
     for name in names:
-        spec = registry.get(name)
+        try:
+            spec = registry.get(name)
+        except ValueError as exc:
+            print(f"  {name}: [CANNOT BE RUN] {exc}")
+            continue
         split = (f"test experiments {list(spec.test_experiments)}" if spec.test_experiments
                  else f"test fraction {spec.test_fraction or DEFAULT_TEST_FRACTION:g}")
         state = "" if Path(spec.path).is_file() else "  [FILE MISSING]"
@@ -240,8 +250,8 @@ def remove_dataset(args: argparse.Namespace) -> int:
     from .registry import DatasetRegistry
 
     registry = DatasetRegistry(default_datasets_path())
-    spec = registry.remove(args.name)
-    print(f"removed {spec.name!r} from {registry.path} (its file {spec.path} and its results "
+    file = registry.remove(args.name)
+    print(f"removed {args.name!r} from {registry.path} (its file {file} and its results "
           f"in the stores are kept); reload the code location in a running Dagster UI")
     return 0
 
@@ -279,6 +289,31 @@ def doctor(args: argparse.Namespace) -> int:
     return 1 if orphans else 0
 
 
+def _minutes(text: str) -> float:
+    """``--older-than``'s value: a finite number of minutes >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number of minutes >= 0, got "
+                                         f"{text!r}")
+    return value
+
+
+def _workers(text: str) -> int:
+    """``--workers``' value: a whole number of worker processes >= 1 (a LocalCluster of none
+    would only wait for a worker that never comes)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number of worker processes >= 1, "
+                                         f"got {text!r}")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
     parser = argparse.ArgumentParser(
@@ -311,9 +346,9 @@ def main(argv: list[str] | None = None) -> int:
                             f"the same stores: $PWA_STORAGE, a folder or fsspec URL such as "
                             f"s3://bucket/pwa, the Dagster instance on PostgreSQL "
                             f"($PWA_DAGSTER_POSTGRES_URL) and an MLflow tracking server")
-    p_run.add_argument("--workers", type=int, default=2, metavar="N",
+    p_run.add_argument("--workers", type=_workers, default=2, metavar="N",
                        help="worker processes of the LocalCluster, when no scheduler is given "
-                            "(default 2)")
+                            "(at least 1; default 2)")
     p_run.add_argument("--tracking-uri", default="",
                        help=f"MLflow tracking URI (default: "
                             f"{mask_credentials(default_tracking_uri())})")
@@ -359,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
                        "processes are gone, and the temporary files that interrupted runs "
                        "left; --repair marks the runs failed/killed and deletes the files")
     p_doc.add_argument("--repair", action="store_true", help="fix what is found")
-    p_doc.add_argument("--older-than", type=float, default=60.0, metavar="MINUTES",
+    p_doc.add_argument("--older-than", type=_minutes, default=60.0, metavar="MINUTES",
                        help="temporary files, and runs of other machines (whose processes "
                             "cannot be seen from here), only when older than this (default "
                             "60)")

@@ -2,8 +2,9 @@
 killed write left, and paths that cannot leave the store.
 
 A store is a universal path (``universal_pathlib``'s ``UPath`` over fsspec): a local folder,
-or any fsspec URL (``file://``, ``s3://``, ``gs://``, ``memory://``, …), so that workers on
-other machines read and write the same files. A local folder is written through the
+or any fsspec URL (``file://``, ``s3://``, ``gs://``, …), so that workers on other machines
+read and write the same files (``memory://`` too, in a test; a run refuses it,
+`check_writable`). A local folder is written through the
 operating system (a temporary file renamed into place); any other store through fsspec (the
 file written locally, uploaded under a temporary name beside its destination, then moved
 onto it: a rename on a file system, a whole-object copy on an object store), so that no
@@ -23,6 +24,9 @@ from .credentials import mask_credentials
 
 #: Age after which a temporary file is taken for one a killed run left behind.
 STALE_SECONDS = 3600.0
+#: fsspec protocols whose files live only in the process that wrote them: a run's stores
+#: there would be lost when it ends (and other processes never see them).
+NON_PERSISTENT_PROTOCOLS = frozenset({"memory"})
 
 
 def store_root(location: str | os.PathLike) -> UPath:
@@ -134,8 +138,15 @@ def create_new(path: UPath, data: bytes, mode: int) -> bool:
 
 def check_writable(folder: UPath, what: str) -> None:
     """Raise a ValueError naming ``folder`` unless it is, or can be created as, a folder this
-    process may write (checked before a run, so that nothing half-done is left). A store
-    that is not a local folder is probed by writing and deleting a small file in it."""
+    process may write and that outlives it (checked before a run, so that nothing half-done
+    is left and nothing is computed to be lost). A store that is not a local folder is
+    probed by writing and deleting a small file in it; one of
+    `NON_PERSISTENT_PROTOCOLS` is refused."""
+    if not is_local(folder) and folder.protocol in NON_PERSISTENT_PROTOCOLS:
+        raise ValueError(f"the {what} {mask_credentials(str(folder))} is kept only in this "
+                         f"process's memory (fsspec's {folder.protocol}://): every asset and "
+                         f"export would be lost when the process ends; use a folder or a "
+                         f"persistent URL such as s3://bucket/pwa")
     if not is_local(folder):
         probe = folder / f".write-probe-{secrets.token_hex(6)}.tmp"
         try:

@@ -1,7 +1,10 @@
 """The asset store: each asset partition a file under one folder, local or an fsspec URL.
 
-A pandas DataFrame is written as Parquet (pyarrow); any other value (fitted step objects and
-estimators, the core's frozen dataclasses) as a signed pickle (`signed_pickles`).
+A pandas DataFrame is written as Parquet (pyarrow) with its signature beside it
+(`signed_tables`); any other value (fitted step objects and estimators, the core's
+frozen dataclasses) as a signed pickle (`signed_pickles`). A table or pickle whose
+signature does not match (cut short, edited, planted) is refused naming it; reading every
+partition (the leaderboard), it is left out as not materialised, with a warning naming it.
 Files live at ``<base_dir>/<asset>/<dataset>/<hparams>.{parquet,pkl}`` (an unpartitioned
 asset: ``<base_dir>/<asset>.{parquet,pkl}``), where ``base_dir`` is a folder or any fsspec
 URL (``s3://bucket/pwa``, ``file:///shared/pwa``): workers on other machines read and write
@@ -18,10 +21,11 @@ import pandas as pd
 from upath import UPath
 
 from .._validation import check_name
-from .files import atomic_write, inside, store_root, sweep_stale_tmp
+from .files import inside, store_root, sweep_stale_tmp
 from .partitions import PartitionKey
 from .paths import default_storage_dir
-from .signed_pickles import load_object, save_object, signing_key
+from .signed_pickles import UnsignedFileError, load_object, save_object, signing_key
+from .signed_tables import load_table, save_table, signature_path
 
 #: Input metadata key: load every materialised partition of the upstream asset as a dict.
 ALL_PARTITIONS = "all_partitions"
@@ -61,7 +65,7 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         path = paths["parquet" if isinstance(obj, pd.DataFrame) else "pkl"]
         try:
             if isinstance(obj, pd.DataFrame):
-                atomic_write(path, lambda p: obj.to_parquet(p, index=False))
+                save_table(path, obj, signing_key(self.root()))
             else:
                 save_object(path, obj, signing_key(self.root()))
         except OSError as exc:  # a full disk, a store made read-only
@@ -71,15 +75,17 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
         for other in paths.values():
             if other != path:
                 other.unlink(missing_ok=True)
+        if path != paths["parquet"]:
+            signature_path(paths["parquet"]).unlink(missing_ok=True)
         context.add_output_metadata({"path": dg.MetadataValue.path(str(path))})
 
     def load(self, asset_key: dg.AssetKey, partition_key: str | None):
-        """The stored value of an asset (partition), or FileNotFoundError naming what was
-        never materialised."""
+        """The stored value of an asset (partition); FileNotFoundError naming what was
+        never materialised, `UnsignedFileError` naming a file whose
+        signature does not match."""
         paths = self._paths(asset_key, partition_key)
         if paths["parquet"].is_file():
-            with paths["parquet"].open("rb") as fh:  # any fsspec store, with its options
-                return pd.read_parquet(fh)
+            return load_table(paths["parquet"], signing_key(self.root()))
         if not paths["pkl"].is_file():
             raise FileNotFoundError(
                 f"{'/'.join(asset_key.path)}"
@@ -91,7 +97,9 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
     def load_input(self, context: dg.InputContext):
         """One stored value; for an input declared with ``metadata={ALL_PARTITIONS: True}``
         (an unpartitioned asset reading every partition upstream), ``{partition key: value}``
-        of the partitions materialised, the others left out."""
+        of the partitions materialised, the others left out, and those whose file does not
+        match its signature too, with a warning naming it (so that one damaged file does
+        not fail every later leaderboard)."""
         if not context.has_asset_partitions:
             return self.load(context.asset_key, None)
         if not (context.definition_metadata or {}).get(ALL_PARTITIONS):
@@ -102,4 +110,6 @@ class PartitionedFileIOManager(dg.ConfigurableIOManager):
                 found[str(key)] = self.load(context.asset_key, str(key))
             except FileNotFoundError:
                 continue
+            except UnsignedFileError as exc:
+                context.log.warning(f"{exc}; left out")
         return found

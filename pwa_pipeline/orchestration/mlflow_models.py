@@ -8,6 +8,10 @@ output is the table of output columns: the warm-up rows as given, then the free-
 simulation (the same numbers as the model's ``simulate``). The logged model keeps what
 simulation needs (its output groups' regions and sub-models, the orders); the record of its
 fit (the fitted steps, the structure search's report) stays in the ``pwa_model`` asset.
+
+The simulator is stored by MLflow with cloudpickle (``python_model.pkl``), unsigned: loading
+it runs code, so only load models from stores you trust (``docs/guarantees.md``, "Loading a
+registered MLflow model").
 """
 
 import copy

@@ -106,7 +106,8 @@ def all_keys(partitions_def: dg.StaticPartitionsDefinition) -> list[str]:
 
 
 def unavailable_datasets(settings: PipelineSettings) -> dict[str, str]:
-    """The data sets whose files are missing, with the reason (the simulated one never is)."""
+    """The data sets whose files are missing, or whose registration breaks a rule made since
+    it was written, with the reason (the simulated one never is)."""
     missing = {}
     if find_kuka(settings.kuka_path or None) is None:
         where = settings.kuka_path or default_kuka_path()
@@ -116,7 +117,11 @@ def unavailable_datasets(settings: PipelineSettings) -> dict[str, str]:
             missing[name] = f"no {name} data: {absent[0]} is missing (set {source.env})"
     registry = settings.registry()
     for name in registry.names():
-        path = Path(registry.get(name).path)
+        try:
+            path = Path(registry.get(name).path)
+        except ValueError as exc:
+            missing[name] = str(exc)
+            continue
         if not path.is_file():
             missing[name] = f"its file {path} is missing (registered in {registry.path})"
     return missing

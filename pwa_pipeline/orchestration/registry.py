@@ -53,14 +53,32 @@ class DatasetRegistry:
         return sorted(self._read())
 
     def get(self, name: str) -> UserDataset:
-        """The registration of ``name`` (KeyError naming the known ones); an entry written
-        before units existed has none."""
+        """The registration of ``name``; an entry written before units existed has none.
+
+        Raises
+        ------
+        KeyError
+            ``name`` is not registered (naming the ones that are).
+        ValueError
+            The entry breaks a rule made after it was registered (such as the column-name
+            rule of `check_column`): in one line naming the
+            data set, the rule and how to register it again. Only this entry is refused;
+            the others still load.
+        """
         entries = self._read()
         if name not in entries:
             raise KeyError(f"no data set {name!r} in {self.path}; registered: {sorted(entries)}")
         entry = entries[name]
-        return UserDataset(**{**entry, "u": tuple(entry["u"]), "y": tuple(entry["y"]),
-                              "test_experiments": tuple(entry["test_experiments"])})
+        try:
+            return UserDataset(**{**entry, "u": tuple(entry["u"]), "y": tuple(entry["y"]),
+                                  "test_experiments": tuple(entry["test_experiments"])})
+        except ValueError as exc:
+            file = entry.get("path", "FILE")
+            raise ValueError(f"data set {name!r} registered in {self.path} breaks a rule made "
+                             f"since: {exc}. Register it again following the rule (a column "
+                             f"renamed in {file} first: python -m pwa_pipeline add-dataset "
+                             f"NAME {file} --u … --y … --replace), or remove it "
+                             f"(remove-dataset {name})") from None
 
     def add(self, spec: UserDataset, replace: bool = False) -> Dataset:
         """Check ``spec`` by loading its file, then register it.
@@ -86,11 +104,20 @@ class DatasetRegistry:
             self._write(entries)
         return data
 
-    def remove(self, name: str) -> UserDataset:
-        """Unregister ``name`` (its file and results stay); KeyError if unknown."""
+    def remove(self, name: str) -> str:
+        """Unregister ``name`` (its file and results stay), even an entry `get`
+        refuses; KeyError if unknown.
+
+        Returns
+        -------
+        str
+            The path of its data file.
+        """
         with self._lock():
-            spec = self.get(name)
             entries = self._read()
-            del entries[name]
+            if name not in entries:
+                raise KeyError(f"no data set {name!r} in {self.path}; registered: "
+                               f"{sorted(entries)}")
+            entry = entries.pop(name)
             self._write(entries)
-        return spec
+        return entry["path"]

@@ -23,7 +23,8 @@ KEY_FILE = ".signing-key"
 
 
 class UnsignedFileError(ValueError):
-    """A pickle whose signature is missing or wrong: not written by this store, or damaged."""
+    """A stored pickle or table (`signed_tables`) whose signature is missing or wrong:
+    not written by this store, or damaged."""
 
 
 def signing_key(root: UPath) -> bytes:

@@ -400,7 +400,8 @@ def _reuse_note(client, logged: dict) -> str:
     except MlflowException:  # that run purged from the store, its model kept
         by = f"{logged['model_run_id']} (no longer in the store)"
     return (f"The model of this run was logged by run {by}, which scored the same fitted "
-            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")`.")
+            f"model; load it with `mlflow.pyfunc.load_model(\"{logged['model_uri']}\")` "
+            f"(a cloudpickle: loading it runs code, so only from a store you trust).")
 
 
 def _write_artifact(path: Path, obj) -> None:

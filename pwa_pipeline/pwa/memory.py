@@ -78,8 +78,9 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     n_c = n if getattr(clustering, "max_clustered", None) is None else min(
         n, clustering.max_clustered)
     width = d * m * (m if getattr(clustering, "embedding", "exact") == "literal" else 1)
-    dbscan = n_c * (width * 8 * 4 + 64 * 8 * 2 + (getattr(clustering, "min_pts", None) or 2 * d)
-                    * 16) + 3 * 2**25
+    # a neighbourhood holds at most the n_c models clustered, however large MinPts is
+    min_pts = min(getattr(clustering, "min_pts", None) or 2 * d, n_c)
+    dbscan = n_c * (width * 8 * 4 + 64 * 8 * 2 + min_pts * 16) + 3 * 2**25
     counts = 0 if getattr(clustering, "eps", None) is not None else (  # the distances (8 B
         n_c * n_c * 9 if n_c * n_c <= _DENSE else 2**25)  # a pair, made in place; 1 B slack)
     out["clustering"] = kept + n * d * m * 8 + max(dbscan, counts)

@@ -4,6 +4,7 @@ its JSON, MPT3 script and stability report hold what they say."""
 
 import copy
 import json
+import re
 
 import numpy as np
 import pytest
@@ -254,6 +255,7 @@ def test_decoupled_outputs_take_the_product_partition():
         np.testing.assert_array_equal(ss.mode_regions[mode, j], out.regions(phi))
     z = _random_in_envelope(ss, 5000, seed=1)
     np.testing.assert_array_equal(_closed_membership(ss, z).sum(axis=1), 1)
+    assert PWAStateSpace.from_json(ss.to_json()).n_modes == ss.n_modes  # a partition
 
 
 def _model_regions(model, phi: np.ndarray) -> np.ndarray:
@@ -289,6 +291,7 @@ def test_structured_and_refined_routes_convert_exactly(make, data):
     phi = np.column_stack([x, np.ones(len(z))]) if model.affine else x
     np.testing.assert_array_equal(ss.mode_regions[ss.mode_of(x, z[:, ss.n_states:])],
                                   _model_regions(model, phi))
+    assert PWAStateSpace.from_json(ss.to_json()).n_modes == ss.n_modes  # a partition
 
 
 def test_the_envelope_is_the_padded_training_range(default_30db, default_ss, sim_30db):
@@ -403,6 +406,75 @@ def test_not_json_is_refused():
         PWAStateSpace.from_json("{not json")
 
 
+def _set(field: str, index: tuple, value):
+    """A change of the document: ``doc[field][i][j]… = value``."""
+    def change(doc):
+        target = doc[field]
+        for i in index[:-1]:
+            target = target[i]
+        target[index[-1]] = value
+    return change
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.update(affine="false"), 'affine must be true or false, got "false"'),
+    (lambda d: d.pop("affine"), r"lacks field\(s\) \['affine'\]"),
+    (lambda d: d.pop("mode_regions"), r"lacks field\(s\) \['mode_regions'\]"),
+    (lambda d: d["envelope"].pop("padding"), r"envelope lacks field\(s\) \['padding'\]"),
+    (lambda d: d.update(schema_version=True), "schema version True is not supported"),
+    (lambda d: d.update(n_modes=4.0), "n_modes must be a whole number, got 4.0"),
+    (lambda d: d.update(output_lags=True), "output_lags must be a whole number"),
+    (_set("mode_regions", (0, 0), 1.7), r"mode_regions\[0\]\[0\] is 1.7, not a whole number"),
+    (_set("mode_regions", (0, 0), None), r"mode_regions\[0\]\[0\] is null, not a whole number"),
+    (_set("mode_regions", (0, 0), -1), r"mode_regions\[0\]\[0\] is -1, not a whole number"),
+    (_set("A", (0, 0, 0), "0.5"), r'A\[0\]\[0\]\[0\] is "0.5", not a number'),
+    (_set("A", (0, 0, 0), True), r"A\[0\]\[0\]\[0\] is true, not a number"),
+    (_set("A", (0, 0, 0), 10 ** 400), r"A\[0\]\[0\]\[0\] is 1000.*, beyond float64's range"),
+    (_set("A", (0, 0), 0.5), r"A\[0\]\[0\] is 0.5, expected a list"),
+    (lambda d: d.update(A=None), "A is null, expected a list"),
+    (lambda d: d.update(input_names="ab"), "input_names must be a list of strings"),
+    (lambda d: d.update(output_names=[1, 2]), "output_names must be a list of strings"),
+    (lambda d: d.update(source="ab"), "source must be an object"),
+    (lambda d: d["envelope"].update(padding="0.05"), "envelope padding must be a number"),
+    (lambda d: d["regions"][1].update(H=[], h=[]),
+     "region 1 has no rows: all of z, which overlaps the other 3 regions"),
+    (lambda d: d["regions"][1].update(H=[[0.0] * 6, [1.0] + [0.0] * 5], h=[1.0, -1e9]),
+     "region 1 is empty inside the envelope"),
+    (lambda d: d["regions"].__setitem__(2, d["regions"][0]), "regions 0 and 2 overlap"),
+])
+def test_a_tampered_document_is_refused_naming_the_field(default_ss, change, message):
+    """Values of the wrong type are not converted (``"false"`` is not true, 1.7 not 1), no
+    field takes a default, and the regions must stay non-empty and without overlap."""
+    doc = json.loads(default_ss.to_json())
+    change(doc)
+    with pytest.raises(ValueError, match=message):
+        PWAStateSpace.from_json(json.dumps(doc))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[1, 2]", "the JSON document is a list, not an object"),
+    ("null", "the JSON document is null, not an object"),
+    ("3", "the JSON document is a number, not an object"),
+    ('"model.json"', "the JSON document is a string, not an object"),
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ('{"A": ' + "[" * 5_000 + "]" * 5_000 + "}", "nested too deeply"),
+])
+def test_a_document_that_is_not_an_object_is_refused_not_read_as_a_path(text, message):
+    with pytest.raises(ValueError, match=message):
+        PWAStateSpace.from_json(text)
+
+
+def test_a_deeply_nested_field_is_refused_naming_it(default_ss):
+    text = json.dumps({**json.loads(default_ss.to_json()), "A": "@"})
+    with pytest.raises(ValueError, match=r"A\[0\]\[0\]\[0\] is a list, expected a number"):
+        PWAStateSpace.from_json(text.replace('"@"', "[" * 900 + "]" * 900))
+
+
+def test_a_missing_file_is_still_a_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        PWAStateSpace.from_json(str(tmp_path / "absent.json"))
+
+
 def test_mpt3_script_builds_the_pwa_system_from_the_matrices(default_ss, tmp_path):
     path = tmp_path / "model_pwa.m"
     script = default_ss.to_mpt3(path)
@@ -417,6 +489,50 @@ def test_mpt3_script_builds_the_pwa_system_from_the_matrices(default_ss, tmp_pat
     # the mode's A matrix, row by row, as MATLAB reads it
     a1 = "A1 = [" + "; ".join(" ".join(f"{v:.17g}" for v in row) for row in default_ss.A[0]) + "];"
     assert a1 in script
+
+
+def _renamed(ss: PWAStateSpace, inputs: list[str], outputs: list[str],
+             source: dict | None = None) -> PWAStateSpace:
+    """``ss`` with other signal names (and source)."""
+    lower, upper = ss.envelope
+    return PWAStateSpace(ss.A, ss.B, ss.f, ss.C, ss.g, ss.regions, lower, upper,
+                         output_lags=ss.output_lags, input_lags=ss.input_lags,
+                         affine=ss.affine, input_names=inputs, output_names=outputs,
+                         mode_regions=ss.mode_regions, dropped_modes=ss.dropped_modes,
+                         source=source if source is not None else ss.source)
+
+
+#: The only statements the MPT3 script holds: the sample time, the envelope, each mode's
+#: matrices, systems and domains, and the PWA system.
+_STATEMENT = re.compile(r"(Ts|z_min|z_max|[ABfCDgHh]\d+|sys\d+|pwa) = [^%']*;"
+                        r"|sys\d+ = LTISystem\(('[A-Za-z]+', [A-Za-z]+\d*(, )?)+\);"
+                        r"|sys\d+\.setDomain\('xu', Polyhedron\('A', H\d+, 'b', h\d+\)\);")
+
+
+def test_names_never_become_matlab_code(default_ss):
+    """A name with a line break, quotes or a comment sign stays inside its comment line,
+    written with Python's escapes, so the script holds only its own statements."""
+    hostile = ["u\nsystem('touch pwned')", "it's \"q\"\r%{\rx"]
+    outputs = ["y\u2028disp(1)", "a\\nb\x85!rm"]
+    ss = _renamed(default_ss, hostile, outputs,
+                  source={"class": "PWARX\nsystem('id')", "na": 1})
+    script = ss.to_mpt3()
+    lines = script.split("\n")[:-1]
+    assert script.splitlines() == lines  # no other line break (\r, \u2028, \x85)
+    code = [line for line in lines if not line.startswith("%")]
+    assert [line for line in code if not _STATEMENT.fullmatch(line)] == []
+    assert len(code) == sum(not line.startswith("%") for line in default_ss.to_mpt3().splitlines())
+    assert "% inputs u: u\\nsystem('touch pwned'), it's \"q\"\\r%{\\rx" in lines
+    assert "% outputs y: y\\u2028disp(1), a\\\\nb\\x85!rm" in lines
+    assert lines[0].endswith(": class=PWARX\\nsystem('id'), na=1")
+
+
+@pytest.mark.parametrize("Ts", [0.0, -1, float("nan"), float("inf"), True, "1"])
+def test_mpt3_refuses_a_sample_time_that_is_not_positive_and_finite(default_ss, Ts):
+    with pytest.raises(ValueError, match=r"Ts must be a finite number > 0 \(the sampling "
+                                         r"time\), got " + re.escape(repr(Ts))):
+        default_ss.to_mpt3(Ts=Ts)
+    assert "Ts = 0.01;" in default_ss.to_mpt3(Ts=0.01)
 
 
 # --- stability ---------------------------------------------------------------------------

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import dagster as dg
 import pandas as pd
+import pytest
 
 from pwa_pipeline.datasets import make_hure_vasak
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
@@ -85,6 +86,23 @@ def test_a_store_that_cannot_be_written_stops_the_command_before_any_run(tmp_pat
     assert not (tmp_path / ".dagster_home").exists()  # nothing started
 
 
+def test_a_store_that_lives_only_in_memory_is_refused_before_any_run(tmp_path, monkeypatch,
+                                                                    capsys):
+    """``PWA_STORAGE=memory://…`` would run (exit 0) and lose every asset and export when the
+    process ends: refused at the start, in one line saying why (exit 2)."""
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    monkeypatch.setenv("PWA_STORAGE", "memory://pwa-lost/assets")
+    assert main(["run", "--partition", "hure_vasak|paper"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline run: error: the asset store memory://pwa-lost/assets "
+                          "is kept only in this process's memory")
+    assert "lost when the process ends" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / ".dagster_home").exists()  # nothing started
+
+
 def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
         tmp_path, monkeypatch, capsys):
     from pwa_pipeline.orchestration.cli import main
@@ -147,3 +165,27 @@ def test_a_registered_data_set_whose_file_was_deleted_stops_the_command_in_one_l
     assert error == (f"pwa-pipeline run: error: plant|default, plant|auto cannot run: its file "
                      f"{table} is missing (registered in {tmp_path / 'datasets.json'})")
     assert not (tmp_path / "storage").exists() and not (tmp_path / "home").exists()
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "two"])
+def test_a_local_cluster_without_workers_is_refused_by_the_parser(value, tmp_path,
+                                                                  monkeypatch, capsys):
+    """``--workers 0`` started a LocalCluster of no workers, waited 30 s, then said to start
+    a worker: refused at once by the argument parser (exit 2)."""
+    import time
+
+    from pwa_pipeline.orchestration import dask_sweep
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("PWA_DASK_SCHEDULER", raising=False)
+    monkeypatch.setattr(dask_sweep, "WORKER_TIMEOUT", 3)  # a reproduction that fails fast
+    t0 = time.perf_counter()
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "--executor", "dask", "--workers", value, "--partition",
+              "hure_vasak|paper"])
+    assert stop.value.code == 2 and time.perf_counter() - t0 < 2
+    assert (f"argument --workers: must be a whole number of worker processes >= 1, got "
+            f"{value!r}" in capsys.readouterr().err)
+    assert not (tmp_path / "home").exists()  # nothing started

@@ -5,6 +5,7 @@ import shutil
 import time
 
 import dagster as dg
+import pytest
 
 
 def test_doctor_finds_and_repairs_what_a_killed_run_left(tmp_path, mlflow_template, monkeypatch,
@@ -46,3 +47,19 @@ def test_doctor_finds_and_repairs_what_a_killed_run_left(tmp_path, mlflow_templa
     assert client.get_run(mlflow_run.info.run_id).info.status == "KILLED"
     assert not tmp.exists()
     assert main(args) == 0  # nothing left
+
+
+@pytest.mark.parametrize("value", ["-5", "nan", "inf"])
+def test_doctor_refuses_an_age_that_is_negative_or_not_finite(value, tmp_path, monkeypatch,
+                                                              capsys):
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    with pytest.raises(SystemExit) as stop:
+        main(["doctor", "--older-than", value, "--tracking-uri",
+              f"sqlite:///{tmp_path / 'mlflow.db'}"])
+    assert stop.value.code == 2
+    assert (f"argument --older-than: must be a finite number of minutes >= 0, got {value!r}"
+            in capsys.readouterr().err)
+    assert not (tmp_path / "home").exists() and not (tmp_path / "mlflow.db").exists()

@@ -38,7 +38,11 @@ def test_similar_names_never_share_a_file(tmp_path):
     ctx = dg.build_output_context(asset_key=dg.AssetKey("x"), partition_key="d|eps0")
     io.handle_output(ctx, pd.DataFrame({"a": [1]}))
     assert sorted(p.name for p in (tmp_path / "x" / "d").iterdir()) == [
-        "eps0.parquet", "eps0_1.pkl", "eps0_3.pkl"]
+        "eps0.parquet", "eps0.parquet.sig", "eps0_1.pkl", "eps0_3.pkl"]
+    ctx = dg.build_output_context(asset_key=dg.AssetKey("x"), partition_key="d|eps0")
+    io.handle_output(ctx, {"value": 0})  # and a pickle the table, with its signature
+    assert sorted(p.name for p in (tmp_path / "x" / "d").iterdir()) == [
+        "eps0.pkl", "eps0_1.pkl", "eps0_3.pkl"]
 
 
 

@@ -6,6 +6,7 @@ import shutil
 import dagster as dg
 import numpy as np
 import pandas as pd
+import pytest
 
 from pwa_pipeline.config import BUNDLED_HPARAMS
 from pwa_pipeline.definitions import defs
@@ -233,3 +234,48 @@ def test_the_leaderboard_is_requested_after_a_partitions_scores_change(tmp_path,
         again = dg.evaluate_automation_conditions(defs=defs, instance=instance,
                                                   cursor=after.cursor)
         assert again.get_num_requested(board) == 0
+
+
+def test_a_truncated_or_edited_scores_file_is_named_and_left_out_not_fatal(
+        tmp_path, mlflow_template):
+    """A stored scores file cut short (``ArrowInvalid: magic bytes not found``) or edited
+    (a better NRMSE written in) is named and left out of the leaderboard, as a partition not
+    materialised, instead of failing it on every later run or being ranked as it says; a
+    step reading it alone fails naming it, and materialising the partition again heals it."""
+    from pwa_pipeline.orchestration.settings import PipelineSettings
+    from pwa_pipeline.orchestration.signed_pickles import UnsignedFileError
+    from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    store = PartitionedFileIOManager(base_dir=str(tmp_path / "storage"))
+    resources = {"io_manager": store,
+                 "settings": PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                              hparams_path=str(BUNDLED_HPARAMS)),
+                 "mlflow": MLflowTracker(tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")}
+    scores = pd.DataFrame([{"mode": mode, "output": out, "nrmse": 0.5, "r2": 0.75,
+                            "diverged": False} for mode in ("one_step", "free_run")
+                           for out in ("y1", "mean")])
+    for key in KEYS:
+        for method in METHODS:
+            store.handle_output(dg.build_output_context(
+                asset_key=dg.AssetKey(f"{method}_scores"), partition_key=key), scores)
+    folder = tmp_path / "storage" / "pwa_scores" / "hure_vasak"
+    cut, edited = folder / "paper.parquet", folder / "default.parquet"
+    cut.write_bytes(cut.read_bytes()[:100])
+    scores.assign(nrmse=0.01).to_parquet(edited, index=False)
+    for path, key in ((cut, KEYS[0]), (edited, KEYS[1])):
+        with pytest.raises(UnsignedFileError, match=f"{path}.*Materialise the asset "
+                                                    r"\(its partition\) again"):
+            store.load(dg.AssetKey("pwa_scores"), key)
+    instance = dg.DagsterInstance.ephemeral()
+    board = dg.materialize(list(defs.assets), selection=[LEADERBOARD], resources=resources,
+                           instance=instance)
+    assert board.success
+    meta = materialization(board, LEADERBOARD).metadata
+    assert meta["partitions_missing"].value == len(all_keys(partitions_of(defs)))
+    assert 0.01 not in board.asset_value(LEADERBOARD)["free_run_nrmse"].tolist()
+    warned = "\n".join(e.user_message for e in instance.all_logs(board.run_id))
+    assert str(cut) in warned and str(edited) in warned
+    store.handle_output(dg.build_output_context(asset_key=dg.AssetKey("pwa_scores"),
+                                                partition_key=KEYS[0]), scores)
+    assert store.load(dg.AssetKey("pwa_scores"), KEYS[0]).equals(scores)

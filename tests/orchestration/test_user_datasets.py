@@ -48,7 +48,7 @@ def test_registration_round_trips_and_splits_by_experiment(registry, csv, table)
     held = table[table.run == "b"]
     np.testing.assert_array_equal(data.u_test[0], held[["u1", "u2"]].to_numpy())
     np.testing.assert_array_equal(data.y_train[1], table[table.run == "c"][["y1", "y2"]])
-    assert registry.remove("plant") == spec and registry.names() == []
+    assert registry.remove("plant") == spec.path and registry.names() == []
 
 
 def test_default_split_holds_out_the_last_experiments_or_the_end_of_one_record(
@@ -109,6 +109,53 @@ def test_too_few_rows_for_the_local_sets_and_clashing_names_are_refused(registry
     with pytest.raises(ValueError, match="already registered"):
         registry.add(UserDataset("p", path, **half, nb=2))
     assert registry.get("p").na == 1
+
+
+_RULE = (r"MLflow's metric names, which hold it, allow only letters, digits, '_', '-', '\.' "
+         r"and spaces, at most 100 characters")
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    (dict(u=("temp(degC)", "u2")),
+     r"input column 'temp\(degC\)' cannot be used: " + _RULE + r"; rename it \(e.g. "
+     r"'temp_degC'\)"),
+    (dict(y=("y1", "valve%")), r"output column 'valve%' cannot be used: .*e.g. 'valve'"),
+    (dict(y=("a:b", "y2")), r"output column 'a:b' cannot be used"),
+    (dict(y=("y/1", "y2")), r"output column 'y/1' cannot be used"),
+    (dict(y=("y\nsystem(1)", "y2")), r"output column 'y\\nsystem\(1\)' cannot be used"),
+    (dict(y=("y" * 101, "y2")), r"output column 'yyy.* cannot be used: .*at most 100"),
+    (dict(name="p" * 300), r"invalid data set name 'ppp.*': use letters, digits, '_' and '-' "
+                           r"only, at most 64 characters"),
+    (dict(na=50), r"na must be an integer from 1 to 20 \(lags per channel\), got 50"),
+    (dict(nb=True), r"nb must be an integer from 1 to 20 \(lags per channel\), got True"),
+])
+def test_names_and_orders_that_would_fail_later_are_refused_at_registration(tmp_path, kwargs,
+                                                                           message):
+    """What a run would fail on minutes later (MLflow's metric names, a file name too long,
+    an order beyond any local set) is refused when the data set is registered."""
+    with pytest.raises(ValueError, match=message):
+        UserDataset(**{"name": "plant", "path": tmp_path / "plant.csv", **COLUMNS, **kwargs})
+
+
+def test_the_column_names_allowed_are_metric_names_mlflow_takes(tmp_path, mlflow_template):
+    """Every name the rule lets through, in the longest metric key built from it, is logged
+    by MLflow; the names it refuses are those MLflow refuses (or, ':' and '/', would make
+    another key or a path on some platforms)."""
+    import shutil
+
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline.orchestration.reporting import PER_OUTPUT
+
+    names = ["Joint 1.torque-Nm", "µm_x", "y" * 100, "T_amb"]
+    spec = UserDataset("plant", tmp_path / "plant.csv", u=("u1",), y=tuple(names))
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    run = client.create_run(client.create_experiment("names"))
+    for name in spec.y:
+        client.log_metric(run.info.run_id, f"{PER_OUTPUT}free_run_nrmse_{name}", 0.5)
+    assert len(client.get_run(run.info.run_id).data.metrics) == len(names)
 
 
 def test_the_cli_registers_lists_and_removes(tmp_path, csv, capsys, monkeypatch):
@@ -276,3 +323,41 @@ def test_a_registry_written_before_units_loads_without_them(tmp_path, csv, capsy
                  "--units", "y2=V", "--replace"]) == 0
     assert registry.get("plant").units == {"y2": "V"}
     assert json.loads(path.read_text())["datasets"]["plant"]["units"] == {"y2": "V"}
+
+
+def test_an_entry_registered_before_a_rule_is_listed_and_refused_not_fatal(tmp_path, csv,
+                                                                           capsys,
+                                                                           monkeypatch):
+    """An entry written before the column-name rule (``temp(degC)``) leaves the rest of the
+    registry usable: listed with the rule it breaks and the fix, skipped by a run of every
+    data set, refused in one line by a run of its own, and removable."""
+    import json
+
+    from pwa_pipeline.orchestration.cli import main
+
+    path = tmp_path / "datasets.json"
+    good = UserDataset("plant", csv, **COLUMNS, experiment="run").describe()
+    old = {**good, "name": "old", "u": ["temp(degC)", "u2"]}
+    path.write_text(json.dumps({"version": 1, "datasets": {"plant": good, "old": old}}))
+    monkeypatch.setenv("PWA_DATASETS", str(path))
+    assert main(["list-datasets"]) == 0
+    out = capsys.readouterr().out
+    assert "2 registered data set(s)" in out and "  plant: " in out
+    line = next(s for s in out.splitlines() if s.startswith("  old: "))
+    assert "input column 'temp(degC)' cannot be used" in line
+    assert "a column renamed in" in line and "add-dataset NAME" in line and "--replace" in line
+    assert "remove-dataset old" in line
+    defs = build_definitions(BUNDLED_HPARAMS, path)
+    keys, skipped = runnable_keys(partitions_of(defs), defs.resources["settings"])
+    assert "plant|default" in keys and not any(k.startswith("old|") for k in keys)
+    assert "input column 'temp(degC)' cannot be used" in skipped["old"]
+    for variable, value in (("PWA_HPARAMS", BUNDLED_HPARAMS), ("PWA_PIPELINE_HOME", tmp_path),
+                            ("DAGSTER_HOME", tmp_path / "home")):
+        monkeypatch.setenv(variable, str(value))  # stores of this test's own, if it ran
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    assert main(["run", "--partition", "old|default"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline run: error: data set 'old' registered in ")
+    assert "input column 'temp(degC)' cannot be used" in err and err.count("\n") == 1
+    assert main(["remove-dataset", "old"]) == 0
+    assert DatasetRegistry(path).names() == ["plant"]

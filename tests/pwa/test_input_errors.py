@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 from scipy.io import savemat
 
-from pwa_pipeline import LinearARX, SubspaceSS, evaluate, load_kuka, load_table
+from pwa_pipeline import PWARX, LinearARX, SubspaceSS, evaluate, load_kuka, load_table
 from pwa_pipeline._validation import as_experiments, as_signal
 
 
@@ -243,3 +243,53 @@ def test_transposed_signals_are_refused_with_a_shape_error():
     with pytest.raises(ValueError, match=r"u has shape \(2, 4000\): 4000 channels of 2 "
                                          r"sample\(s\).*transposed"):
         LinearARX(na=1, nb=1).fit(u, y)
+
+
+@pytest.mark.parametrize("make", [lambda: PWARX(na=1, nb=1), lambda: LinearARX(na=1, nb=1),
+                                  lambda: SubspaceSS(order=1, horizon=3)],
+                         ids=["PWARX", "LinearARX", "SubspaceSS"])
+@pytest.mark.parametrize(("u", "y", "message"), [
+    (np.empty((0, 2)), np.empty((0, 1)), r"u and y have no samples \(shapes \(0, 2\) and "
+                                         r"\(0, 1\)\): an experiment needs at least one"),
+    ([], [], r"u and y have no samples"),
+    ([np.ones((50, 1)), np.empty((0, 1))], [np.ones((50, 1)), np.empty((0, 1))],
+     r"u and y \(experiment 1\) have no samples"),
+])
+def test_empty_signals_are_refused_naming_them(make, u, y, message):
+    """Not numpy's "zero-size array to reduction operation minimum"."""
+    with pytest.raises(ValueError, match=message):
+        make().fit(u, y)
+
+
+def test_min_pts_above_the_local_models_is_said_so_not_taken_for_memory():
+    """MinPts larger than the local models to cluster is that, not a memory request of
+    thousands of GiB."""
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(400, 1))
+    y = np.zeros((400, 1))
+    for k in range(1, 400):
+        y[k] = 0.5 * y[k - 1] + u[k - 1] - 0.3 * np.sign(y[k - 1])
+    for min_pts in (10**9, 1000):
+        model = PWARX(na=1, nb=1).set_params(clustering__min_pts=min_pts)
+        with pytest.raises(ValueError, match=rf"clustering min_pts = {min_pts} is larger than "
+                                             r"the 399 local models there are to cluster"):
+            model.fit(u, y)
+
+
+@pytest.mark.parametrize("lengths", [(400, 400, 1), (400, 400, 12), (1, 400, 400, 1)])
+def test_a_held_out_experiment_too_short_for_the_search_is_named(lengths):
+    """A held-out experiment too short to score a free run is named with the samples it
+    needs, not reported as "every linear candidate diverges"."""
+    rng = np.random.default_rng(0)
+    n = sum(lengths)
+    u = rng.normal(size=(n, 1))
+    y = np.zeros((n, 1))
+    for k in range(1, n):
+        y[k] = 0.5 * y[k - 1] + u[k - 1] - 0.3 * np.sign(y[k - 1])
+    cuts = np.cumsum(lengths)[:-1]
+    short = len(lengths) - 1
+    with pytest.raises(ValueError, match=rf"held-out experiment {short} has {lengths[-1]} "
+                                         rf"sample\(s\): the structure search scores the free "
+                                         rf"run of each held-out experiment after a warm-up of "
+                                         rf"10 samples and needs at least 30"):
+        PWARX.auto(na=1, nb=1, max_candidates=5).fit(np.split(u, cuts), np.split(y, cuts))

@@ -41,6 +41,7 @@ from pwa_pipeline.methods import METHODS
 from pwa_pipeline.orchestration.io_manager import PartitionedFileIOManager
 from pwa_pipeline.orchestration.registry import DatasetRegistry
 from pwa_pipeline.orchestration.signed_pickles import KEY_FILE, load_object, signing_key
+from pwa_pipeline.orchestration.signed_tables import SIGNATURE_SUFFIX, load_table
 
 DATASETS = ("m1", "m2", "m3")
 SETS = ("default", "paper")
@@ -186,13 +187,12 @@ def _every_stored_file_loads(root: Path) -> int:
     returns how many."""
     count = 0
     for path in root.rglob("*"):
-        if path.is_dir() or path.name.startswith("."):
-            continue
-        if path.suffix == ".pkl":  # signed with the key of its store: assets' or caches'
+        if path.is_dir() or path.name.startswith(".") or path.suffix == SIGNATURE_SUFFIX:
+            continue  # a table's signature is checked as the table is loaded
+        if path.suffix in (".pkl", ".parquet"):  # signed with the key of its store
             store = next(p for p in path.parents if (p / KEY_FILE).is_file())
-            load_object(path, signing_key(store))
-        elif path.suffix == ".parquet":
-            pd.read_parquet(path)
+            load = load_object if path.suffix == ".pkl" else load_table
+            load(path, signing_key(store))
         count += 1
     return count
 

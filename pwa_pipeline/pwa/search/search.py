@@ -564,9 +564,18 @@ class _Search:
         self.lags = na + 1
         self.warmup = max(self.lags, nb, WARMUP)
         self.m, self.r = experiments[0][1].shape[1], experiments[0][0].shape[1]
+        min_samples = self.warmup + 20
         self.fit_exp, self.held_exp, self.split = split_experiments(
-            experiments, params.validation_fraction, min_samples=self.warmup + 20)
+            experiments, params.validation_fraction, min_samples=min_samples)
         self.n_experiments = len(experiments)
+        for i, (_, y) in enumerate(self.held_exp, len(experiments) - len(self.held_exp)):
+            if len(y) < min_samples:  # else nothing, or too little, is scored: NaN costs
+                raise ValueError(
+                    f"held-out experiment {i} has {len(y)} sample(s): the structure search "
+                    f"scores the free run of each held-out experiment after a warm-up of "
+                    f"{self.warmup} samples and needs at least {min_samples} (it holds out "
+                    f"the last {len(self.held_exp)} of {len(experiments)}); lengthen it, "
+                    f"join it to another or leave it out")
         self.n_fit = len(self.fit_exp)
         self.folds = [_Fold(fit, held, self.lags, nb, self.warmup, params.max_rows)
                       for fit, held in folds(experiments, params.validation_fraction,

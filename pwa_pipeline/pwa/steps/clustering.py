@@ -254,6 +254,15 @@ class DBSCANClustering(BaseClustering):
         original = local.original_
         distinct = original == np.arange(n)
         estimated = distinct & local.estimated_
+        available = int(estimated.sum()) if self.max_clustered is None else min(
+            int(estimated.sum()), self.max_clustered)
+        if self.min_pts_ > available:
+            raise ValueError(
+                f"clustering min_pts = {self.min_pts_} is larger than the {available} local "
+                f"models there are to cluster (one per distinct regressor row, at most "
+                f"local_models__max_sets estimated and clustering__max_clustered clustered): "
+                f"no DBSCAN neighbourhood can hold that many; lower it (left out, it is "
+                f"2d = {2 * local.phi_scale_.size})")
         keep = ~local.degenerate_ & estimated
         if keep.sum() < self.min_pts_:
             raise ValueError(
