@@ -20,7 +20,7 @@ from pwa_pipeline.datasets import load_dataset
 CUT = 59
 VARIANTS = {
     "search default": {},
-    "judged on the last held-out block alone (n_folds=1)": {"n_folds": 1},
+    "judged on five held-out blocks in turn (n_folds=5)": {"n_folds": 5},
     "refit on every training experiment (refit=True)": {"refit": True},
     "min_gain = 0.05": {"min_gain": 0.05},
     "one variable per output (max_variables = 1)": {"max_variables": 1},
