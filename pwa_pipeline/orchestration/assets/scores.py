@@ -11,8 +11,7 @@ from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS, Method
 from ...plotting import PredictionDisplay, context_title
-from ...scoring.comparison import mean_scores
-from ...scoring.evaluation import Evaluation, evaluate
+from ...scoring.evaluation import Evaluation, evaluate, score_text
 from ..caches import SignedMemory
 from ..checks import (
     COMPARISON_CHECKS,
@@ -27,7 +26,7 @@ from ..mlflow_models import (
 )
 from ..model_facts import prediction_key
 from ..reporting import (
-    markdown,
+    mean_scores_markdown,
     nrmse_summary,
     rounded,
 )
@@ -77,7 +76,7 @@ def scores_asset(method: Method, partitions_def):
                 configuration.dataset, configuration.hparams, method.label)).figure_
         png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
-                         f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
+                         f"{score_text(ev.mean('free_run'), 'nrmse', ev.diverged())}")
         record = method_run(configuration, method.name, model, ev, data,
                             control=control.get("control_model"),
                             tags={"dagster_run_id": context.run.run_id,
@@ -114,7 +113,7 @@ def comparison_asset(partitions_def):
         """Every method's scores side by side (one-step and free run)."""
         table = pd.concat([scores[name].assign(method=name) for name in METHODS],
                           ignore_index=True)
-        yield dg.Output(table, metadata={"mean_scores": markdown(mean_scores(table))})
+        yield dg.Output(table, metadata={"mean_scores": mean_scores_markdown(table)})
         yield from comparison_results(table, str(context.partition_key))
 
     return comparison
