@@ -166,13 +166,18 @@ def _sig4(value: float) -> str:
 def leaderboard_markdown(table: pd.DataFrame, missing: dict[str, list[str]] | None = None
                          ) -> str:
     """The leaderboard (`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
-    table per data set, numbers to 4 significant digits, a diverged free run's scores as
-    `score_text` shows them everywhere (``≥ 10 (diverged)``, ``≤ -99 (diverged)``); then
-    the partitions never materialised (``missing``: key → methods)."""
+    table per data set, each method named with what its model is when the name does not say
+    it (``pwa — linear kept (no switching structure beat it)``, the table's ``model``),
+    numbers to 4 significant digits, a diverged free run's scores as `score_text` shows
+    them everywhere (``≥ 10 (diverged)``, ``≤ -99 (diverged)``); then the partitions never
+    materialised (``missing``: key → methods)."""
     parts = []
     for dataset, rows in table.groupby("dataset", sort=False):
         shown = pd.DataFrame({
-            "rank": rows["rank"], "method": rows["method"], "hparams": rows["hparams"],
+            "rank": rows["rank"],
+            "method": [f"{method} — {note}" if note else method
+                       for method, note in zip(rows["method"], rows["model"], strict=True)],
+            "hparams": rows["hparams"],
             "one-step NRMSE": rows["one_step_nrmse"].map(_sig4),
             "one-step R²": rows["one_step_r2"].map(_sig4),
             "free-run NRMSE": [score_text(v, "nrmse", d) for v, d in zip(

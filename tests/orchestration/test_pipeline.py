@@ -559,6 +559,11 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert pwa_run.data.metrics["model/search_candidates"] == report.n_candidates
     assert pwa_run.data.metrics["model/search_budget_spent"] == 0.0
     assert page_meta["structure chosen"].value == report.choice
+    # what the model is, on its page and in its scores (which carry it to the leaderboard)
+    assert list(page_meta)[0] == "model" and page_meta["model"].value == report.verdict
+    assert report.verdict.startswith("linear kept" if report.linear else "switching")
+    assert set(result.asset_value("pwa_scores")["model"]) == {report.verdict}
+    assert set(result.asset_value("linear_arx_scores")["model"]) == {""}
     assert page_meta["structure per output"].value.count("level (1, 1)") == 2
     # the export works for a searched model too, and the registered model simulates as it
     assert result.asset_value("control_model").state_space.n_modes >= 1

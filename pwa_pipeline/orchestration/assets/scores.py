@@ -24,7 +24,7 @@ from ..mlflow_models import (
     example_table,
     training_dataset,
 )
-from ..model_facts import prediction_key
+from ..model_facts import model_note, prediction_key
 from ..reporting import (
     mean_scores_markdown,
     nrmse_summary,
@@ -58,7 +58,9 @@ def scores_asset(method: Method, partitions_def):
                           f"alike. Its page shows the *prediction* figure: measured output, "
                           f"one-step prediction and free run of the first held-out "
                           f"experiment, per output in the data's units, titled with the data "
-                          f"set, set and method.")
+                          f"set, set and method. Its table's column ``model`` says what the "
+                          f"model is when the method's name does not (a structure search "
+                          f"that kept the linear model), for the leaderboard.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                settings: PipelineSettings, configuration: Configuration,
                raw_benchmark: Dataset, model, **control: ControlModel | None
@@ -94,13 +96,15 @@ def scores_asset(method: Method, partitions_def):
                                             data.y_names, configuration.warmup),
                 training=training_dataset(data)))
         log_seconds = time.perf_counter() - t0
+        note = model_note(model)
         context.add_output_metadata(rounded({
+            **({"model": note} if note else {}),
             "prediction": dg.MetadataValue.md(png_markdown(png, figure.get_suptitle())),
             "scores_from_cache": memory.hits > 0,
             "mlflow_run_id": run.run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run)),
             "mlflow_log_seconds": log_seconds,
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))
-        return ev.table
+        return ev.table.assign(model=note)
 
     return scores
 
