@@ -134,9 +134,10 @@ def diverged_tags(evaluation: Evaluation) -> dict[str, str]:
             for metric in ("nrmse", "r2")}
 
 
-def mean_scores_markdown(table: pd.DataFrame) -> dg.MetadataValue:
-    """`pwa_pipeline.scoring.comparison.mean_scores` of ``table`` as Markdown metadata,
-    a diverged free run's scores as `score_text` shows them."""
+def mean_scores_markdown(table: pd.DataFrame) -> str:
+    """`pwa_pipeline.scoring.comparison.mean_scores` of ``table`` as Markdown (the
+    comparison page, the command line's table per partition), a diverged free run's scores
+    as `score_text` shows them."""
     wide = mean_scores(table)
     diverged = wide.pop("free-run diverged").fillna(False).astype(bool) \
         if "free-run diverged" in wide else pd.Series(False, index=wide.index)
@@ -145,7 +146,7 @@ def mean_scores_markdown(table: pd.DataFrame) -> dg.MetadataValue:
                    d and column.endswith("free_run"))
         for v, d in zip(wide[column], diverged, strict=True)] for column in wide},
         index=wide.index)
-    return dg.MetadataValue.md(shown.to_markdown())
+    return shown.to_markdown()
 
 
 def training_table(data: Dataset) -> pd.DataFrame:

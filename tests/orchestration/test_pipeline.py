@@ -767,7 +767,7 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
     assert shown["nrmse free_run mean"] == shown["nrmse free_run q2"] == "≥ 10 (diverged)"
     assert isinstance(shown["nrmse free_run q1"], float)
     table = pd.concat([ev.table.assign(method="pwa"), calm.table.assign(method="linear_arx")])
-    page = mean_scores_markdown(table).value  # the comparison page
+    page = mean_scores_markdown(table)  # the comparison page
     pwa_line = next(line for line in page.splitlines() if line.startswith("| pwa"))
     assert "≥ 10 (diverged)" in pwa_line and "≤ -99 (diverged)" in pwa_line
     assert "e+" not in page and "diverged" not in page.replace(pwa_line, "")
@@ -783,6 +783,15 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
     assert "free-run NRMSE ≥ 10 (diverged) from sample 37 of held-out experiment 1" \
         in record.description
     assert diverged_tags(calm) == {}
+    # the command line's summary line, with what a searched model is
+    from pwa_pipeline.orchestration.cli import _summary
+
+    searched = SimpleNamespace(n_submodels_=1, structure_search_=SimpleNamespace(
+        verdict="linear kept (no switching structure beat it)"))
+    line = _summary("sim|auto", SimpleNamespace(asset_value=lambda name: searched), table, 1.0)
+    assert line == (f"sim|auto: 1 PWA sub-model(s) — linear kept (no switching structure "
+                    f"beat it); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
+                    f"{calm.mean('free_run'):.4g} (1.0 s)")
 
 
 def test_registered_model_versions_say_where_they_come_from(paper_run):

@@ -117,7 +117,8 @@ def comparison_asset(partitions_def):
         """Every method's scores side by side (one-step and free run)."""
         table = pd.concat([scores[name].assign(method=name) for name in METHODS],
                           ignore_index=True)
-        yield dg.Output(table, metadata={"mean_scores": mean_scores_markdown(table)})
+        yield dg.Output(table, metadata={
+            "mean_scores": dg.MetadataValue.md(mean_scores_markdown(table))})
         yield from comparison_results(table, str(context.partition_key))
 
     return comparison
