@@ -8,7 +8,10 @@ certificate proves" below); no equilibrium of the affine model is analysed.
 
 Three tests, in turn:
 
-1. **Spectral radius.** ρ(A_i) of each mode. A mode with ρ(A_i) ≥ 1 (within
+1. **Spectral radius.** ρ(A_i) of each mode. A model of one mode (a linear model) is
+   decided here: ρ(A) < 1 is exactly the exponential stability of x⁺ = A x, and the
+   discrete Lyapunov equation AᵀPA − P = −I (solved directly, no LMI solver) gives its
+   certificate (method ``"spectral radius"``). A mode with ρ(A_i) ≥ 1 (within
    `MARGINAL`) rules a common quadratic function out. If such a mode can also follow
    itself (its region holds a point [x; u] whose successor, with some next input, is in the
    same region: a linear program, below), no piecewise-quadratic function of the form of
@@ -40,7 +43,9 @@ Three tests, in turn:
 
 Both LMIs are solved by cvxpy with Clarabel (SCS if Clarabel fails) and the solution is
 checked in floating point: the verdict is **certified** only when the eigenvalues confirm
-P_i ≻ 0 and A_iᵀP_jA_i − P_i ≺ 0 (below −1e-9 λ_max) for every mode or transition.
+P_i ≻ 0 and A_iᵀP_jA_i − P_i ≺ 0 (below −1e-9 λ_max) for every mode or transition. A solver
+that stops without a solution is named with what happened in a few words (`SOLVER_OUTCOMES`),
+never with the solver's own text, which is meant for whoever tunes the solver.
 
 What a certificate proves: with γ = max ‖A_i‖ from P_i to P_j over the transitions (the
 largest contraction per step, ‖P_j^{1/2} A_i P_i^{−1/2}‖₂ < 1), the switched linear system
@@ -78,6 +83,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import solve_discrete_lyapunov
 from scipy.optimize import linprog
 
 from .._optional import require
@@ -100,6 +106,17 @@ MAX_LMI_SIZE = 1_500_000
 #: that margin.
 MARGINAL = 1e-9
 
+#: What a solver's status means, in the words of the report's message (any other status:
+#: "stopped without a solution"); ``"solver_error"`` is a solver that raised.
+SOLVER_OUTCOMES = {
+    "user_limit": "time limit reached",
+    "solver_error": "failed numerically",
+    "infeasible": "no such function (infeasible)",
+    "infeasible_inaccurate": "no such function (infeasible, inaccurate)",
+    "unbounded": "failed numerically (unbounded)",
+    "unbounded_inaccurate": "failed numerically (unbounded)",
+}
+
 #: Every row of a transition's linear program is relaxed by this much (half-widths of the
 #: envelope), so that a transition is excluded only when it is clearly impossible.
 SLACK = 1e-6
@@ -119,12 +136,14 @@ class StabilityReport:
     method : str
         The test that decided: ``"common quadratic Lyapunov function (LMI, <solver>)"``,
         ``"piecewise quadratic Lyapunov function (LMI over k transitions, <solver>)"``, or
-        ``"spectral radius"`` when a mode with ρ(A_i) ≥ 1 can follow itself (no LMI is then
-        solved). A search that was skipped says ``"(not searched: …)"``.
+        ``"spectral radius"`` for a one-mode model or when a mode with ρ(A_i) ≥ 1 can
+        follow itself (no LMI is then solved). A search that was skipped says
+        ``"(not searched: …)"``.
     message : str
         The verdict in a sentence, with the reason when not certified.
     P : ndarray of shape (n, n) or None
-        The common certificate V(x) = xᵀPx (certified by the common function only).
+        The common certificate V(x) = xᵀPx (certified by the common function, or by the
+        spectral radius of a one-mode model, only).
     contraction : float or None
         γ = max ‖P_j^{1/2} A_i P_i^{−1/2}‖₂ < 1 over the modes (common P: P_i = P_j = P) or
         the transitions (certified only).
@@ -239,7 +258,7 @@ def _solve_lmi(A: np.ndarray, pairs: list[tuple[int, int]], blocks: list[int], s
     The unknowns are the upper triangles p_b, and vec(A_iᵀ P A_i) = (A_iᵀ ⊗ A_iᵀ) D p is
     formed in numpy, so cvxpy sees one matrix product per condition (far quicker to compile
     than the matrix expression). Returns (P of each mode, solver status), P None unless
-    solved."""
+    solved; the status is cvxpy's, or ``"solver_error"`` when the solver raised."""
     cp = require("cvxpy", "control", "The stability report's Lyapunov search")
 
     n = A.shape[1]
@@ -262,8 +281,8 @@ def _solve_lmi(A: np.ndarray, pairs: list[tuple[int, int]], blocks: list[int], s
         warnings.simplefilter("ignore")  # "solution may be inaccurate": checked below
         try:
             problem.solve(solver=solver, **limit)
-        except cp.error.SolverError as exc:
-            return None, f"solver error ({exc})"
+        except cp.error.SolverError:  # its text names options for tuning, not the reason
+            return None, "solver_error"
     if problem.status not in ("optimal", "optimal_inaccurate") \
             or any(v.value is None for v in p):
         return None, str(problem.status)
@@ -312,7 +331,7 @@ def _search(A, pairs, blocks, solvers, deadline, max_lmi_size, what):
         P, status = _solve_lmi(A, pairs, blocks, solver, left)
         if P is None:
             reasons.append(f"{solver}: "
-                           f"{'time limit reached' if status == 'user_limit' else status}")
+                           f"{SOLVER_OUTCOMES.get(status, 'stopped without a solution')}")
             continue
         gamma = _verified(A, P, pairs)
         if gamma is not None:
@@ -360,9 +379,11 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
     rho = np.array([np.abs(np.linalg.eigvals(Ai)).max() if Ai.size else 0.0 for Ai in A])
     marginal = np.flatnonzero(rho >= 1 - MARGINAL)
     every = "/".join(solvers)
-    common_solved = False
 
-    # 1-2. spectral radii; the common quadratic function when every mode is stable
+    # 1-2. spectral radii (which decide a one-mode model); the common quadratic function
+    # when every mode is stable
+    if s == 1 and len(marginal) == 0:
+        return _one_stable_mode(rho, A)
     if len(marginal) == 0:
         P, gamma, how, skipped = _search(A, [(i, i) for i in range(s)], [0] * s, solvers,
                                          deadline, max_lmi_size, "modes")
@@ -374,7 +395,6 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
                 P=P[0], contraction=gamma, certificates={"P": P[0]})
         common = (f"the common quadratic search was skipped: {how}" if skipped
                   else f"no common quadratic Lyapunov function was found ({how})")
-        common_solved = not skipped
     else:
         common = (f"mode(s) {marginal.tolist()} have spectral radius ≥ 1 (largest "
                   f"{rho.max():.4g}), so no common quadratic Lyapunov function exists")
@@ -398,12 +418,6 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
         return _skipped(rho, common, max_seconds)
     pairs = [(int(i), int(j)) for i, j in zip(*np.nonzero(possible), strict=True)]
     graph = np.array(pairs, dtype=int).reshape(-1, 2)
-    if common_solved and pairs == [(0, 0)]:  # one mode: the same LMI as the common one
-        return StabilityReport(
-            rho, False, f"common quadratic Lyapunov function (LMI, {every})",
-            f"not certified: {common}; with one mode that can follow itself the "
-            "piecewise-quadratic function is the common one; the model may still be "
-            "stable", transitions=graph)
     P, gamma, how, skipped = _search(A, pairs, list(range(s)), solvers, deadline,
                                      max_lmi_size, "transitions")
     method = f"piecewise quadratic Lyapunov function (LMI over {len(pairs)} transitions"
@@ -427,6 +441,24 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
         f"not certified: {common}, and no piecewise-quadratic Lyapunov function over the "
         f"{len(pairs)} transitions the regions allow was found ({how}); the model may "
         "still be stable", transitions=graph)
+
+
+def _one_stable_mode(rho: np.ndarray, A: np.ndarray) -> StabilityReport:
+    """The report of a one-mode model x⁺ = A x with ρ(A) < 1: certified by its spectral
+    radius, with the certificate P of AᵀPA − P = −I when it passes the floating-point check
+    (a spectral radius a hair below 1 can leave P too ill-conditioned for it)."""
+    n = A.shape[1]
+    P = solve_discrete_lyapunov(A[0].T, np.eye(n))
+    gamma = _verified(A, [P], [(0, 0)])
+    shown = f"{rho[0]:.4g}" if rho[0] < 0.9999 else f"1 − {1 - rho[0]:.2g}"
+    message = (f"certified: one mode (a linear model) of spectral radius {shown} < 1, so "
+               "x⁺ = A x is exponentially stable")
+    if gamma is None:
+        return StabilityReport(rho, True, "spectral radius", message)
+    return StabilityReport(
+        rho, True, "spectral radius",
+        f"{message} (V(x) = xᵀPx from AᵀPA − P = −I contracts by "
+        f"{_contraction(gamma)} per step)", P=P, contraction=gamma, certificates={"P": P})
 
 
 def _skipped(rho, common: str, max_seconds: float) -> StabilityReport:

@@ -32,12 +32,11 @@ def run(args: argparse.Namespace) -> int:
     """Materialise the requested partitions and print their comparison tables."""
     import dagster as dg
 
-    from ..scoring.comparison import mean_scores
     from .dask_sweep import step_failures
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
     from .partitions import DEFAULT_SETS, PartitionKey, check_keys, check_runnable, runnable_keys
-    from .reporting import leaderboard_markdown
+    from .reporting import leaderboard_markdown, mean_scores_markdown
 
     defs = cli_definitions(args.tracking_uri)
     partitions_def = partitions_of(defs)
@@ -90,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
                 continue
             table = result.asset_value("comparison")
             print(f"\n{key}: mean over the outputs\n\n"
-                  f"{mean_scores(table).to_markdown(floatfmt='.4g')}")
+                  f"{mean_scores_markdown(table)}")
             summaries.append(_summary(key, result, table, seconds))
     except KeyboardInterrupt:  # one that came outside a run (Dagster records those inside)
         interrupted.append(None)
@@ -176,13 +175,18 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
 
 
 def _summary(key: str, result, table, seconds: float) -> str:
-    """One line per partition: sub-models found and free-run NRMSE of every method."""
+    """One line per partition: sub-models found (and what the model is, `model_note`) and
+    free-run NRMSE of every method (a diverged run as `score_text` shows it)."""
+    from ..scoring.evaluation import score_text
+    from .model_facts import model_note
+
     free = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
-    scores = ", ".join(f"{m} {v:.4g}" for m, v in zip(free["method"], free["nrmse"],
-                                                      strict=True))
+    scores = ", ".join(f"{m} {score_text(v, 'nrmse', d)}" for m, v, d in zip(
+        free["method"], free["nrmse"], free["diverged"], strict=True))
     model = result.asset_value("pwa_model")
-    return (f"{key}: {model.n_submodels_} PWA sub-model(s); free-run NRMSE {scores} "
-            f"({seconds:.1f} s)")
+    note = model_note(model)
+    return (f"{key}: {model.n_submodels_} PWA sub-model(s){f' — {note}' if note else ''}; "
+            f"free-run NRMSE {scores} ({seconds:.1f} s)")
 
 
 def add_dataset(args: argparse.Namespace) -> int:

@@ -1,6 +1,6 @@
 """What the assets read about a fitted model and its data: the names of its regressors,
-the comparison with a simulated system's ground truth, and the key its scores and figures
-are cached by."""
+the comparison with a simulated system's ground truth, what the model is (`model_note`),
+and the key its scores and figures are cached by."""
 
 from ..datasets import Dataset, GroundTruth
 from ..pwa import PWARX
@@ -36,6 +36,15 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
                                 f"affine) = {(model.output_lags_, model.nb, model.affine)}, "
                                 f"the system's {(t.na, t.nb, t.affine)}"}
     return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
+
+
+def model_note(model) -> str:
+    """What a fitted model is when its method's name does not say it: the structure
+    search's verdict (`SearchReport.verdict`, e.g. ``"linear kept (no switching structure
+    beat it)"``) for a searched PWARX, ``""`` for any other model. The scores tables carry
+    it (column ``model``) to the leaderboard."""
+    report = getattr(model, "structure_search_", None)
+    return "" if report is None else report.verdict
 
 
 def prediction_key(model, data: Dataset) -> tuple[str, str]:

@@ -5,7 +5,8 @@ import numpy as np
 import pandas as pd
 
 from ..datasets import Dataset
-from ..scoring.evaluation import DIVERGENCE, Evaluation
+from ..scoring.comparison import mean_scores
+from ..scoring.evaluation import Evaluation, score_text
 
 
 def rounded(metadata: dict) -> dict:
@@ -71,7 +72,9 @@ def score_metrics(evaluation: Evaluation) -> dict[str, float]:
     envelope (its non-finite samples count as outside: the onset says more), but where it
     diverged (`Onset`): ``free_run_divergence_experiment``
     and ``free_run_divergence_sample`` (the held-out experiment, from 0, and its sample, the
-    warm-up counted) and ``free_run_nrmse_before_divergence``; the ``scores.csv`` artifact
+    warm-up counted) and ``free_run_nrmse_before_divergence``, and its scores as every
+    page shows them in the tags ``free_run_nrmse`` and ``free_run_r2`` (`diverged_tags`:
+    ``"≥ 10 (diverged)"``, the leaderboard's text); the ``scores.csv`` artifact
     keeps every exact value.
     """
     out: dict[str, float] = {}
@@ -111,10 +114,39 @@ def _round4(value: float) -> float:
     return float(f"{float(value):.4g}")
 
 
-def nrmse_summary(table: pd.DataFrame) -> dict[str, float]:
-    """NRMSE per output and mode, for the asset's metadata."""
-    return {f"nrmse {row.mode} {row.output}": float(row.nrmse)
+def nrmse_summary(table: pd.DataFrame) -> dict[str, float | str]:
+    """NRMSE per output and mode, for the asset's metadata: a number, or for a diverged
+    run `score_text`'s ``"≥ 10 (diverged)"`` (text, which the asset's plots leave out
+    rather than drawing a 1e30 spike)."""
+    return {f"nrmse {row.mode} {row.output}":
+            score_text(row.nrmse, "nrmse", True) if row.diverged else float(row.nrmse)
             for row in table.itertuples(index=False)}
+
+
+def diverged_tags(evaluation: Evaluation) -> dict[str, str]:
+    """What a diverged free run shows in MLflow in place of its scores (`score_metrics`
+    logs none): the tags ``free_run_nrmse`` and ``free_run_r2`` holding `score_text`'s
+    ``"≥ 10 (diverged)"`` and ``"≤ -99 (diverged)"``, as the leaderboard and the Dagster
+    pages show them; none for a run that did not diverge."""
+    if not evaluation.diverged():
+        return {}
+    return {f"free_run_{metric}": score_text(evaluation.mean("free_run", metric), metric, True)
+            for metric in ("nrmse", "r2")}
+
+
+def mean_scores_markdown(table: pd.DataFrame) -> str:
+    """`pwa_pipeline.scoring.comparison.mean_scores` of ``table`` as Markdown (the
+    comparison page, the command line's table per partition), a diverged free run's scores
+    as `score_text` shows them."""
+    wide = mean_scores(table)
+    diverged = wide.pop("free-run diverged").fillna(False).astype(bool) \
+        if "free-run diverged" in wide else pd.Series(False, index=wide.index)
+    shown = pd.DataFrame({column: [
+        score_text(v, "nrmse" if column.startswith("NRMSE") else "r2",
+                   d and column.endswith("free_run"))
+        for v, d in zip(wide[column], diverged, strict=True)] for column in wide},
+        index=wide.index)
+    return shown.to_markdown()
 
 
 def training_table(data: Dataset) -> pd.DataFrame:
@@ -135,21 +167,24 @@ def _sig4(value: float) -> str:
 def leaderboard_markdown(table: pd.DataFrame, missing: dict[str, list[str]] | None = None
                          ) -> str:
     """The leaderboard (`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
-    table per data set, numbers to 4 significant digits, a diverged free run shown as
-    `score_metrics` logs it (NRMSE capped at the divergence limit, R² at 1 − limit²)
-    and flagged; then the partitions never materialised (``missing``: key → methods)."""
+    table per data set, each method named with what its model is when the name does not say
+    it (``pwa — linear kept (no switching structure beat it)``, the table's ``model``),
+    numbers to 4 significant digits, a diverged free run's scores as `score_text` shows
+    them everywhere (``≥ 10 (diverged)``, ``≤ -99 (diverged)``); then the partitions never
+    materialised (``missing``: key → methods)."""
     parts = []
     for dataset, rows in table.groupby("dataset", sort=False):
         shown = pd.DataFrame({
-            "rank": rows["rank"], "method": rows["method"], "hparams": rows["hparams"],
+            "rank": rows["rank"],
+            "method": [f"{method} — {note}" if note else method
+                       for method, note in zip(rows["method"], rows["model"], strict=True)],
+            "hparams": rows["hparams"],
             "one-step NRMSE": rows["one_step_nrmse"].map(_sig4),
             "one-step R²": rows["one_step_r2"].map(_sig4),
-            "free-run NRMSE": [f"≥ {_sig4(DIVERGENCE)} (diverged)" if d else _sig4(v)
-                               for v, d in zip(rows["free_run_nrmse"],
-                                               rows["free_run_diverged"], strict=True)],
-            "free-run R²": [f"≤ {_sig4(1 - DIVERGENCE**2)} (diverged)" if d else _sig4(v)
-                            for v, d in zip(rows["free_run_r2"], rows["free_run_diverged"],
-                                            strict=True)]})
+            "free-run NRMSE": [score_text(v, "nrmse", d) for v, d in zip(
+                rows["free_run_nrmse"], rows["free_run_diverged"], strict=True)],
+            "free-run R²": [score_text(v, "r2", d) for v, d in zip(
+                rows["free_run_r2"], rows["free_run_diverged"], strict=True)]})
         parts.append(f"### {dataset}\n\n{shown.to_markdown(index=False)}")
     if table.empty:
         parts.append("No partition has been materialised yet.")

@@ -13,7 +13,7 @@ from ..pwa import PWARX
 from ..scoring.conventions import single_run_scores
 from ..scoring.evaluation import Evaluation
 from .model_facts import phi_names, truth_metadata
-from .reporting import model_metrics, score_metrics
+from .reporting import diverged_tags, model_metrics, score_metrics
 from .tracking import model_description
 
 
@@ -55,8 +55,9 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
     (`score_metrics`), what the model says of itself under ``model/``
     (sub-models, output groups, ε and the noise share where the paper's clustering ran, the
     ground truth's errors, the structure search's, the state-space export's) and the fit's
-    seconds, from the model (``timings_``); tags are the data set, set and method and
-    ``tags``.
+    seconds, from the model (``timings_``); tags are the data set, set and method,
+    ``tags`` and, for a diverged free run, its scores as every page shows them
+    (`diverged_tags`).
 
     Parameters
     ----------
@@ -107,7 +108,8 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
     ds, hp = configuration.dataset, configuration.hparams
     return MethodRun(
         dataset=ds, hparams=hp, method=method, params=params, metrics=metrics,
-        tags=dict(tags or {}), artifacts={"scores.csv": evaluation.table, **artifacts},
+        tags={**(tags or {}), **diverged_tags(evaluation)},
+        artifacts={"scores.csv": evaluation.table, **artifacts},
         description=model_description(ds, hp, method, metrics), fit_seconds=fit_seconds)
 
 

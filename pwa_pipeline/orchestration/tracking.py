@@ -14,6 +14,7 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
+from ..scoring.evaluation import score_text
 from .credentials import mask_credentials, split_credentials, user_and_password
 from .paths import MLFLOW_TRAINING_VIEW, default_mlflow_ui_url, default_tracking_uri
 from .reporting import MODEL
@@ -347,15 +348,16 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
                       ) -> str:
     """What a run scored, and its registered model version: the model, what it was fitted
     on, its headline scores on the held-out experiments (``metrics``, named as
-    `score_metrics` names them; the mean over the outputs), and for a PWA
-    model its sub-models."""
+    `score_metrics` names them; the mean over the outputs; a diverged free run as
+    `score_text` shows it, with where it diverged), and for a PWA model its
+    sub-models."""
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
     shown = [f"{label} NRMSE {metrics[key]:.4g}" for label, key in (
         ("one-step", "one_step_nrmse"), ("free-run", "free_run_nrmse")) if key in metrics]
     if metrics.get("free_run_diverged"):
-        shown.append(f"the free run diverged at sample "
-                     f"{int(metrics['free_run_divergence_sample'])} of held-out experiment "
-                     f"{int(metrics['free_run_divergence_experiment'])}")
+        shown.append(f"free-run NRMSE {score_text(np.nan, 'nrmse', diverged=True)} from "
+                     f"sample {int(metrics['free_run_divergence_sample'])} of held-out "
+                     f"experiment {int(metrics['free_run_divergence_experiment'])}")
     if shown:
         parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs).")
     if f"{MODEL}n_submodels" in metrics:

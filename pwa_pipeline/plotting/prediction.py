@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..datasets.dataset import with_unit
+from ..scoring.evaluation import score_text
 from .style import DIVERGED, MAX_HEIGHT, MAX_SAMPLES, MAX_WIDTH, figure, legend_below, suptitle
 
 if TYPE_CHECKING:
@@ -44,7 +45,8 @@ class PredictionDisplay:
 
     One subplot per output, over the experiment's first 606 samples at most (one KUKA robot
     experiment), each titled with that output's one-step and free-run NRMSE (eq. 21, 4
-    significant digits) and its y axis labelled ``name [unit]``. Up to three outputs are
+    significant digits; a diverged free run's as `score_text` shows it,
+    ``≥ 10 (diverged)``) and its y axis labelled ``name [unit]``. Up to three outputs are
     stacked; more are laid out three rows high in further columns (the robot's six in
     3 × 2).
 
@@ -132,7 +134,7 @@ class PredictionDisplay:
                                 facecolor="none", edgecolor=tint, hatch=hatch, lw=0,
                                 alpha=0.45, label=f"{label} outside the training data")
             ax.set_title(f"{self.y_names[j]}: NRMSE one-step {one['nrmse']:.4g}, free run "
-                         f"{free_row['nrmse']:.4g}" + (" (diverged)" if diverged else ""),
+                         f"{score_text(free_row['nrmse'], 'nrmse', diverged)}",
                          fontsize=8.5, loc="left")
             ax.set_ylabel(with_unit(self.y_names[j], self.units))
             ax.set_xlim(0, n - 1)

@@ -55,18 +55,21 @@ def mean_scores(table: pd.DataFrame) -> pd.DataFrame:
 
 #: Columns of `leaderboard`.
 LEADERBOARD_COLUMNS = ["dataset", "rank", "method", "hparams", "one_step_nrmse", "one_step_r2",
-                       "free_run_nrmse", "free_run_r2", "free_run_diverged"]
+                       "free_run_nrmse", "free_run_r2", "free_run_diverged", "model"]
 
 
 def leaderboard(scores: pd.DataFrame, methods: list[str]) -> pd.DataFrame:
     """Every data set × hyper-parameter set × method in one table, ranked by free run.
 
     ``scores`` has columns dataset, hparams, method, mode, output, nrmse, r2 and diverged
-    (evaluation tables stacked, one per partition and method). Each row holds the
-    output-averaged NRMSE and R² of one-step prediction and free run and whether the free run
-    diverged; ``rank`` orders the rows of a data set by free-run NRMSE (1 is best, ties share
-    a rank, a diverged or non-finite free run ranks last). Rows are sorted by data set (as
-    they come), rank, then method (in the order of ``methods``) and set. No score: no row.
+    (evaluation tables stacked, one per partition and method), and optionally model (what
+    the fitted model is when its method's name does not say it, e.g. a structure search
+    that kept the linear model; ``""`` when it does). Each row holds the output-averaged
+    NRMSE and R² of one-step prediction and free run, whether the free run diverged, and
+    ``model`` (``""`` without that column); ``rank`` orders the rows of a data set by
+    free-run NRMSE (1 is best, ties share a rank, a diverged or non-finite free run ranks
+    last). Rows are sorted by data set (as they come), rank, then method (in the order of
+    ``methods``) and set. No score: no row.
     """
     means = scores[scores["output"] == "mean"]
     if means.empty:  # nothing scored yet: the table's columns, no row
@@ -76,8 +79,12 @@ def leaderboard(scores: pd.DataFrame, methods: list[str]) -> pd.DataFrame:
     wide = means.set_index([*keys, "mode"])[["nrmse", "r2"]].unstack("mode")
     wide.columns = [f"{mode}_{metric}" for metric, mode in wide.columns]
     free = means[means["mode"] == "free_run"].set_index(keys)["diverged"].astype(bool)
-    table = wide.join(free.rename("free_run_diverged")).reset_index()
+    if "model" not in means:  # scores stored before the column existed
+        means = means.assign(model="")
+    notes = means.groupby(keys, sort=False)["model"].first()
+    table = wide.join(free.rename("free_run_diverged")).join(notes).reset_index()
     table["free_run_diverged"] = table["free_run_diverged"].fillna(False).astype(bool)
+    table["model"] = table["model"].fillna("").astype(str)
     finite = table["free_run_nrmse"].where(~table["free_run_diverged"]
                                            & np.isfinite(table["free_run_nrmse"]), np.inf)
     table["rank"] = finite.groupby(table["dataset"], sort=False).rank(method="min").astype(int)

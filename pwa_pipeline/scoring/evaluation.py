@@ -8,9 +8,11 @@ from the end of the warm-up to the end of the experiment, restarted at every exp
 NRMSE (eq. 21), R² (eq. 22, standard form) and RMSE (data units) are computed per output on
 the scored samples of all experiments together, and averaged over outputs (eq. 23–24).
 A free run whose NRMSE exceeds ``divergence`` (10) or is not finite is flagged diverged; its
-number is reported all the same, and `Onset` says where it left the data: the first
+number is kept in the table all the same, and `Onset` says where it left the data: the first
 scored sample whose error exceeds ``divergence`` standard deviations of its output (one
 exists whenever an NRMSE exceeds ``divergence``), and the NRMSE of the samples before it.
+Every page shows a diverged score one way, `score_text`'s: the bound the flag guarantees
+and the word (``≥ 10 (diverged)``), never the number itself.
 
 Data envelope. A model that records its training range (``signal_range_``: a fitted PWARX
 or LinearARX) says, per scored sample and mode, whether its regressor
@@ -111,6 +113,32 @@ class Evaluation:
         if "outside_share" not in self.table:
             return float("nan")
         return self.mean(mode, "outside_share")
+
+
+def score_text(value: float, metric: str, diverged: bool = False,
+               divergence: float = DIVERGENCE) -> str:
+    """A score as every page shows it: to 4 significant digits, or for a diverged run the
+    bound its flag guarantees and the word, never the number itself (a 1e30 NRMSE says no
+    more than that the run left the data, and sets the scale of any chart it enters).
+
+    Parameters
+    ----------
+    value : float
+        The score.
+    metric : {"nrmse", "r2", "rmse"}
+        Its metric: a diverged NRMSE shows as ``"≥ 10 (diverged)"``, R² as
+        ``"≤ -99 (diverged)"`` (R² = 1 − NRMSE², eq. 21–22), RMSE as ``"diverged"`` (in the
+        data's units, it has no bound).
+    diverged : bool, default False
+        Whether the run is flagged diverged (`Evaluation.diverged`).
+    divergence : float, default 10
+        The free-run NRMSE above which a run is flagged diverged.
+    """
+    if not diverged:
+        return f"{value:.4g}"
+    bound = {"nrmse": f"≥ {divergence:.4g} ", "r2": f"≤ {1 - divergence**2:.4g} ",
+             "rmse": ""}[metric]
+    return f"{bound}(diverged)" if bound else "diverged"
 
 
 #: Warm-up samples of the evaluation protocol unless a data set sets its own.

@@ -572,6 +572,38 @@ def test_stability_is_not_certified_when_it_cannot_be():
     np.testing.assert_allclose(switching.spectral_radius, [0.5, 0.5])
 
 
+def test_one_stable_mode_is_certified_by_its_spectral_radius_without_a_solver():
+    # the robot's linear model had ρ = 0.9996 and was shown "not certified"
+    ss = _hand_made(np.array([[[1.8996, -0.89964], [1.0, 0.0]]]))  # poles 0.9996, 0.9
+    np.testing.assert_allclose(np.abs(np.linalg.eigvals(ss.A[0])).max(), 0.9996)
+    report = stability_report(ss, solvers=())  # no LMI solver is needed, nor asked
+    assert report.certified and report.method == "spectral radius"
+    assert report.message.startswith("certified: one mode (a linear model) of spectral "
+                                     "radius 0.9996 < 1")
+    P = report.certificates["P"]
+    np.testing.assert_allclose(ss.A[0].T @ P @ ss.A[0] - P, -np.eye(2), atol=1e-6)
+    assert 0 < report.contraction < 1 and json.dumps(report.to_dict())
+    # one mode of ρ ≥ 1 stays uncertified, by its spectral radius
+    assert not stability_report(_hand_made(np.array([[[1.0, 0.0], [1.0, 0.0]]]))).certified
+
+
+def test_a_solver_that_fails_is_named_in_a_few_words_never_by_its_own_text(monkeypatch):
+    import cvxpy as cp
+
+    def failing(self, solver=None, **options):
+        raise cp.error.SolverError(f"Solver '{solver}' failed. Try another solver, or "
+                                   "solve with verbose=True for more information.")
+
+    monkeypatch.setattr(cp.Problem, "solve", failing)
+    pair = np.array([[[0.5, 0.0], [0.0, 0.5]], [[0.4, 0.0], [0.0, 0.4]]])
+    report = stability_report(_hand_made(pair))
+    assert not report.certified
+    assert "no common quadratic Lyapunov function was found (CLARABEL: failed " \
+           "numerically; SCS: failed numerically)" in report.message
+    assert "Try another solver" not in report.message and "'" not in report.message
+    assert "\n" not in report.message
+
+
 def _flagged(B0, B1, c0=1.0, c1=1.0, split: str = "flag") -> PWAStateSpace:
     """Two modes x⁺ = A_i x + f_i over three output lags of one output (one input entering
     nothing): A_i = diag(B_i, 0.5), f_i = (0, 0, c_i), so x3 is a flag that mode i moves to

@@ -201,6 +201,10 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert eps == float(f"{eps:.4g}")
     evaluations = result.get_asset_check_evaluations()
     assert {e.metadata["partition"].value for e in evaluations} == {"hure_vasak|paper"}
+    assert all(e.description.startswith("partition hure_vasak|paper: ") for e in evaluations)
+    noise = next(e for e in evaluations if e.check_name == "noise_share_below_limit")
+    assert noise.description == (f"partition hure_vasak|paper: noise share "
+                                 f"{model.steps_['clustering'].noise_share_:.1%} (limit 90%)")
     # figures on the asset pages, as Markdown with an inline PNG
     for asset, key in (("pwa_scores", "prediction"), ("clusters", "local models by cluster"),
                        ("pwa_model", "regions"),
@@ -555,6 +559,11 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert pwa_run.data.metrics["model/search_candidates"] == report.n_candidates
     assert pwa_run.data.metrics["model/search_budget_spent"] == 0.0
     assert page_meta["structure chosen"].value == report.choice
+    # what the model is, on its page and in its scores (which carry it to the leaderboard)
+    assert list(page_meta)[0] == "model" and page_meta["model"].value == report.verdict
+    assert report.verdict.startswith("linear kept" if report.linear else "switching")
+    assert set(result.asset_value("pwa_scores")["model"]) == {report.verdict}
+    assert set(result.asset_value("linear_arx_scores")["model"]) == {""}
     assert page_meta["structure per output"].value.count("level (1, 1)") == 2
     # the export works for a searched model too, and the registered model simulates as it
     assert result.asset_value("control_model").state_space.n_modes >= 1
@@ -728,6 +737,61 @@ def test_a_diverged_free_run_logs_where_it_diverged_and_no_score():
     calm = score_metrics(evaluate(_Diverging(ys, at=80), us, ys, warmup=10))
     assert calm["free_run_diverged"] == 0 and "free_run_nrmse" in calm
     assert not any("divergence" in k for k in calm)
+
+
+def test_a_diverged_run_is_shown_one_way_on_every_page():
+    """Dagster's scores and comparison pages, the check, the MLflow run's tags and
+    description all show a diverged free run as the leaderboard does: ≥ 10 (diverged)."""
+    from types import SimpleNamespace
+
+    from pwa_pipeline.orchestration.checks import comparison_results
+    from pwa_pipeline.orchestration.reporting import (
+        diverged_tags,
+        mean_scores_markdown,
+        nrmse_summary,
+    )
+    from pwa_pipeline.orchestration.run_records import method_run
+    from pwa_pipeline.scoring.evaluation import evaluate
+
+    class Fitted(_Diverging):
+        def resolved_params(self):
+            return {}
+
+    rng = np.random.default_rng(0)
+    us = [rng.normal(size=(80, 1)) for _ in range(2)]
+    ys = [rng.normal(size=(80, 2)) for _ in range(2)]
+    ev = evaluate(Fitted(ys, at=37), us, ys, warmup=10, output_names=["q1", "q2"])
+    calm = evaluate(Fitted(ys, at=80), us, ys, warmup=10, output_names=["q1", "q2"])
+    assert ev.mean("free_run") > 1e15  # the number no page shows
+    shown = nrmse_summary(ev.table)  # the scores page
+    assert shown["nrmse free_run mean"] == shown["nrmse free_run q2"] == "≥ 10 (diverged)"
+    assert isinstance(shown["nrmse free_run q1"], float)
+    table = pd.concat([ev.table.assign(method="pwa"), calm.table.assign(method="linear_arx")])
+    page = mean_scores_markdown(table)  # the comparison page
+    pwa_line = next(line for line in page.splitlines() if line.startswith("| pwa"))
+    assert "≥ 10 (diverged)" in pwa_line and "≤ -99 (diverged)" in pwa_line
+    assert "e+" not in page and "diverged" not in page.replace(pwa_line, "")
+    (check,) = comparison_results(table, "sim|paper")
+    assert not check.passed and check.description == (
+        f"partition sim|paper: FAILED: free-run NRMSE of PWA ≥ 10 (diverged), of linear "
+        f"ARX {calm.mean('free_run'):.4g}")
+    assert check.metadata["pwa_free_run_nrmse"].value == "≥ 10 (diverged)"
+    record = method_run(SimpleNamespace(dataset="sim", hparams="paper", warmup=10), "pwa",
+                        Fitted(ys, at=37), ev, SimpleNamespace(convention=None))  # MLflow
+    assert record.tags == {"free_run_nrmse": "≥ 10 (diverged)",
+                           "free_run_r2": "≤ -99 (diverged)"}
+    assert "free-run NRMSE ≥ 10 (diverged) from sample 37 of held-out experiment 1" \
+        in record.description
+    assert diverged_tags(calm) == {}
+    # the command line's summary line, with what a searched model is
+    from pwa_pipeline.orchestration.cli import _summary
+
+    searched = SimpleNamespace(n_submodels_=1, structure_search_=SimpleNamespace(
+        verdict="linear kept (no switching structure beat it)"))
+    line = _summary("sim|auto", SimpleNamespace(asset_value=lambda name: searched), table, 1.0)
+    assert line == (f"sim|auto: 1 PWA sub-model(s) — linear kept (no switching structure "
+                    f"beat it); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
+                    f"{calm.mean('free_run'):.4g} (1.0 s)")
 
 
 def test_registered_model_versions_say_where_they_come_from(paper_run):

@@ -74,6 +74,24 @@ def test_schedule_requests_are_sweep_runs_with_partition_keys():
         assert tags["dagster/partition"] == request.partition_key
 
 
+def test_leaderboard_says_what_a_searched_model_is_in_its_row():
+    rows = [{"dataset": "robot", "hparams": "auto", "method": method, "mode": mode,
+             "output": "mean", "nrmse": 0.6, "r2": 0.64, "diverged": False, "model": note}
+            for method, note in (("pwa", "linear kept: the search stopped at its time limit "
+                                         "before a switching structure beat it"),
+                                 ("linear_arx", "")) for mode in ("one_step", "free_run")]
+    table = leaderboard(pd.DataFrame(rows), list(METHODS))
+    assert table["model"].tolist() == [rows[0]["model"], ""]
+    cells = [[c.strip() for c in line.strip("|").split("|")]
+             for line in leaderboard_markdown(table).splitlines() if line.startswith("|")]
+    assert cells[2][:3] == ["1", "pwa — linear kept: the search stopped at its time limit "
+                                 "before a switching structure beat it", "auto"]
+    assert cells[3][:3] == ["1", "linear_arx", "auto"]
+    # scores stored before the column existed: no note, the method alone
+    old = leaderboard(pd.DataFrame(rows).drop(columns="model"), list(METHODS))
+    assert old["model"].tolist() == ["", ""] and "—" not in leaderboard_markdown(old)
+
+
 def test_leaderboard_ranks_by_free_run_and_puts_diverged_runs_last():
     rows = []
     for method, hparams, one, free, diverged in [

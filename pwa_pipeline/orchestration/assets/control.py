@@ -13,6 +13,7 @@ from ...datasets import Dataset
 from ...methods import METHODS
 from ...plotting import PartitionDisplay, context_title
 from ...pwa import PWARX
+from ..checks import described
 from ..files import atomic_write, inside
 from ..images import to_markdown
 from ..reporting import rounded
@@ -58,6 +59,8 @@ def control_model_asset(partitions_def):
             yield dg.Output(None, metadata={"exported": False, "reason": str(exc)})
             yield dg.AssetCheckResult(check_name="exported", passed=False,
                                       severity=dg.AssetCheckSeverity.WARN,
+                                      description=described(str(context.partition_key),
+                                                            False, f"not exported: {exc}"),
                                       metadata={"partition": str(context.partition_key),
                                                 "reason": str(exc)})
             return
@@ -87,6 +90,8 @@ def control_model_asset(partitions_def):
             "mpt3_script": dg.MetadataValue.path(str(folder / MPT3_FILE)),
             "regions": dg.MetadataValue.md(to_markdown(figure))}))
         yield dg.AssetCheckResult(check_name="exported", passed=True,
+                                  description=described(str(context.partition_key), True,
+                                                        f"{ss.n_modes} region(s) exported"),
                                   metadata={"partition": str(context.partition_key),
                                             "n_modes": ss.n_modes})
 

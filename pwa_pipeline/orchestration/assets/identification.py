@@ -73,7 +73,9 @@ _DESCRIPTIONS = {
     "output_error_refinement": "θ_i refined to minimise the free-run error on the training "
                                "experiments, regions kept (the fitted `refinement` step).",
     "pwa_model": "The fitted PWARX model, what `pwa_scores` scores and MLflow registers. Its "
-                 "page shows its resolved parameters, each output's structure, and two "
+                 "page shows what the model is when a structure search built it (`model`: "
+                 "e.g. the linear model kept, and whether its budget or time limit "
+                 "stopped it), its resolved parameters, each output's structure, and two "
                  "figures: *switching*, the region of each sample of the first held-out "
                  "experiment (one lane per output group), and *regions*, the regions in the "
                  "2-D slice of φ where they differ most.",
@@ -304,10 +306,11 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
 def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                  configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
                  phi: np.ndarray) -> dg.Output:
-    """``pwa_model`` with its page: resolved parameters, each output's structure, the
-    structure search's report or the structured fit's candidates, the ground truth when
-    comparable, and the switching and regions figures (their numbers cached by what the
-    model predicts with, drawn titled with this partition's set)."""
+    """``pwa_model`` with its page: what the model is (the structure search's verdict,
+    first), resolved parameters, each output's structure, the structure search's report
+    or the structured fit's candidates, the ground truth when comparable, and the
+    switching and regions figures (their numbers cached by what the model predicts with,
+    drawn titled with this partition's set)."""
     title = _title(configuration)
     memory = SignedMemory(settings.cache_root(), "model_figures",
                           warn=context.log.warning, salt=figures_fingerprint())
@@ -344,15 +347,19 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                                                 "seconds": "elapsed (s)"})
         rows["held-out NRMSE"] = rows["held-out NRMSE"].astype(object).where(
             rows["held-out NRMSE"].notna(), None)
+        stop = " (its time limit: stopped there)" if report.time_limited else \
+            " (its budget: stopped there)" if report.budget_spent else ""
         found |= {"structure chosen": dg.MetadataValue.md(report.choice),
                   "structure search": dg.MetadataValue.md(
                       f"{report.n_candidates} candidates measured in {report.seconds:.1f} s"
-                      f"{' (its budget: stopped there)' if report.budget_spent else ''}; those "
+                      f"{stop}; those "
                       f"kept, refined and chosen (every candidate is in the MLflow run's "
                       f"`structure_search.csv`):\n\n"
                       f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
     figures = model_figures(inputs, model, data, title)
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
+        # what the model is, first: the search's verdict (e.g. the linear model kept)
+        **({} if report is None else {"model": report.verdict}),
         "n_submodels": model.n_submodels_, "output_groups": len(model.groups_),
         "fit_seconds": sum(model.timings_.values()),
         "steps_from_cache": ", ".join(sorted(cached)) or "none",

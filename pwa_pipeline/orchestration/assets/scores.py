@@ -11,8 +11,7 @@ from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import METHODS, Method
 from ...plotting import PredictionDisplay, context_title
-from ...scoring.comparison import mean_scores
-from ...scoring.evaluation import Evaluation, evaluate
+from ...scoring.evaluation import Evaluation, evaluate, score_text
 from ..caches import SignedMemory
 from ..checks import (
     COMPARISON_CHECKS,
@@ -25,9 +24,9 @@ from ..mlflow_models import (
     example_table,
     training_dataset,
 )
-from ..model_facts import prediction_key
+from ..model_facts import model_note, prediction_key
 from ..reporting import (
-    markdown,
+    mean_scores_markdown,
     nrmse_summary,
     rounded,
 )
@@ -59,7 +58,9 @@ def scores_asset(method: Method, partitions_def):
                           f"alike. Its page shows the *prediction* figure: measured output, "
                           f"one-step prediction and free run of the first held-out "
                           f"experiment, per output in the data's units, titled with the data "
-                          f"set, set and method.")
+                          f"set, set and method. Its table's column ``model`` says what the "
+                          f"model is when the method's name does not (a structure search "
+                          f"that kept the linear model), for the leaderboard.")
     def scores(context: dg.AssetExecutionContext, mlflow: MLflowTracker,
                settings: PipelineSettings, configuration: Configuration,
                raw_benchmark: Dataset, model, **control: ControlModel | None
@@ -77,7 +78,7 @@ def scores_asset(method: Method, partitions_def):
                 configuration.dataset, configuration.hparams, method.label)).figure_
         png = to_png(figure)
         context.log.info(f"{method.label}: one-step NRMSE {ev.mean('one_step'):.4g}, free run "
-                         f"{ev.mean('free_run'):.4g}{' (diverged)' if ev.diverged() else ''}")
+                         f"{score_text(ev.mean('free_run'), 'nrmse', ev.diverged())}")
         record = method_run(configuration, method.name, model, ev, data,
                             control=control.get("control_model"),
                             tags={"dagster_run_id": context.run.run_id,
@@ -95,13 +96,15 @@ def scores_asset(method: Method, partitions_def):
                                             data.y_names, configuration.warmup),
                 training=training_dataset(data)))
         log_seconds = time.perf_counter() - t0
+        note = model_note(model)
         context.add_output_metadata(rounded({
+            **({"model": note} if note else {}),
             "prediction": dg.MetadataValue.md(png_markdown(png, figure.get_suptitle())),
             "scores_from_cache": memory.hits > 0,
             "mlflow_run_id": run.run_id, "mlflow_run": dg.MetadataValue.url(mlflow.run_url(run)),
             "mlflow_log_seconds": log_seconds,
             "free_run_diverged": ev.diverged(), **nrmse_summary(ev.table)}))
-        return ev.table
+        return ev.table.assign(model=note)
 
     return scores
 
@@ -114,7 +117,8 @@ def comparison_asset(partitions_def):
         """Every method's scores side by side (one-step and free run)."""
         table = pd.concat([scores[name].assign(method=name) for name in METHODS],
                           ignore_index=True)
-        yield dg.Output(table, metadata={"mean_scores": markdown(mean_scores(table))})
+        yield dg.Output(table, metadata={
+            "mean_scores": dg.MetadataValue.md(mean_scores_markdown(table))})
         yield from comparison_results(table, str(context.partition_key))
 
     return comparison

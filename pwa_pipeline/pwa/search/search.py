@@ -167,7 +167,8 @@ class SearchReport:
         Each output's structure as the table writes it (form, orders, regions).
     linear : bool
         Whether every output kept its linear model: the search returns the linear ARX
-        model (no switching structure beat it on the held-out experiments).
+        model (no switching structure beat it on the held-out experiments). `verdict`
+        says it in a line.
     n_candidates : int
         Candidate structures measured (least squares and a held-out free run each).
     budget_spent : bool
@@ -193,6 +194,22 @@ class SearchReport:
     validation_nrmse: float
     linear_nrmse: float
     seconds: float
+
+    @property
+    def verdict(self) -> str:
+        """What the model is, in a line (the leaderboard's row and the model's page show it
+        beside the method's name): the linear model kept or a switching structure, and,
+        when the budget ``max_candidates`` or the time limit ``max_seconds`` stopped the
+        search, that it did."""
+        if self.time_limited:
+            stop = "the search stopped at its time limit"
+        elif self.budget_spent:
+            stop = "the search spent its budget of candidates"
+        else:
+            return ("linear kept (no switching structure beat it)" if self.linear
+                    else "switching structure kept (it beats the linear model)")
+        return (f"linear kept: {stop} before a switching structure beat it" if self.linear
+                else f"switching structure kept: {stop}, the best found kept")
 
     def summary(self) -> pd.DataFrame:
         """The rows that decided: the best linear candidate of each coupling, the variables

@@ -155,6 +155,7 @@ def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
     assert report.linear is True
     assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert "Linear ARX: no switching structure beat it" in report.choice
+    assert report.verdict == "linear kept (no switching structure beat it)"
     assert report.validation_nrmse == report.linear_nrmse
     # with the best switching candidate's number, the one the table lists: none was
     # shortlisted (none lowered the first block's error by min_gain), so the number is the
@@ -337,6 +338,8 @@ def test_a_time_limit_after_the_proposals_keeps_the_best_measured_candidate(monk
         model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
     report = model.structure_search_
     assert report.time_limited and report.linear is False
+    assert report.verdict == ("switching structure kept: the search stopped at its time "
+                              "limit, the best found kept")
     assert model.structure_fit_.outputs[0].n_regions == 2
     assert report.validation_nrmse < 0.8 * report.linear_nrmse
     unrefined = report.table[report.table.outcome == "not refined: time limit reached"]
@@ -355,6 +358,8 @@ def test_a_spent_budget_keeps_the_best_candidate_measured_and_says_so():
     assert (report.n_candidates, report.budget_spent, report.time_limited) == (6, True, False)
     assert (report.table.stage == "scheduled").sum() == 2 + 1  # two measured, one kept
     assert "Budget of 6 candidates spent: the best measured kept" in report.choice
+    assert report.verdict == ("switching structure kept: the search spent its budget of "
+                              "candidates, the best found kept")
     (out,) = model.structure_fit_.outputs
     assert out.n_regions == 2 and out.region_of.weights[0][:2].tolist() == [1.0, -1.0]
     assert report.validation_nrmse < 0.8 * report.linear_nrmse
@@ -369,6 +374,9 @@ def test_a_spent_budget_on_a_linear_result_says_why_linear_was_kept():
                       "experiments; stopped by the budget of 4 candidates)")
     assert "No switching candidate was measured (stopped by the budget of 4 candidates)." \
         in model.structure_search_.choice
+    assert model.structure_search_.verdict == ("linear kept: the search spent its budget of "
+                                               "candidates before a switching structure "
+                                               "beat it")
 
 
 def test_the_same_data_give_the_same_model_on_a_busy_machine():
