@@ -3,6 +3,7 @@ sequence, its big-M constants are the exact box bounds, its closed loop tracks a
 reference on the paper's system, and an infeasible problem says why."""
 
 import itertools
+import re
 import time
 
 import numpy as np
@@ -304,6 +305,27 @@ def test_infeasible_horizon_names_the_envelope():
         HybridMPC(ss, 4).solve(x0, [0.0])
     with pytest.raises(ValueError, match="at sample 0: the MPC problem is infeasible"):
         HybridMPC(ss, 4).closed_loop(x0, [0.0], steps=3)
+
+
+def test_an_unreachable_reference_is_named_not_blamed_on_the_horizon(tiny):
+    """Chasing y_ref = 100 (the model's outputs over the envelope lie in [−2.9, 2.5]) drives
+    the state to the envelope's edge until no input keeps it inside: the message names the
+    reference as out of reach, with the range, instead of telling to shorten a horizon of 1
+    or to start farther inside; an infeasible state with a reference in range is blamed on
+    the envelope whatever the reference."""
+    mpc = HybridMPC(tiny, 1)
+    np.testing.assert_allclose(mpc.output_range(), ([-2.9], [2.5]))
+    with pytest.raises(ValueError) as info:
+        mpc.closed_loop([0.0, 0.0], [100.0], steps=20)
+    message = str(info.value)
+    assert re.search(r"^at sample \d+: the MPC problem is infeasible .*: the reference is out "
+                     r"of the model's reach: y_ref = 100 for output y1 \(step 1\) is outside "
+                     r"\[-2\.9, 2\.5\], the range of its outputs over the data envelope", message)
+    assert "Set a reference inside that range" in message and "horizon" not in message
+    np.testing.assert_allclose(mpc.closed_loop([0.0, 0.0], [0.9], steps=20).y[-1], [0.9])
+    ss = _siso([[2.0, 0.1, 0.0]], [(np.zeros((0, 3)), np.zeros(0))], y_range=(-1.0, 1.0))
+    with pytest.raises(ValueError, match=r"whatever the input .* and whatever the reference"):
+        HybridMPC(ss, 4).solve([0.3, 0.0], [0.5])
 
 
 def test_bad_arguments_are_named(tiny):

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..state_space import TIE_TOL, PWAStateSpace
-from .formulation import MLDProgram
+from .formulation import MLDProgram, affine_range
 
 #: What the input term of the cost penalises: the move u_k − u_{k−1} or the input u_k.
 INPUT_PENALTIES = ("delta", "level")
@@ -318,8 +318,10 @@ class HybridMPC:
         ValueError
             If x is outside the envelope, an argument has the wrong shape, or the problem is
             infeasible: the message gives the solver's status and the cause, i.e. the input
-            bounds (naming ``u_min`` or ``u_max``) or the envelope (the number of steps the
-            state can be kept inside it from x).
+            bounds (naming ``u_min`` or ``u_max``), a reference outside the model's reach
+            (outside `output_range`, which steering towards drives the state to the
+            envelope's edge), or the envelope (the number of steps the state can be kept
+            inside it from x).
         RuntimeError
             If HiGHS stops without a plan for another reason (time limit, solver error).
         """
@@ -335,7 +337,7 @@ class HybridMPC:
         seconds = time.perf_counter() - start
         if v is None:
             if res.status == 2:
-                raise ValueError(self._infeasible_message(x))
+                raise ValueError(self._infeasible_message(x, ref))
             if res.status == 1:
                 raise RuntimeError(
                     f"HiGHS found no plan within the time limit of {self.time_limit:g} s "
@@ -373,9 +375,27 @@ class HybridMPC:
                                    probe.previous_input(x), probe.mip_rel_gap, probe.time_limit)
         return v is not None
 
-    def _infeasible_message(self, x: np.ndarray) -> str:
-        """Why the program from x is infeasible: which input bound, or how many steps the
-        state can be kept inside the envelope (found by solving relaxed programs)."""
+    def output_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """The range of each output over the data envelope: the smallest and largest
+        C_i x + g_i of any mode i over the envelope's box of x.
+
+        Every predicted output y_1 … y_N is such a value (its state is kept inside the
+        envelope), so a reference outside this range cannot be reached from any state.
+
+        Returns
+        -------
+        low, high : ndarray of shape (m,)
+        """
+        n, ss = self.ss.n_states, self.ss
+        lower, upper = (b[:n] for b in ss.envelope)
+        ranges = [affine_range(ss.C[i], ss.g[i], lower, upper) for i in range(ss.n_modes)]
+        return (np.min([low for low, _ in ranges], axis=0),
+                np.max([high for _, high in ranges], axis=0))
+
+    def _infeasible_message(self, x: np.ndarray, ref: np.ndarray) -> str:
+        """Why the program from x is infeasible: which input bound, a reference out of the
+        model's reach, or how many steps the state can be kept inside the envelope (found by
+        solving relaxed programs)."""
         ss, N = self.ss, self.horizon
         n = ss.n_states
         lower, upper = (b[n:] for b in ss.envelope)
@@ -403,10 +423,26 @@ class HybridMPC:
             if not self._feasible(x, h, self.u_min, self.u_max):
                 break
             feasible_steps = h
+        kept = (f"it can for at most {feasible_steps} step(s) from this x" if feasible_steps
+                else "the model's step from this x leaves it whatever the input")
+        low, high = self.output_range()
+        outside = (ref < low) | (ref > high)
+        if np.any(outside):
+            # tracking is a cost, so the reference alone never makes the program infeasible;
+            # steering towards one out of reach is what brings the state to the edge
+            k, p = (int(i) for i in np.argwhere(outside)[0])
+            return (head + f"the reference is out of the model's reach: y_ref = "
+                    f"{ref[k, p]:.6g} for output {ss.output_names[p]} (step {k + 1}) is "
+                    f"outside [{low[p]:.6g}, {high[p]:.6g}], the range of its outputs over the "
+                    f"data envelope. Steering towards it brings the state to the envelope's "
+                    f"edge, where it cannot be kept inside for {N} more step(s) ({kept}). Set "
+                    f"a reference inside that range")
+        advice = ("Shorten the horizon or start" if feasible_steps else "Start")
         return (head + f"the state cannot be kept inside the data envelope for the horizon of "
-                f"{N} step(s) whatever the input in [{fmt(self.u_min)}, {fmt(self.u_max)}]: "
-                f"it can for at most {feasible_steps} step(s) from this x. Shorten the "
-                f"horizon or start from a state farther inside the envelope")
+                f"{N} step(s) whatever the input in [{fmt(self.u_min)}, {fmt(self.u_max)}] "
+                f"and whatever the reference (a cost, not a constraint): {kept}. {advice} "
+                f"from a state farther inside the envelope (in a loop, a reference near its "
+                f"edge can steer the state there)")
 
     def closed_loop(self, x0, y_ref, steps: int, u_prev=None) -> ClosedLoop:
         """Receding-horizon control of the model itself: at each sample solve, apply the
