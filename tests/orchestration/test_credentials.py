@@ -45,3 +45,34 @@ def test_credentials_move_to_mlflow_variables_and_the_probe_reads_them(monkeypat
     assert url == "http://host:5000/" and base64.b64decode(token) == b"ana:s@cret"
     assert credentials_to_environment("http://other:5000") == "http://other:5000"
     assert os.environ[USERNAME_ENV] == "ana"  # a URI without credentials leaves them
+
+
+class _Store:
+    def __init__(self, url: str):
+        self.url = url
+
+    def root(self) -> str:
+        return self.url
+
+    def cache_root(self) -> str:
+        return self.url + "/cache"
+
+    def uri(self) -> str:
+        return self.url
+
+
+def test_the_run_configuration_sent_to_dask_workers_holds_no_password():
+    """``--executor dask`` gives its workers the stores as run configuration, which every
+    run stores and the UI shows: a store or tracking URL holding a password is left out
+    (the workers read their own environment), one without is passed on."""
+    from pwa_pipeline.orchestration.dask_sweep import worker_run_config
+
+    secret = worker_run_config({"io_manager": _Store("sftp://ana:s3cret@host/pwa"),
+                                "settings": _Store("sftp://ana:s3cret@host/pwa"),
+                                "mlflow": _Store("http://ana:s3cret@host:5000")})
+    assert "s3cret" not in repr(secret)
+    plain = worker_run_config({"io_manager": _Store("/srv/pwa"), "settings": _Store("/srv/pwa"),
+                               "mlflow": _Store("http://host:5000")})["resources"]
+    assert plain == {"io_manager": {"config": {"base_dir": "/srv/pwa"}},
+                     "settings": {"config": {"cache_dir": "/srv/pwa/cache"}},
+                     "mlflow": {"config": {"tracking_uri": "http://host:5000"}}}
