@@ -31,6 +31,7 @@ from .signed_pickles import signing_key
 def run(args: argparse.Namespace) -> int:
     """Materialise the requested partitions and print their comparison tables."""
     import dagster as dg
+    from mlflow.exceptions import MlflowException
 
     from .dask_sweep import step_failures
     from .definitions import partitions_of
@@ -121,6 +122,9 @@ def run(args: argparse.Namespace) -> int:
                         if (url := tracker.experiment_url(dataset)) is not None)
     except dg.Failure as exc:  # a tracking server gone since the start: the runs say so
         links = f"     (none: {exc.description})\n"
+    except MlflowException as exc:  # one that answers its probe but not its API
+        links = (f"     (none: MLflow tracking server {uri} answers its health probe but "
+                 f"not its API: {str(exc).splitlines()[0]})\n")
     print(f"""
 Stores
   Dagster instance : {home}

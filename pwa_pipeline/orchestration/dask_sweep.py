@@ -116,16 +116,15 @@ def _missing_stores(stores: list[str]) -> list[str]:
 def worker_run_config(resources: Mapping[str, object]) -> dict:
     """Run configuration giving the workers the stores this process resolved from its own
     settings and environment (a worker's may differ): the asset store, the cache folder and
-    the MLflow tracking URI. A tracking URI holding a password is left out (run configuration
-    is shown in the Dagster UI): the workers then read ``$MLFLOW_TRACKING_URI`` of their own
-    environment."""
-    uri = resources["mlflow"].uri()
-    resources_config = {
-        "io_manager": {"config": {"base_dir": str(resources["io_manager"].root())}},
-        "settings": {"config": {"cache_dir": str(resources["settings"].cache_root())}}}
-    if urllib.parse.urlsplit(uri).password is None:
-        resources_config["mlflow"] = {"config": {"tracking_uri": uri}}
-    return {"resources": resources_config}
+    the MLflow tracking URI. One holding a password is left out (run configuration is stored
+    with the run and shown in the Dagster UI): the workers then read ``$PWA_STORAGE`` or
+    ``$MLFLOW_TRACKING_URI`` of their own environment."""
+    given = {("io_manager", "base_dir"): str(resources["io_manager"].root()),
+             ("settings", "cache_dir"): str(resources["settings"].cache_root()),
+             ("mlflow", "tracking_uri"): resources["mlflow"].uri()}
+    return {"resources": {name: {"config": {field: value}}
+                          for (name, field), value in given.items()
+                          if urllib.parse.urlsplit(value).password is None}}
 
 
 def step_failures(instance: dg.DagsterInstance, run_id: str) -> list[str]:

@@ -52,12 +52,15 @@ def was_interrupted(result) -> bool:
 def cli_definitions(tracking_uri: str = "") -> dg.Definitions:
     """The code location's definitions as the command line runs them: read now (a data set
     may have been registered since import), with the MLflow store at ``tracking_uri`` when
-    given (``--tracking-uri``)."""
+    given (``--tracking-uri``). Credentials in it go to the environment
+    (`credentials_to_environment`), never into the configuration that runs store."""
+    from .credentials import credentials_to_environment
     from .definitions import build_definitions
     from .tracking import MLflowTracker
 
     if tracking_uri:
-        return build_definitions(mlflow=MLflowTracker(tracking_uri=tracking_uri))
+        return build_definitions(
+            mlflow=MLflowTracker(tracking_uri=credentials_to_environment(tracking_uri)))
     return build_definitions()
 
 

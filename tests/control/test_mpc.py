@@ -3,12 +3,17 @@ sequence, its big-M constants are the exact box bounds, its closed loop tracks a
 reference on the paper's system, and an infeasible problem says why."""
 
 import itertools
+import re
+import time
 
 import numpy as np
 import pytest
+import scipy.optimize
 from scipy.optimize import linprog
 
 from pwa_pipeline.control import HybridMPC, PWAStateSpace
+from pwa_pipeline.control.mpc import formulation
+from pwa_pipeline.control.mpc.controller import DEFAULT_TIME_LIMIT, MAX_HORIZON
 from pwa_pipeline.control.mpc.formulation import STATE_MARGIN, affine_range
 
 
@@ -302,6 +307,27 @@ def test_infeasible_horizon_names_the_envelope():
         HybridMPC(ss, 4).closed_loop(x0, [0.0], steps=3)
 
 
+def test_an_unreachable_reference_is_named_not_blamed_on_the_horizon(tiny):
+    """Chasing y_ref = 100 (the model's outputs over the envelope lie in [−2.9, 2.5]) drives
+    the state to the envelope's edge until no input keeps it inside: the message names the
+    reference as out of reach, with the range, instead of telling to shorten a horizon of 1
+    or to start farther inside; an infeasible state with a reference in range is blamed on
+    the envelope whatever the reference."""
+    mpc = HybridMPC(tiny, 1)
+    np.testing.assert_allclose(mpc.output_range(), ([-2.9], [2.5]))
+    with pytest.raises(ValueError) as info:
+        mpc.closed_loop([0.0, 0.0], [100.0], steps=20)
+    message = str(info.value)
+    assert re.search(r"^at sample \d+: the MPC problem is infeasible .*: the reference is out "
+                     r"of the model's reach: y_ref = 100 for output y1 \(step 1\) is outside "
+                     r"\[-2\.9, 2\.5\], the range of its outputs over the data envelope", message)
+    assert "Set a reference inside that range" in message and "horizon" not in message
+    np.testing.assert_allclose(mpc.closed_loop([0.0, 0.0], [0.9], steps=20).y[-1], [0.9])
+    ss = _siso([[2.0, 0.1, 0.0]], [(np.zeros((0, 3)), np.zeros(0))], y_range=(-1.0, 1.0))
+    with pytest.raises(ValueError, match=r"whatever the input .* and whatever the reference"):
+        HybridMPC(ss, 4).solve([0.3, 0.0], [0.5])
+
+
 def test_bad_arguments_are_named(tiny):
     with pytest.raises(ValueError, match="horizon must be"):
         HybridMPC(tiny, 0)
@@ -320,3 +346,73 @@ def test_bad_arguments_are_named(tiny):
         mpc.solve([0.0, 0.0], [[0.0], [0.0], [0.0]])
     assert tiny.state_names[1] == "u1(k-1)"
     np.testing.assert_array_equal(mpc.previous_input([0.1, -0.4]), [-0.4])
+
+
+# --- bounded cost -------------------------------------------------------------------------
+
+def test_a_horizon_above_the_limit_is_refused_at_once(tiny):
+    """``HybridMPC(horizon=10**6)`` built a program of millions of rows without end; the
+    limit is checked before anything is built, and the largest horizon allowed builds."""
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=rf"horizon = 1000000 is above the limit of "
+                                         rf"{MAX_HORIZON} samples: .* binaries"):
+        HybridMPC(tiny, 10**6)
+    assert time.perf_counter() - t0 < 1.0
+    with pytest.raises(ValueError, match="above the limit"):
+        HybridMPC(tiny, MAX_HORIZON + 1)
+    assert HybridMPC(tiny, MAX_HORIZON).horizon == MAX_HORIZON
+
+
+def _stopped_by_the_clock(monkeypatch, with_plan: bool) -> list[dict]:
+    """Make HiGHS report its time limit reached, when it has one (with the plan it solved,
+    or none), and record the options it was given."""
+    options = []
+
+    def milp(*args, **kwargs):
+        options.append(kwargs["options"])
+        res = scipy.optimize.milp(*args, **kwargs)
+        if "time_limit" not in kwargs["options"]:
+            return res
+        res.status = 1
+        res.message = "Time limit reached. (HiGHS Status 13: Time limit reached)"
+        if not with_plan:
+            res.x = None
+        return res
+
+    monkeypatch.setattr(formulation, "milp", milp)
+    return options
+
+
+def test_every_solve_has_a_time_limit_by_default(tiny, monkeypatch):
+    """An 8-mode MPC at horizon 10 took 73 s CPU with no limit: HiGHS now gets
+    `DEFAULT_TIME_LIMIT` seconds per solve unless told otherwise."""
+    options = _stopped_by_the_clock(monkeypatch, with_plan=True)
+    mpc = HybridMPC(tiny, 3)
+    assert mpc.time_limit == DEFAULT_TIME_LIMIT
+    mpc.solve([0.0, 0.0], [0.5])
+    assert options[-1]["time_limit"] == DEFAULT_TIME_LIMIT
+    HybridMPC(tiny, 3, time_limit=2.5).solve([0.0, 0.0], [0.5])
+    assert options[-1]["time_limit"] == 2.5
+    HybridMPC(tiny, 3, time_limit=None).solve([0.0, 0.0], [0.5])
+    assert "time_limit" not in options[-1]
+
+
+def test_the_time_limit_reached_is_said_in_one_line_of_our_own(tiny, monkeypatch):
+    """With a plan: returned, not optimal, its message one line saying the limit was hit;
+    without: a RuntimeError in one line naming the limit and what to change. Never HiGHS's
+    own text."""
+    _stopped_by_the_clock(monkeypatch, with_plan=True)
+    plan = HybridMPC(tiny, 3, time_limit=0.5).solve([0.0, 0.0], [0.5])
+    assert plan.status == 1 and not plan.optimal
+    assert plan.message.startswith("time limit of 0.5 s reached: the best plan found")
+    assert "HiGHS Status" not in plan.message and "\n" not in plan.message
+    _stopped_by_the_clock(monkeypatch, with_plan=False)
+    with pytest.raises(RuntimeError) as info:
+        HybridMPC(tiny, 3, time_limit=0.5).solve([0.0, 0.0], [0.5])
+    message = str(info.value)
+    assert message.startswith("HiGHS found no plan within the time limit of 0.5 s")
+    assert "raise time_limit or shorten the horizon" in message
+    assert "HiGHS Status" not in message and "\n" not in message
+    monkeypatch.undo()
+    plan = HybridMPC(tiny, 3).solve([0.0, 0.0], [0.5])
+    assert plan.optimal and plan.message == "optimal (relative MIP gap 1e-06)"

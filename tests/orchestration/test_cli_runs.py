@@ -1,10 +1,13 @@
 """``run``: partitions one after the other in this process, on shared stores; a failure or
 an interrupt keeps what was computed (Ctrl-C to a real run: tests/system/test_processes.py)."""
 
+import base64
 import os
 import shutil
 import subprocess
 import sys
+import threading
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import dagster as dg
@@ -103,17 +106,26 @@ def test_a_store_that_lives_only_in_memory_is_refused_before_any_run(tmp_path, m
     assert not (tmp_path / ".dagster_home").exists()  # nothing started
 
 
+def _undo_mlflow_environment(monkeypatch) -> None:
+    """Unset MLflow's URI and credential variables for the test, and have what the command
+    sets in them (`credentials_to_environment`) undone after it."""
+    for name in ("MLFLOW_TRACKING_URI", "MLFLOW_TRACKING_USERNAME", "MLFLOW_TRACKING_PASSWORD"):
+        monkeypatch.setenv(name, "")  # recorded, so that the test's end restores it
+        monkeypatch.delenv(name)
+
+
 def test_a_tracking_server_that_does_not_answer_stops_the_command_in_one_line(
         tmp_path, monkeypatch, capsys):
     from pwa_pipeline.orchestration.cli import main
 
     monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
     monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    _undo_mlflow_environment(monkeypatch)
     assert main(["run", "--partition", "hure_vasak|paper", "--tracking-uri",
                  "http://ana:s3cret@127.0.0.1:9"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("pwa-pipeline run: error: MLflow tracking server "
-                          "http://ana:***@127.0.0.1:9 cannot be reached")
+                          "http://127.0.0.1:9 cannot be reached")
     assert "s3cret" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "storage").exists()  # no run started
 
@@ -189,3 +201,57 @@ def test_a_local_cluster_without_workers_is_refused_by_the_parser(value, tmp_pat
     assert (f"argument --workers: must be a whole number of worker processes >= 1, got "
             f"{value!r}" in capsys.readouterr().err)
     assert not (tmp_path / "home").exists()  # nothing started
+
+
+class _HealthOnly(BaseHTTPRequestHandler):
+    """A tracking server whose /health answers 200 to ana:s3cret; its API answers 503."""
+
+    def do_GET(self):  # noqa: N802
+        expected = "Basic " + base64.b64encode(b"ana:s3cret").decode()
+        ok = self.path == "/health" and self.headers.get("Authorization") == expected
+        self.send_response(200 if ok else 503)
+        self.end_headers()
+        self.wfile.write(b"OK")
+
+    do_POST = do_GET  # noqa: N815
+
+    def log_message(self, *args):
+        pass
+
+
+def test_a_password_in_the_tracking_uri_is_never_stored_in_a_run(tmp_path, monkeypatch,
+                                                                 capsys):
+    """``run --tracking-uri http://ana:s3cret@host``: the runs it launches (and the
+    leaderboard's) hold the URI masked, never the password, in their run configuration,
+    tags and job snapshot (all shown in the Dagster UI); the password reaches MLflow
+    through its own environment variables."""
+    from pwa_pipeline.orchestration.cli import main
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), _HealthOnly)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    uri = f"http://ana:s3cret@127.0.0.1:{server.server_address[1]}"
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    _undo_mlflow_environment(monkeypatch)
+    d = make_hure_vasak(n_samples=300, seed=7)
+    pd.DataFrame({"u1": d.u_train[0][:, 0], "u2": d.u_train[0][:, 1],
+                  "y1": d.y_train[0][:, 0], "y2": d.y_train[0][:, 1]}).to_csv(
+        tmp_path / "plant.csv", index=False)
+    assert main(["add-dataset", "plant", str(tmp_path / "plant.csv"), "--u", "u1", "u2",
+                 "--y", "y1", "y2"]) == 0
+    (tmp_path / "plant.csv").write_text("a,b\n1,2\n")  # the run starts, then fails at once
+    try:
+        # the probe passed (with the credentials from the environment) and the run started
+        assert main(["run", "--partition", "plant|default", "--tracking-uri", uri]) == 1
+    finally:
+        server.shutdown()
+    out = capsys.readouterr()
+    assert "s3cret" not in out.out + out.err
+    instance = dg.DagsterInstance.get()
+    runs = instance.get_runs()
+    assert {r.job_name for r in runs} >= {"sweep"}
+    for run in runs:
+        stored = [dg.serialize_value(run.run_config), dg.serialize_value(run.tags),
+                  dg.serialize_value(instance.get_job_snapshot(run.job_snapshot_id))]
+        assert not [s for s in stored if "s3cret" in s], run.job_name

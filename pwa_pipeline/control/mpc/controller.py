@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..state_space import TIE_TOL, PWAStateSpace
-from .formulation import MLDProgram
+from .formulation import MLDProgram, affine_range
 
 #: What the input term of the cost penalises: the move u_k − u_{k−1} or the input u_k.
 INPUT_PENALTIES = ("delta", "level")
@@ -16,6 +16,16 @@ INPUT_PENALTIES = ("delta", "level")
 #: Default share of the input weight against the output weight (both in half-widths of the
 #: envelope's range of the channel).
 DEFAULT_INPUT_WEIGHT = 0.1
+
+#: The longest horizon accepted (samples). The program has one binary per mode and step,
+#: (N + 1)·s, and HiGHS's branch and bound over them grows exponentially with N (an 8-mode
+#: model at N = 10 took 73 s of CPU); its rows grow linearly (about 7,000 per 100 steps of
+#: a 4-mode model), so N = 10⁶ built for hours before solving anything.
+MAX_HORIZON = 200
+
+#: Seconds HiGHS may take per solve unless ``time_limit`` says otherwise; when reached, the
+#: best plan found is returned, not proven optimal.
+DEFAULT_TIME_LIMIT = 10.0
 
 _STATUS = {0: "optimal", 1: "time or iteration limit reached", 2: "infeasible",
            3: "unbounded", 4: "solver error"}
@@ -41,7 +51,8 @@ class MPCSolution:
         `scipy.optimize.milp`'s status: 0 optimal, 1 time limit reached with a feasible
         plan (then ``optimal`` is False).
     message : str
-        The solver's message.
+        One line: ``optimal (relative MIP gap …)``, or ``time limit of … s reached: the
+        best plan found, …`` (never the solver's own text).
     optimal : bool
         Whether HiGHS proved the plan optimal (to the relative MIP gap).
     seconds : float
@@ -105,7 +116,9 @@ class HybridMPC:
     ss : PWAStateSpace
         The model, e.g. ``model.to_state_space()`` or ``PWAStateSpace.from_json(...)``.
     horizon : int
-        N ≥ 1, the number of inputs planned (and of predicted outputs in the cost).
+        N, the number of inputs planned (and of predicted outputs in the cost), from 1 to
+        `MAX_HORIZON` (200): the program has one binary per mode and step, and HiGHS's
+        search over them grows exponentially with N.
     Q : float or array-like of shape (m,), optional
         Weight of each output's absolute tracking error. Default: 1 / the half-width of the
         output's range in the envelope (so an error counts in units of that range and
@@ -120,9 +133,10 @@ class HybridMPC:
         Penalise |u_k − u_{k−1}| (no steady offset when tracking) or |u_k|.
     mip_rel_gap : float, default 1e-6
         HiGHS's relative optimality gap: the plan's cost is within this share of the optimum.
-    time_limit : float, optional
-        Seconds HiGHS may take per solve; when reached, the best plan found is returned with
-        ``optimal=False`` (an error if none was found).
+    time_limit : float or None, default `DEFAULT_TIME_LIMIT` (10 s)
+        Seconds HiGHS may take per solve (each sample of ``closed_loop`` gets its own);
+        when reached, the best plan found is returned with ``optimal=False`` and a message
+        saying so (a ``RuntimeError`` if none was found). None: no limit.
 
     Attributes
     ----------
@@ -136,7 +150,8 @@ class HybridMPC:
     Raises
     ------
     ValueError
-        If the horizon is not a whole number ≥ 1, a weight is negative or has the wrong
+        If the horizon is not a whole number from 1 to `MAX_HORIZON`, the time limit is not
+        a number of seconds > 0, a weight is negative or has the wrong
         shape, or an input bound is outside the envelope or above the other.
 
     Examples
@@ -160,11 +175,17 @@ class HybridMPC:
 
     def __init__(self, ss: PWAStateSpace, horizon: int, Q=None, R=None, u_min=None,
                  u_max=None, *, input_penalty: str = "delta", mip_rel_gap: float = 1e-6,
-                 time_limit: float | None = None):
+                 time_limit: float | None = DEFAULT_TIME_LIMIT):
         if not isinstance(ss, PWAStateSpace):
             raise ValueError(f"ss must be a PWAStateSpace, got {type(ss).__name__}")
         if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
             raise ValueError(f"horizon must be a whole number >= 1, got {horizon!r}")
+        if horizon > MAX_HORIZON:
+            raise ValueError(
+                f"horizon = {horizon} is above the limit of {MAX_HORIZON} samples: the "
+                f"program would have {(int(horizon) + 1) * ss.n_modes:,} binaries (one per "
+                f"mode and step), whose search HiGHS cannot finish, and building it alone "
+                f"grows with the horizon; plan over fewer samples")
         if input_penalty not in INPUT_PENALTIES:
             raise ValueError(f"input_penalty must be one of {INPUT_PENALTIES}, got "
                              f"{input_penalty!r}")
@@ -297,8 +318,10 @@ class HybridMPC:
         ValueError
             If x is outside the envelope, an argument has the wrong shape, or the problem is
             infeasible: the message gives the solver's status and the cause, i.e. the input
-            bounds (naming ``u_min`` or ``u_max``) or the envelope (the number of steps the
-            state can be kept inside it from x).
+            bounds (naming ``u_min`` or ``u_max``), a reference outside the model's reach
+            (outside `output_range`, which steering towards drives the state to the
+            envelope's edge), or the envelope (the number of steps the state can be kept
+            inside it from x).
         RuntimeError
             If HiGHS stops without a plan for another reason (time limit, solver error).
         """
@@ -314,11 +337,16 @@ class HybridMPC:
         seconds = time.perf_counter() - start
         if v is None:
             if res.status == 2:
-                raise ValueError(self._infeasible_message(x))
-            raise RuntimeError(f"HiGHS stopped without a plan (status {res.status}, "
-                               f"{_STATUS.get(res.status, '?')}): {res.message}"
-                               + (f"; time_limit is {self.time_limit} s"
-                                  if res.status == 1 and self.time_limit else ""))
+                raise ValueError(self._infeasible_message(x, ref))
+            if res.status == 1:
+                raise RuntimeError(
+                    f"HiGHS found no plan within the time limit of {self.time_limit:g} s "
+                    f"(horizon {self.horizon}, {self.ss.n_modes} modes: "
+                    f"{(self.horizon + 1) * self.ss.n_modes} binaries); raise time_limit or "
+                    f"shorten the horizon")
+            raise RuntimeError(f"HiGHS stopped without a plan (status {res.status}: "
+                               f"{_STATUS.get(res.status, 'unknown status')}) from x = "
+                               f"{np.array2string(x, precision=4)}")
         N, n, r, m, s = (self.horizon, self.ss.n_states, self.ss.n_inputs, self.ss.n_outputs,
                          self.ss.n_modes)
         o = self.program.offsets
@@ -328,7 +356,16 @@ class HybridMPC:
             x=v[o["x"]:o["x"] + (N + 1) * n].reshape(N + 1, n),
             y=v[o["y"]:o["y"] + N * m].reshape(N, m),
             modes=np.argmax(delta, axis=1), cost=float(res.fun), status=int(res.status),
-            message=str(res.message), optimal=res.status == 0, seconds=seconds)
+            message=self._plan_message(res), optimal=res.status == 0, seconds=seconds)
+
+    def _plan_message(self, res) -> str:
+        """One line on how good a plan is: optimal, or the time limit reached first."""
+        if res.status == 0:
+            return f"optimal (relative MIP gap {self.mip_rel_gap:g})"
+        gap = getattr(res, "mip_gap", None)
+        return (f"time limit of {self.time_limit:g} s reached: the best plan found, not proven "
+                f"optimal" + (f" (its cost within {gap:.3g} of the bound, relative)"
+                              if gap is not None and np.isfinite(gap) else ""))
 
     def _feasible(self, x: np.ndarray, horizon: int, u_min, u_max) -> bool:
         probe = HybridMPC(self.ss, horizon, self.Q, self.R, u_min, u_max,
@@ -338,9 +375,27 @@ class HybridMPC:
                                    probe.previous_input(x), probe.mip_rel_gap, probe.time_limit)
         return v is not None
 
-    def _infeasible_message(self, x: np.ndarray) -> str:
-        """Why the program from x is infeasible: which input bound, or how many steps the
-        state can be kept inside the envelope (found by solving relaxed programs)."""
+    def output_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """The range of each output over the data envelope: the smallest and largest
+        C_i x + g_i of any mode i over the envelope's box of x.
+
+        Every predicted output y_1 … y_N is such a value (its state is kept inside the
+        envelope), so a reference outside this range cannot be reached from any state.
+
+        Returns
+        -------
+        low, high : ndarray of shape (m,)
+        """
+        n, ss = self.ss.n_states, self.ss
+        lower, upper = (b[:n] for b in ss.envelope)
+        ranges = [affine_range(ss.C[i], ss.g[i], lower, upper) for i in range(ss.n_modes)]
+        return (np.min([low for low, _ in ranges], axis=0),
+                np.max([high for _, high in ranges], axis=0))
+
+    def _infeasible_message(self, x: np.ndarray, ref: np.ndarray) -> str:
+        """Why the program from x is infeasible: which input bound, a reference out of the
+        model's reach, or how many steps the state can be kept inside the envelope (found by
+        solving relaxed programs)."""
         ss, N = self.ss, self.horizon
         n = ss.n_states
         lower, upper = (b[n:] for b in ss.envelope)
@@ -368,10 +423,26 @@ class HybridMPC:
             if not self._feasible(x, h, self.u_min, self.u_max):
                 break
             feasible_steps = h
+        kept = (f"it can for at most {feasible_steps} step(s) from this x" if feasible_steps
+                else "the model's step from this x leaves it whatever the input")
+        low, high = self.output_range()
+        outside = (ref < low) | (ref > high)
+        if np.any(outside):
+            # tracking is a cost, so the reference alone never makes the program infeasible;
+            # steering towards one out of reach is what brings the state to the edge
+            k, p = (int(i) for i in np.argwhere(outside)[0])
+            return (head + f"the reference is out of the model's reach: y_ref = "
+                    f"{ref[k, p]:.6g} for output {ss.output_names[p]} (step {k + 1}) is "
+                    f"outside [{low[p]:.6g}, {high[p]:.6g}], the range of its outputs over the "
+                    f"data envelope. Steering towards it brings the state to the envelope's "
+                    f"edge, where it cannot be kept inside for {N} more step(s) ({kept}). Set "
+                    f"a reference inside that range")
+        advice = ("Shorten the horizon or start" if feasible_steps else "Start")
         return (head + f"the state cannot be kept inside the data envelope for the horizon of "
-                f"{N} step(s) whatever the input in [{fmt(self.u_min)}, {fmt(self.u_max)}]: "
-                f"it can for at most {feasible_steps} step(s) from this x. Shorten the "
-                f"horizon or start from a state farther inside the envelope")
+                f"{N} step(s) whatever the input in [{fmt(self.u_min)}, {fmt(self.u_max)}] "
+                f"and whatever the reference (a cost, not a constraint): {kept}. {advice} "
+                f"from a state farther inside the envelope (in a loop, a reference near its "
+                f"edge can steer the state there)")
 
     def closed_loop(self, x0, y_ref, steps: int, u_prev=None) -> ClosedLoop:
         """Receding-horizon control of the model itself: at each sample solve, apply the
