@@ -421,8 +421,8 @@ class StructureSearch(BaseEstimator):
         move a kept one to the hinge of its two pieces (Breiman 1993), where a continuous
         nonlinearity (a saturation, an overflow) switches. On the simulated machines'
         tuning seeds (``benchmarks/auto_tuning.py``) it lowered the DC motor's median
-        free-run NRMSE from 0.112 to 0.108 and left the arm's and the tanks' as they were;
-        on the robot's training experiments it scored 0.703 against 0.700 without.
+        free-run NRMSE from 0.112 to 0.107 and left the arm's and the tanks' as they were;
+        on the robot's training experiments it scored 0.697 against 0.693 without.
     clustering : bool, default True
         Also try the paper's clustered regions (the estimator's steps 2–6) on the chosen
         regressors, and compare the result with the default PWARX of the largest orders
@@ -442,15 +442,15 @@ class StructureSearch(BaseEstimator):
         with 5 folds the simulated machines' tuning seeds (``benchmarks/auto_tuning.py``)
         got the same models on 8 of 9 seeds and a worse one on the ninth (the arm, 0.1155
         to 0.1205), the robot's training experiments (``benchmarks/robot_auto_tuning.py``)
-        0.765 against 0.708, and the cascaded tanks the same structure, at 1.5 to 2.5
-        times the search's time.
+        0.751 against 0.697, and the cascaded tanks the same structure, at about twice
+        the search's time.
     max_rows : int or None, default 50000
         Regressor rows the candidates are fitted on at most, and samples the refinements
         run on: past it the candidates are fitted on one row in k (an even subsample,
         each row keeping its own lags) and the shortlisted ones fitted again on every row,
         and the refinements run on windows of 2,000 samples (or whole shorter
         experiments) evenly spread over the data (`windows`); the held-out blocks
-        are simulated whole. A 400,000-sample record is then searched in about 35 s. The
+        are simulated whole. A 400,000-sample record is then searched in about 15 s. The
         default leaves the robot's 32,000 rows and EMPS's 20,000 whole: on the robot's
         training experiments 20,000 gave 0.708 against 0.697. None: every row and
         sample.
@@ -459,10 +459,10 @@ class StructureSearch(BaseEstimator):
         included (least squares in its regions, then the refinement, which has no
         held-out iterate to choose then and runs to its tolerance or ``max_iter``). Off
         by default: on the robot's training experiments (fitted on 0–58, scored on 59–65;
-        ``benchmarks/robot_auto_tuning.py``) it lowered the free-run NRMSE from 0.703 to
-        0.695, and on the simulated machines' tuning seeds (``benchmarks/auto_tuning.py``)
+        ``benchmarks/robot_auto_tuning.py``) it lowered the free-run NRMSE from 0.697 to
+        0.688, and on the simulated machines' tuning seeds (``benchmarks/auto_tuning.py``)
         the two tanks' median from 0.048 to 0.044, but it raised the DC motor's from
-        0.108 to 0.117 (one seed 0.107 to 0.121).
+        0.107 to 0.109 (one seed 0.107 to 0.121) and one arm seed's from 0.121 to 0.131.
     max_candidates : int, default 2000
         The search's budget of work: candidate structures measured at most (each a
         least-squares fit and a held-out free run; the linear stage is measured whole
