@@ -8,6 +8,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 """
 
 import argparse
+import contextlib
 import math
 import os
 import sys
@@ -25,11 +26,20 @@ from .paths import (
     default_storage_dir,
     default_tracking_uri,
 )
+from .run_lock import exclusive_run
 from .signed_pickles import signing_key
 
 
 def run(args: argparse.Namespace) -> int:
-    """Materialise the requested partitions and print their comparison tables."""
+    """Materialise the requested partitions and print their comparison tables; refused at
+    once (`exclusive_run`) while another ``run`` uses the same Dagster home."""
+    with contextlib.ExitStack() as held:
+        return _run(args, held)
+
+
+def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
+    """`run`'s body; the run lock is entered on ``held`` once the partitions and stores were
+    checked (a command refused for those leaves nothing, not even the Dagster home)."""
     import dagster as dg
     from mlflow.exceptions import MlflowException
 
@@ -59,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
                          (resources["io_manager"].root(), "asset store"),
                          (resources["settings"].cache_root(), "cache folder")):
         check_writable(folder, what)  # before any run: a refused store leaves nothing half-done
+    held.enter_context(exclusive_run(dagster_home()))  # one run per store, or refused here
     try:
         resources["mlflow"].check_reachable()
     except dg.Failure as exc:  # said in one line, before any run

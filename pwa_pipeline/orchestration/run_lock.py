@@ -1,0 +1,66 @@
+"""One `run` at a time per Dagster home: an exclusive lock on ``<home>/run.lock``.
+
+Two ``python -m pwa_pipeline run`` on one store would both compute every partition and log
+every MLflow run twice; the second is refused at once, naming the first (its pid and start
+time, which the holder writes into the file). The lock is the operating system's
+(``fcntl.flock``), held by the open file: it goes with the process, so a run that was killed
+never leaves a stale lock, whatever the file still says. Without ``fcntl`` (Windows) no
+lock is taken.
+"""
+
+import contextlib
+import datetime as dt
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
+
+#: The lock file's name in the Dagster home.
+LOCK_NAME = "run.lock"
+
+
+def _holder(fd: int) -> str:
+    """What the holder wrote (``pid …, started …``), or that it has not written it yet."""
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        info = json.loads(os.read(fd, 4096).decode() or "{}")
+        return f"pid {int(info['pid'])}, started {info['started']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "pid not yet written"
+
+
+@contextlib.contextmanager
+def exclusive_run(home: Path) -> Iterator[Path]:
+    """Hold ``<home>/run.lock`` for the ``with`` block; yield its path.
+
+    Raises
+    ------
+    ValueError
+        In one line naming the run that holds it (pid and start time), at once, when
+        another process holds it.
+    """
+    home = Path(home)
+    path = home / LOCK_NAME
+    if fcntl is None:  # pragma: no cover - not POSIX
+        yield path
+        return
+    home.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)  # not inherited by child processes
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ValueError(
+                f"another run is using the Dagster home {home} ({_holder(fd)}; lock file "
+                f"{path}): wait for it to end or stop it, then run again") from None
+        started = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps({"pid": os.getpid(), "started": started}).encode(), 0)
+        yield path
+    finally:
+        os.close(fd)  # releases the lock
