@@ -1,7 +1,8 @@
 """Fitted models as MLflow models: a pyfunc that simulates the model's outputs.
 
-``mlflow.pyfunc.load_model("models:/<prefix>.<dataset>.<method>/latest")`` in any process
-with pwa-pipeline installed gives back the simulator of a logged run. Its input is a table
+``mlflow.pyfunc.load_model("models:/<prefix>.<dataset>.<method>@<set>")`` in any process
+with pwa-pipeline installed gives back the simulator of a logged run: the newest model of
+hyper-parameter set ``<set>``, whose name is the alias of that version. Its input is a table
 with the model's input columns and output columns; the outputs are given on the leading
 warm-up rows (at least what the model needs, e.g. max(na, nb)) and empty (NaN) after. Its
 output is the table of output columns: the warm-up rows as given, then the free-run

@@ -3,6 +3,7 @@
 import json
 import logging
 import os
+import re
 import tempfile
 import urllib.error
 import urllib.request
@@ -217,9 +218,15 @@ class MLflowTracker(dg.ConfigurableResource):
                 for key, value in version_tags.items():
                     client.set_model_version_tag(registered_name, version, key, value)
                 client.update_model_version(registered_name, version, description=description)
+                _name_version(client, registered_name, version, version_tags)
                 return {"model_uri": info.model_uri, "model_id": info.model_id,
                         "model_run_id": run_id}
         client.log_outputs(run_id, [LoggedModelOutput(logged["model_id"], step=0)])
+        linked = client.search_model_versions(
+            f"name = '{registered_name}' and run_id = '{logged['model_run_id']}'")
+        if linked:  # the version the other run registered is this set's model too
+            _name_version(client, registered_name, max(int(v.version) for v in linked),
+                          version_tags)
         return {**logged, "mlflow.note.content": _reuse_note(client, logged)}
 
     def ui_base(self) -> str:
@@ -270,7 +277,9 @@ class MLflowTracker(dg.ConfigurableResource):
         to this run as its output, and the run's description links the run that logged it
         (runs of other processes that score the same model at the same moment may each log
         it).
-        Either way the run is tagged ``model_uri`` (where the model is), ``model_id`` (its
+        Either way the version is given the alias of ``hparams`` (`set_alias`), and the
+        registered model its description and tags (`registered_model_description`); the
+        run is tagged ``model_uri`` (where the model is), ``model_id`` (its
         MLflow logged model), ``model_run_id`` (the run that logged it) and
         ``model_fingerprint``.
         ``run_name`` defaults to ``<method>|<hparams>``. ``started`` (seconds since the epoch,
@@ -365,6 +374,36 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
     if "fit_seconds" in metrics:
         parts.append(f"Fitted in {metrics['fit_seconds']:.3g} s.")
     return " ".join(parts)
+
+
+def set_alias(hparams: str) -> str:
+    """The registered model alias of hyper-parameter set ``hparams``: its name, or
+    ``set-<name>`` for a name MLflow reserves (``latest``, and ``v<digits>``, which name
+    versions). Set names are letters, digits, ``_`` and ``-``, which aliases allow."""
+    reserved = hparams.lower() == "latest" or re.fullmatch(r"[vV]\d+", hparams)
+    return f"set-{hparams}" if reserved else hparams
+
+
+def registered_model_description(dataset: str, method: str, registered_name: str) -> str:
+    """The registered model's own description: what it is and how to load one set's."""
+    return (f"The {method} model of data set {dataset}, one version per fit by pwa-pipeline. "
+            f"Each hyper-parameter set's newest version has the set's name as its alias: "
+            f"load it as `models:/{registered_name}@<set>` (e.g. "
+            f"`models:/{registered_name}@default`); `latest` is whichever set ran last.")
+
+
+def _name_version(client, registered_name: str, version, version_tags: dict[str, str]
+                  ) -> None:
+    """Point the alias of the version's set (`set_alias`) at ``version``, and give the
+    registered model its description and its ``dataset`` and ``method`` tags."""
+    dataset, method = version_tags["dataset"], version_tags["method"]
+    client.set_registered_model_alias(registered_name, set_alias(version_tags["hparams"]),
+                                      str(version))
+    client.update_registered_model(
+        registered_name,
+        description=registered_model_description(dataset, method, registered_name))
+    for key, value in (("dataset", dataset), ("method", method)):
+        client.set_registered_model_tag(registered_name, key, value)
 
 
 def _log_pyfunc(model: "ModelToLog", registered_name: str):

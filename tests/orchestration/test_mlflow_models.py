@@ -139,3 +139,55 @@ def test_the_training_table_stacks_the_experiments_and_labels_each_rows_experime
     np.testing.assert_array_equal(table[["u1", "u2"]].to_numpy(), np.concatenate(data.u_train))
     np.testing.assert_array_equal(table["y1"].to_numpy(), np.concatenate(data.y_train)[:, 0])
     assert isinstance(table.index, pd.RangeIndex) and len(table) == sum(lengths)
+
+
+def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what_it_is(
+        tmp_path, mlflow_template):
+    """``models:/…/latest`` is whichever set ran last: each set's newest version carries the
+    set's name as its alias (a linked model's too; a name MLflow reserves as ``set-<name>``),
+    and the registered model has a description and tags of its own."""
+    import mlflow
+    import numpy as np
+    from mlflow.tracking import MlflowClient
+
+    from pwa_pipeline import LinearARX, make_hure_vasak
+    from pwa_pipeline.orchestration.mlflow_models import ModelToLog, Simulator, example_table
+    from pwa_pipeline.orchestration.tracking import MLflowTracker
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    tracker = MLflowTracker(tracking_uri=uri)
+    name = "pwa-pipeline.d.linear_arx"
+
+    def to_log(seed: int) -> ModelToLog:
+        data = make_hure_vasak(n_samples=300, snr_db=30, seed=seed)
+        model = LinearARX(na=1, nb=1).fit(data.u_train[0], data.y_train[0])
+        table = example_table(data.u_train[0], data.y_train[0], data.u_names, data.y_names, 5)
+        return ModelToLog(Simulator(model, data.u_names, data.y_names), table,
+                          mlflow.data.from_pandas(table, name="training"))
+
+    def log(hparams: str, model: ModelToLog) -> str:
+        return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
+                               metrics={}, tags={}, artifacts={}, model=model).run_id
+
+    first, second = to_log(0), to_log(1)
+    log("a", first)
+    run_b = log("b", first)  # links the version a registered
+    log("a", second)  # a new version: a's alias moves to it, b's stays
+    log("latest", second)  # a reserved alias name
+    client = MlflowClient(tracking_uri=uri)
+    registered = client.get_registered_model(name)
+    assert registered.aliases == {"a": 2, "b": 1, "set-latest": 2}
+    assert registered.description.startswith("The linear_arx model of data set d, ")
+    assert f"`models:/{name}@<set>`" in registered.description
+    assert registered.tags == {"dataset": "d", "method": "linear_arx"}
+    assert client.get_model_version_by_alias(name, "b").run_id == \
+        client.get_run(run_b).data.tags["model_run_id"]
+    before = mlflow.get_tracking_uri()
+    mlflow.set_tracking_uri(uri)
+    try:
+        loaded = mlflow.pyfunc.load_model(f"models:/{name}@b")
+    finally:
+        mlflow.set_tracking_uri(before)
+    np.testing.assert_array_equal(loaded.predict(first.input_example).to_numpy(),
+                                  first.simulator.predict(None, first.input_example).to_numpy())

@@ -665,6 +665,8 @@ def test_registered_models_load_in_another_process_and_simulate_the_same(paper_r
     client = MlflowClient(tracking_uri=uri)
     names = sorted(m.name for m in client.search_registered_models())
     assert names == [f"pwa-pipeline.hure_vasak.{m}" for m in sorted(METHODS)]
+    for name in names:  # the set's alias, whichever set ran last
+        assert "paper" in client.get_registered_model(name).aliases
     data = result.asset_value("raw_benchmark")
     u, y = data.u_test[0][500:700], data.y_test[0][500:700]  # not the logged example
     table = example_table(u, y, data.u_names, data.y_names, 10, rows=200)
@@ -672,7 +674,7 @@ def test_registered_models_load_in_another_process_and_simulate_the_same(paper_r
     script = (
         "import sys, json, mlflow, pandas as pd\n"
         f"mlflow.set_tracking_uri({uri!r})\n"
-        "m = mlflow.pyfunc.load_model('models:/pwa-pipeline.hure_vasak.pwa/latest')\n"
+        "m = mlflow.pyfunc.load_model('models:/pwa-pipeline.hure_vasak.pwa@paper')\n"
         f"out = m.predict(pd.read_parquet({str(tmp_path / 'input.parquet')!r}))\n"
         "print(json.dumps(out.to_numpy().tolist()))\n")
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
