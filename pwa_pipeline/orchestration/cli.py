@@ -277,10 +277,19 @@ def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
     from .doctor import find_orphans, repair
-    from .tracking import MLflowTracker
+    from .tracking import MLflowTracker, move_store_aside, store_problem
 
     instance = prepare_instance()
-    client = MLflowTracker(tracking_uri=args.tracking_uri).client()
+    tracker = MLflowTracker(tracking_uri=args.tracking_uri)
+    broken = None
+    if (db := tracker._sqlite_db()) is not None and (problem := store_problem(db)):
+        if args.repair and problem.half_made:
+            print(f"Moved the half-made MLflow store {db} aside to {move_store_aside(db)}; "
+                  f"the next run creates a new one.")
+        else:
+            print(problem.message)
+            broken = problem
+    client = None if broken else tracker.client()
     older = args.older_than * 60
     orphans = find_orphans(instance, client, [default_storage_dir()], older)
     print("What interrupted or killed runs left (runs whose processes are gone; runs of other "
@@ -291,10 +300,10 @@ def doctor(args: argparse.Namespace) -> int:
     if orphans and args.repair:
         repair(orphans, instance, client, older)
         print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files deleted.")
-        return 0
+        return 1 if broken else 0
     if orphans:
         print("Run again with --repair to fix them.")
-    return 1 if orphans else 0
+    return 1 if orphans or broken else 0
 
 
 def _minutes(text: str) -> float:
