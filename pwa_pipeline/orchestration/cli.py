@@ -293,13 +293,18 @@ def doctor(args: argparse.Namespace) -> int:
     older = args.older_than * 60
     orphans = find_orphans(instance, client, [default_storage_dir()], older)
     print("What interrupted or killed runs left (runs whose processes are gone; runs of other "
-          f"machines and temporary files older than {args.older_than:g} minutes):")
+          "machines, temporary files and models left pending older than "
+          f"{args.older_than:g} minutes):")
     print(f"  Dagster runs not ended     : {orphans.dagster_runs or 'none'}")
     print(f"  MLflow runs still RUNNING  : {orphans.mlflow_runs or 'none'}")
     print(f"  temporary files            : {[str(p) for p in orphans.temporary_files] or 'none'}")
+    print(f"  logged models PENDING      : {orphans.pending_models or 'none'}")
+    print("  model versions PENDING_REGISTRATION: "
+          f"{[f'{n} version {v}' for n, v in orphans.pending_versions] or 'none'}")
     if orphans and args.repair:
         repair(orphans, instance, client, older)
-        print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files deleted.")
+        print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files "
+              "deleted.")
         return 1 if broken else 0
     if orphans:
         print("Run again with --repair to fix them.")
@@ -408,8 +413,10 @@ def main(argv: list[str] | None = None) -> int:
     p_rm.add_argument("name")
     p_doc = sub.add_parser(
         "doctor", help="list the Dagster runs (not ended) and MLflow runs (RUNNING) whose "
-                       "processes are gone, and the temporary files that interrupted runs "
-                       "left; --repair marks the runs failed/killed and deletes the files")
+                       "processes are gone, the temporary files and pending MLflow models "
+                       "that interrupted runs left, and a half-made MLflow store; --repair "
+                       "marks the runs failed/killed and the models failed, deletes the "
+                       "files and pending model versions, and moves the store aside")
     p_doc.add_argument("--repair", action="store_true", help="fix what is found")
     p_doc.add_argument("--older-than", type=_minutes, default=60.0, metavar="MINUTES",
                        help="temporary files, and runs of other machines (whose processes "
