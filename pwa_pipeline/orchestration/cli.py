@@ -288,24 +288,38 @@ def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
     from .doctor import find_orphans, repair
-    from .tracking import MLflowTracker
+    from .tracking import MLflowTracker, move_store_aside, store_problem
 
     instance = prepare_instance()
-    client = MLflowTracker(tracking_uri=args.tracking_uri).client()
+    tracker = MLflowTracker(tracking_uri=args.tracking_uri)
+    broken = None
+    if (db := tracker._sqlite_db()) is not None and (problem := store_problem(db)):
+        if args.repair and problem.half_made:
+            print(f"Moved the half-made MLflow store {db} aside to {move_store_aside(db)}; "
+                  f"the next run creates a new one.")
+        else:
+            print(problem.message)
+            broken = problem
+    client = None if broken else tracker.client()
     older = args.older_than * 60
     orphans = find_orphans(instance, client, [default_storage_dir()], older)
     print("What interrupted or killed runs left (runs whose processes are gone; runs of other "
-          f"machines and temporary files older than {args.older_than:g} minutes):")
+          "machines, temporary files and models left pending older than "
+          f"{args.older_than:g} minutes):")
     print(f"  Dagster runs not ended     : {orphans.dagster_runs or 'none'}")
     print(f"  MLflow runs still RUNNING  : {orphans.mlflow_runs or 'none'}")
     print(f"  temporary files            : {[str(p) for p in orphans.temporary_files] or 'none'}")
+    print(f"  logged models PENDING      : {orphans.pending_models or 'none'}")
+    print("  model versions PENDING_REGISTRATION: "
+          f"{[f'{n} version {v}' for n, v in orphans.pending_versions] or 'none'}")
     if orphans and args.repair:
         repair(orphans, instance, client, older)
-        print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files deleted.")
-        return 0
+        print("Repaired: Dagster runs marked failed, MLflow runs KILLED, temporary files "
+              "deleted.")
+        return 1 if broken else 0
     if orphans:
         print("Run again with --repair to fix them.")
-    return 1 if orphans else 0
+    return 1 if orphans or broken else 0
 
 
 def _minutes(text: str) -> float:
@@ -410,8 +424,10 @@ def main(argv: list[str] | None = None) -> int:
     p_rm.add_argument("name")
     p_doc = sub.add_parser(
         "doctor", help="list the Dagster runs (not ended) and MLflow runs (RUNNING) whose "
-                       "processes are gone, and the temporary files that interrupted runs "
-                       "left; --repair marks the runs failed/killed and deletes the files")
+                       "processes are gone, the temporary files and pending MLflow models "
+                       "that interrupted runs left, and a half-made MLflow store; --repair "
+                       "marks the runs failed/killed and the models failed, deletes the "
+                       "files and pending model versions, and moves the store aside")
     p_doc.add_argument("--repair", action="store_true", help="fix what is found")
     p_doc.add_argument("--older-than", type=_minutes, default=60.0, metavar="MINUTES",
                        help="temporary files, and runs of other machines (whose processes "

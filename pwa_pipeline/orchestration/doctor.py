@@ -12,6 +12,13 @@ another machine, whose processes cannot be seen from here, is taken for left beh
 older than ``older_than``. An MLflow run RUNNING is left behind when the Dagster run that
 opened it (its ``dagster_run_id`` tag) is no longer going; one without that tag, or opened by a
 run of another Dagster instance, once older than ``older_than``.
+
+A run killed while it logs its model (``mlflow.pyfunc.log_model``, from 0.2 s after its MLflow
+run opens) leaves the logged model PENDING, and a registry that registers asynchronously
+can leave a model version PENDING_REGISTRATION. Either is left behind once older than
+``older_than`` (`doctor`'s ``--older-than``, an hour by default: logging a model takes seconds);
+`repair` marks such a logged model FAILED (MLflow's status for a logging that did not end)
+and deletes such a model version (``MlflowClient.delete_model_version``).
 """
 
 import socket
@@ -40,9 +47,38 @@ class Orphans:
     dagster_runs: list[str] = field(default_factory=list)
     mlflow_runs: list[str] = field(default_factory=list)
     temporary_files: list[Path] = field(default_factory=list)
+    #: Logged models (ids) PENDING, and model versions ``(name, version)``
+    #: PENDING_REGISTRATION, older than ``older_than``.
+    pending_models: list[str] = field(default_factory=list)
+    pending_versions: list[tuple[str, str]] = field(default_factory=list)
 
     def __bool__(self) -> bool:
-        return bool(self.dagster_runs or self.mlflow_runs or self.temporary_files)
+        return bool(self.dagster_runs or self.mlflow_runs or self.temporary_files
+                    or self.pending_models or self.pending_versions)
+
+
+def _all_pages(search, **kwargs) -> list:
+    """Every result of an MLflow search that returns pages."""
+    found, token = [], None
+    while True:
+        page = search(**kwargs, page_token=token)
+        found.extend(page)
+        token = page.token
+        if not token:
+            return found
+
+
+def _pending(mlflow_client, experiments: list[str], cutoff_ms: float
+             ) -> tuple[list[str], list[tuple[str, str]]]:
+    """The logged models PENDING and model versions PENDING_REGISTRATION created before
+    ``cutoff_ms`` (see the module doc)."""
+    models = [m.model_id for m in
+              _all_pages(mlflow_client.search_logged_models, experiment_ids=experiments)
+              if m.status == "PENDING" and m.creation_timestamp < cutoff_ms
+              ] if experiments else []
+    versions = [(v.name, v.version) for v in _all_pages(mlflow_client.search_model_versions)
+                if v.status == "PENDING_REGISTRATION" and v.creation_timestamp < cutoff_ms]
+    return models, versions
 
 
 def _stale_tmp(roots: list[Path], older_than: float) -> list[Path]:
@@ -85,27 +121,35 @@ def find_orphans(instance: dg.DagsterInstance, mlflow_client, roots: list[Path],
     dagster_runs = [r.dagster_run.run_id for r in records
                     if _left_behind(instance, r, local, now, older_than)]
     going = {r.dagster_run.run_id for r in records} - set(dagster_runs)
-    mlflow_runs = []
+    mlflow_runs, models, versions = [], [], []
     if mlflow_client is not None:
         experiments = [e.experiment_id for e in mlflow_client.search_experiments()]
+        models, versions = _pending(mlflow_client, experiments, (now - older_than) * 1000)
         if experiments:
             mlflow_runs = [r.info.run_id for r in mlflow_client.search_runs(
                 experiments, filter_string="attributes.status = 'RUNNING'")
                 if (r.data.tags["dagster_run_id"] not in going
                     if instance.has_run(r.data.tags.get("dagster_run_id", ""))
                     else r.info.start_time / 1000 < now - older_than)]
-    return Orphans(dagster_runs, mlflow_runs, _stale_tmp(roots, older_than))
+    return Orphans(dagster_runs, mlflow_runs, _stale_tmp(roots, older_than), models, versions)
 
 
 def repair(orphans: Orphans, instance: dg.DagsterInstance, mlflow_client,
            older_than: float = STALE_SECONDS) -> None:
-    """Mark the orphaned Dagster runs failed and MLflow runs KILLED; delete the temporary
-    files."""
+    """Mark the orphaned Dagster runs failed and MLflow runs KILLED, the logged models left
+    PENDING FAILED; delete the model versions left PENDING_REGISTRATION and the temporary
+    files (one line printed per model and version)."""
     for run_id in orphans.dagster_runs:
         run = instance.get_run_by_id(run_id)
         instance.report_run_failed(run, "marked failed by `pwa_pipeline doctor`: its process "
                                         "is gone (interrupted or killed)")
     for run_id in orphans.mlflow_runs:
         mlflow_client.set_terminated(run_id, "KILLED")
+    for model_id in orphans.pending_models:
+        mlflow_client.finalize_logged_model(model_id, "FAILED")
+        print(f"Marked the logged model {model_id} FAILED (left PENDING by a killed logging).")
+    for name, version in orphans.pending_versions:
+        mlflow_client.delete_model_version(name, version)
+        print(f"Deleted {name} version {version} (left PENDING_REGISTRATION).")
     for folder in {p.parent for p in orphans.temporary_files}:
         sweep_stale_tmp(folder, older_than)

@@ -1,10 +1,13 @@
 """The ``mlflow`` resource: one MLflow run per method and partition materialisation."""
 
+import functools
 import json
 import logging
 import os
 import re
+import sqlite3
 import tempfile
+import time
 import urllib.error
 import urllib.request
 from importlib.metadata import version
@@ -34,6 +37,89 @@ EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
 _READY_STORES: set[str] = set()
 
 
+class StoreProblem(NamedTuple):
+    """What is wrong with a sqlite tracking store (see `store_problem`)."""
+
+    message: str
+    #: Whether ``doctor --repair`` moves it aside: a store half made, holding no run.
+    half_made: bool
+
+
+@functools.cache
+def _schema_head() -> str:
+    """The schema version (alembic revision) this MLflow creates."""
+    import mlflow
+    from alembic.script import ScriptDirectory
+
+    return ScriptDirectory(str(Path(mlflow.__file__).parent / "store" / "db_migrations")
+                           ).get_current_head()
+
+
+def store_problem(db: Path) -> StoreProblem | None:
+    """None if the sqlite tracking store ``db`` is absent or whole; else what is wrong.
+
+    A store is half made when it cannot be read, has no schema version, or has a version that
+    is not this MLflow's and holds no run (what SIGKILL during MLflow's schema creation left
+    before stores were created in a temporary file). One with runs at another version is
+    out of date, for ``mlflow db upgrade``, and never moved.
+    """
+    if not db.is_file():
+        return None
+    half = (f"MLflow store {db} is half made ({{}}): every run would fail on it; run "
+            f"`python -m pwa_pipeline doctor --repair` to move it aside (it is kept)")
+    try:
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master "
+                                                "WHERE type = 'table'")}
+            versions = ([r[0] for r in con.execute("SELECT version_num FROM alembic_version")]
+                        if "alembic_version" in tables else [])
+            runs = (con.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+                    if "runs" in tables else 0)
+        finally:
+            con.close()
+    except sqlite3.Error as why:
+        return StoreProblem(half.format(f"cannot be read: {why}"), True)
+    if not tables:
+        return None  # an empty file: MLflow creates the schema in it
+    if not versions:
+        return StoreProblem(half.format("no schema version"), True)
+    if versions != [head := _schema_head()]:
+        if runs == 0:
+            return StoreProblem(half.format(f"schema version {versions} and no run"), True)
+        return StoreProblem(f"MLflow store {db} has schema version {versions[0]}, not this "
+                            f"MLflow's {head}: back it up, then run `mlflow db upgrade "
+                            f"sqlite:///{db}`", False)
+    return None
+
+
+def move_store_aside(db: Path) -> Path:
+    """Rename the sqlite store ``db`` to ``<db>.broken-<time>`` (never deleted); the new
+    name."""
+    aside = db.with_name(f"{db.name}.broken-{time.strftime('%Y%m%dT%H%M%S')}")
+    os.replace(db, aside)
+    return aside
+
+
+def _create_store(db: Path) -> None:
+    """Create the sqlite store ``db`` with MLflow's schema in a temporary file beside it and
+    move it into place once complete (called under the store's file lock)."""
+    from mlflow.tracking import MlflowClient
+
+    for left in db.parent.glob(f".{db.name}.*.tmp"):  # left by a creation killed before
+        left.unlink(missing_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{db.name}.", suffix=".tmp", dir=db.parent)
+    os.close(fd)
+    try:
+        MlflowClient(tracking_uri=f"sqlite:///{tmp}").search_experiments(max_results=1)
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, db)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 class MLflowTracker(dg.ConfigurableResource):
     """Logs one MLflow run per method and partition materialisation.
 
@@ -46,7 +132,9 @@ class MLflowTracker(dg.ConfigurableResource):
     (MLflow's own defaults, 120 s and 7 retries, stall an asset for minutes on a broken
     server). Credentials in the URI (``http://user:password@host``) are used for the probe and
     never printed. A new sqlite store is created under a file lock, so runs that start at once
-    do not race in MLflow's schema migration.
+    do not race in MLflow's schema migration, and in a temporary file moved into place once
+    complete, so that a kill meanwhile leaves no half-made store; a half-made one is refused
+    before any run (see `store_problem`).
 
     Attributes
     ----------
@@ -101,6 +189,8 @@ class MLflowTracker(dg.ConfigurableResource):
             folder = db.parent
             if not os.access(folder, os.W_OK):
                 raise dg.Failure(description=f"MLflow store folder {folder} is not writable")
+            if (problem := store_problem(db)) is not None:
+                raise dg.Failure(description=problem.message)
 
     def client(self):
         """An MLflow client on the tracking URI, the store created if new (see the class doc)."""
@@ -124,8 +214,11 @@ class MLflowTracker(dg.ConfigurableResource):
         if (db := self._sqlite_db()) is not None and uri not in _READY_STORES:
             from filelock import FileLock
 
-            # the client's first use of a store creates and migrates its schema
+            # the client's first use of a store creates and migrates its schema: done whole
+            # in a file beside it, so that a kill meanwhile leaves no half-made store
             with FileLock(f"{db}.lock"):
+                if not db.exists():
+                    _create_store(db)
                 client = MlflowClient(tracking_uri=uri)
                 client.search_experiments(max_results=1)
             _READY_STORES.add(uri)
