@@ -31,8 +31,9 @@ from .signed_pickles import signing_key
 
 
 def run(args: argparse.Namespace) -> int:
-    """Materialise the requested partitions and print their comparison tables; refused at
-    once (`exclusive_run`) while another ``run`` uses the same Dagster home."""
+    """Materialise the requested partitions and print their comparison tables, once another
+    ``run`` on the same Dagster home has ended (`exclusive_run`: this one waits and says
+    so)."""
     with contextlib.ExitStack() as held:
         return _run(args, held)
 
@@ -69,7 +70,9 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
                          (resources["io_manager"].root(), "asset store"),
                          (resources["settings"].cache_root(), "cache folder")):
         check_writable(folder, what)  # before any run: a refused store leaves nothing half-done
-    held.enter_context(exclusive_run(dagster_home()))  # one run per store, or refused here
+    held.enter_context(exclusive_run(  # one run at a time per store: a second one waits
+        dagster_home(), on_wait=lambda line: print(f"pwa-pipeline run: {line}",
+                                                   file=sys.stderr, flush=True)))
     try:
         resources["mlflow"].check_reachable()
     except dg.Failure as exc:  # said in one line, before any run

@@ -1,8 +1,9 @@
 """One `run` at a time per Dagster home: an exclusive lock on ``<home>/run.lock``.
 
-Two ``python -m pwa_pipeline run`` on one store would both compute every partition and log
-every MLflow run twice; the second is refused at once, naming the first (its pid and start
-time, which the holder writes into the file). The lock is the operating system's
+Two ``python -m pwa_pipeline run`` at once on one store would compute every partition side
+by side and log their MLflow runs interleaved; the second waits for the first to end (or,
+asked not to wait, is refused at once), naming it (its pid and start time, which the holder
+writes into the file). The lock is the operating system's
 (``fcntl.flock``), held by the open file: it goes with the process, so a run that was killed
 never leaves a stale lock, whatever the file still says. Without ``fcntl`` (Windows) no
 lock is taken.
@@ -12,7 +13,7 @@ import contextlib
 import datetime as dt
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 try:
@@ -35,14 +36,21 @@ def _holder(fd: int) -> str:
 
 
 @contextlib.contextmanager
-def exclusive_run(home: Path) -> Iterator[Path]:
+def exclusive_run(home: Path, on_wait: Callable[[str], None] | None = None) -> Iterator[Path]:
     """Hold ``<home>/run.lock`` for the ``with`` block; yield its path.
+
+    Parameters
+    ----------
+    home : Path
+    on_wait : callable, optional
+        Told, in one line naming the run that holds the lock, that this one waits for it
+        (until it ends; Ctrl-C stops the wait). None: refused at once instead.
 
     Raises
     ------
     ValueError
-        In one line naming the run that holds it (pid and start time), at once, when
-        another process holds it.
+        Without ``on_wait``, in one line naming the run that holds it (pid and start
+        time), when another process holds it.
     """
     home = Path(home)
     path = home / LOCK_NAME
@@ -55,9 +63,13 @@ def exclusive_run(home: Path) -> Iterator[Path]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise ValueError(
-                f"another run is using the Dagster home {home} ({_holder(fd)}; lock file "
-                f"{path}): wait for it to end or stop it, then run again") from None
+            holder = (f"another run is using the Dagster home {home} ({_holder(fd)}; lock "
+                      f"file {path})")
+            if on_wait is None:
+                raise ValueError(f"{holder}: wait for it to end or stop it, then run "
+                                 f"again") from None
+            on_wait(f"{holder}: this run starts when it ends (Ctrl-C to stop waiting)")
+            fcntl.flock(fd, fcntl.LOCK_EX)
         started = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
         os.ftruncate(fd, 0)
         os.pwrite(fd, json.dumps({"pid": os.getpid(), "started": started}).encode(), 0)
