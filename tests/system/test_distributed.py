@@ -228,6 +228,7 @@ def test_a_sweep_across_the_cluster_equals_the_in_process_run(cluster):
     assert _every_stored_file_loads(cluster.folder / "shared") > 6 * 10
 
 
+@pytest.mark.slow
 @pytest.mark.distributed
 @pytest.mark.xdist_group("distributed")
 def test_two_clients_sweeping_at_once_take_turns_and_both_complete(cluster):
