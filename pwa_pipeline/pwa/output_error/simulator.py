@@ -140,6 +140,11 @@ class OutputFreeRuns(FreeRuns):
         self.models = models
         self.g = [models[j].G() for j in self.simulated]
         self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
+        forms = [models[j].compiled_regions() for j in self.simulated]
+        #: The compiled kernel's fixed arrays (dθ/dp and the regions), built once: the
+        #: regions stay fixed while p is refined; None where the numpy loop runs.
+        self.kernel = self._kernel_arrays(forms) \
+            if affine and all(f is not None for f in forms) else None
 
     def simulate(self, p: np.ndarray, sensitivities: bool):
         """As `FreeRuns.simulate`, with the concatenated p_j: compiled
@@ -149,9 +154,8 @@ class OutputFreeRuns(FreeRuns):
         sim, bounds = self.simulated, list(zip(self.offsets[:-1], self.offsets[1:]))
         thetas = [self.models[j].c + g @ p[a:b]
                   for j, g, (a, b) in zip(sim, self.g, bounds, strict=True)]
-        forms = [self.models[j].compiled_regions() for j in sim]
-        if self.affine and all(f is not None for f in forms):
-            return self._compiled(thetas, forms, sensitivities)
+        if self.kernel is not None:
+            return self._compiled(thetas, sensitivities)
         return self._looped(thetas, sensitivities)
 
     def _looped(self, thetas: list[np.ndarray], sensitivities: bool):
@@ -170,30 +174,35 @@ class OutputFreeRuns(FreeRuns):
         with np.errstate(over="ignore", invalid="ignore"):
             return self._run(step, int(self.offsets[-1]), sensitivities)
 
-    def _compiled(self, thetas: list[np.ndarray], forms: list, sensitivities: bool):
-        """`simulate` by the compiled kernel (``forms``: the simulated outputs'
-        compiled regions), a block of `BLOCK` time steps at a time, JᵀJ and Jᵀr
-        summed by one matrix product per block."""
+    def _kernel_arrays(self, forms: list) -> tuple:
+        """The compiled kernel's arguments that do not change with p: the simulated
+        outputs, dθ/dp per output and region (each output's columns between its offsets),
+        the offsets and the regions (``forms``: the simulated outputs' compiled regions)."""
+        n_par, d = int(self.offsets[-1]), self.g[0].shape[1]
+        gmat = np.zeros((len(self.g), max(len(g) for g in self.g), d, n_par))
+        for jj, g in enumerate(self.g):
+            gmat[jj, :len(g), :, self.offsets[jj]:self.offsets[jj + 1]] = g
+        return (np.array(self.simulated, dtype=np.int64), gmat,
+                self.offsets.astype(np.int64), *pack_regions(forms, d))
+
+    def _compiled(self, thetas: list[np.ndarray], sensitivities: bool):
+        """`simulate` by the compiled kernel, a block of `BLOCK` time steps at a time,
+        JᵀJ and Jᵀr summed by one matrix product per block."""
         sim, n_par = self.simulated, int(self.offsets[-1])
         n_exp, n = self.y.shape[:2]
-        d = thetas[0].shape[1]
-        n_regions = max(len(t) for t in thetas)
-        packed = np.zeros((len(sim), n_regions, d))
-        gmat = np.zeros((len(sim), n_regions, d, n_par))
-        for jj, (t, g) in enumerate(zip(thetas, self.g, strict=True)):
+        outputs, gmat, offsets, *regions = self.kernel
+        packed = np.zeros(gmat.shape[:3])
+        for jj, t in enumerate(thetas):
             packed[jj, :len(t)] = t
-            gmat[jj, :len(g), :, self.offsets[jj]:self.offsets[jj + 1]] = g
-        regions = pack_regions(forms, d)
+        lengths = self.lengths.astype(np.int64)
         ysim, ring = self.y.copy(), np.zeros((n_exp, self.na + 1, len(sim), n_par))
         rows = np.empty((BLOCK * n_exp * len(sim), n_par) if sensitivities else (0, n_par))
         residuals = np.empty(len(rows))
         jtj, jtr, cost = np.zeros((n_par, n_par)), np.zeros(n_par), 0.0
         for k0 in range(self.warmup, n, BLOCK):
             k1 = min(n, k0 + BLOCK)
-            cost += sensitivity_block(self.y, self.u, self.lengths.astype(np.int64),
-                                      self.warmup, self.na, self.nb,
-                                      np.array(sim, dtype=np.int64), packed, gmat,
-                                      self.offsets.astype(np.int64), *regions, k0, k1,
+            cost += sensitivity_block(self.y, self.u, lengths, self.warmup, self.na, self.nb,
+                                      outputs, packed, gmat, offsets, *regions, k0, k1,
                                       ysim, ring, rows, residuals, sensitivities)
             if not np.isfinite(cost):
                 return np.inf, None, None

@@ -265,9 +265,10 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
 
 
 def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
-          ) -> list[tuple[list, list]]:
+          ) -> tuple[list[tuple[list, list]], str]:
     """Blocked cross-validation folds: (fit, held) pairs, the first that of
-    `split_experiments`, each next one holding out the block before.
+    `split_experiments`, each next one holding out the block before; with the first
+    split in words (as `split_experiments` says it).
 
     Blocks keep time order (no sample is predicted from its future's fit, and a drift is
     judged over a whole block): with several experiments a block is ``round(fraction·n)``
@@ -276,7 +277,7 @@ def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
     shorter than ``min_samples`` is left out). At most ``n_folds`` folds, as many as
     whole blocks fit in the data.
     """
-    fit, held, _ = split_experiments(experiments, fraction, min_samples)
+    fit, held, how = split_experiments(experiments, fraction, min_samples)
     out = [(fit, held)]
     n = len(experiments)
     if n >= 2:
@@ -287,7 +288,7 @@ def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
                 break
             out.append((experiments[:start] + experiments[start + size:],
                         experiments[start:start + size]))
-        return out
+        return out, how
     u, y = experiments[0]
     size = len(held[0][1])
     for i in range(1, n_folds):
@@ -298,7 +299,7 @@ def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
         parts = [(u[a:b], y[a:b]) for a, b in ((0, start), (end, len(y)))
                  if b - a >= min_samples]
         out.append((parts, [(u[start:end], y[start:end])]))
-    return out
+    return out, how
 
 
 class _HeldOut:
@@ -582,8 +583,9 @@ class _Search:
         self.warmup = max(self.lags, nb, WARMUP)
         self.m, self.r = experiments[0][1].shape[1], experiments[0][0].shape[1]
         min_samples = self.warmup + 20
-        self.fit_exp, self.held_exp, self.split = split_experiments(
-            experiments, params.validation_fraction, min_samples=min_samples)
+        blocks, self.split = folds(experiments, params.validation_fraction, params.n_folds,
+                                   min_samples)
+        self.fit_exp, self.held_exp = blocks[0]
         self.n_experiments = len(experiments)
         for i, (_, y) in enumerate(self.held_exp, len(experiments) - len(self.held_exp)):
             if len(y) < min_samples:  # else nothing, or too little, is scored: NaN costs
@@ -595,8 +597,7 @@ class _Search:
                     f"join it to another or leave it out")
         self.n_fit = len(self.fit_exp)
         self.folds = [_Fold(fit, held, self.lags, nb, self.warmup, params.max_rows)
-                      for fit, held in folds(experiments, params.validation_fraction,
-                                             params.n_folds, min_samples=self.warmup + 20)]
+                      for fit, held in blocks]
         full, self.held = self.folds[0].reg, self.folds[0].held
         if full.phi.shape[0] < 2 * full.phi.shape[1]:
             raise ValueError(f"too few samples for the structure search: "

@@ -224,13 +224,13 @@ def test_split_holds_out_the_last_experiments():
 
 def test_folds_hold_out_each_block_of_experiments_in_turn():
     exps = [(np.zeros((5, 1)), np.full((5, 1), i)) for i in range(10)]
-    blocks = folds(exps, 0.2, n_folds=5, min_samples=3)
+    blocks, how = folds(exps, 0.2, n_folds=5, min_samples=3)
     assert [[e[1][0, 0] for e in held] for _, held in blocks] == \
         [[8, 9], [6, 7], [4, 5], [2, 3], [0, 1]]
     assert [e[1][0, 0] for e in blocks[2][0]] == [0, 1, 2, 3, 6, 7, 8, 9]
-    assert blocks[0][:2] == split_experiments(exps, 0.2, min_samples=3)[:2]
-    assert len(folds(exps, 0.2, n_folds=3, min_samples=3)) == 3
-    assert len(folds(exps, 0.3, n_folds=9, min_samples=3)) == 3  # 3 whole blocks of 3
+    assert (*blocks[0], how) == split_experiments(exps, 0.2, min_samples=3)
+    assert len(folds(exps, 0.2, n_folds=3, min_samples=3)[0]) == 3
+    assert len(folds(exps, 0.3, n_folds=9, min_samples=3)[0]) == 3  # 3 whole blocks of 3
 
 
 def test_more_folds_than_whole_blocks_are_said_so():
@@ -242,14 +242,14 @@ def test_more_folds_than_whole_blocks_are_said_so():
 
 def test_folds_cut_one_record_in_blocks_fitting_what_lies_either_side():
     u, y = np.arange(1000.0)[:, None], np.arange(1000.0)[:, None]
-    blocks = folds([(u, y)], 0.2, n_folds=9, min_samples=30)
+    blocks, _ = folds([(u, y)], 0.2, n_folds=9, min_samples=30)
     spans = [[(int(e[1][0, 0]), int(e[1][-1, 0]) + 1) for e in fit + held]
              for fit, held in blocks]
     assert spans == [[(0, 800), (800, 1000)], [(0, 600), (800, 1000), (600, 800)],
                      [(0, 400), (600, 1000), (400, 600)], [(0, 200), (400, 1000), (200, 400)],
                      [(200, 1000), (0, 200)]]
     # a part shorter than min_samples is left out of the fit
-    blocks = folds([(u, y)], 0.3, n_folds=5, min_samples=150)
+    blocks, _ = folds([(u, y)], 0.3, n_folds=5, min_samples=150)
     assert [len(e[1]) for e in blocks[2][0]] == [600] and len(blocks[2][1][0][1]) == 300
 
 
