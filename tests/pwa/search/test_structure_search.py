@@ -17,22 +17,29 @@ from pwa_pipeline.regressors import build_regressors
 FAST = {"clustering": False, "max_variables": 1, "forms": ["level"]}
 
 
+def siso_records(step, n_experiments: int, n: int, seed: int, u_low: float, start: int):
+    """Records of a SISO machine y(k) = ``step(y, u, k)`` from rest, for k ≥ ``start``,
+    driven by inputs held 10 samples at uniform levels on [``u_low``, 1], measured with
+    noise of standard deviation 0.002."""
+    rng = np.random.default_rng(seed)
+    us, ys = [], []
+    for _ in range(n_experiments):
+        u = np.repeat(rng.uniform(u_low, 1, n // 10), 10)
+        y = np.zeros(n)
+        for k in range(start, n):
+            y[k] = step(y, u, k)
+        us.append(u[:, None])
+        ys.append(y[:, None] + 0.002 * rng.standard_normal((n, 1)))
+    return us, ys
+
+
 def friction_machine(n_experiments: int = 12, n: int = 300, seed: int = 0,
                      friction: float = 0.08):
     """y(k) = 1.5 y(k−1) − 0.6 y(k−2) + 0.3 u(k−1) − f·sign(y(k−1) − y(k−2)) + noise: a
     mass with Coulomb friction, whose offset flips with the sign of the velocity."""
-    rng = np.random.default_rng(seed)
-    us, ys = [], []
-    for _ in range(n_experiments):
-        u = np.repeat(rng.uniform(-1, 1, n // 10), 10)[:, None]
-        y = np.zeros((n, 1))
-        for k in range(2, n):
-            v = y[k - 1, 0] - y[k - 2, 0]
-            y[k, 0] = (1.5 * y[k - 1, 0] - 0.6 * y[k - 2, 0] + 0.3 * u[k - 1, 0]
-                       - friction * np.sign(v))
-        us.append(u)
-        ys.append(y + 0.002 * rng.standard_normal((n, 1)))
-    return us, ys
+    return siso_records(lambda y, u, k: 1.5 * y[k - 1] - 0.6 * y[k - 2] + 0.3 * u[k - 1]
+                        - friction * np.sign(y[k - 1] - y[k - 2]),
+                        n_experiments, n, seed, u_low=-1, start=2)
 
 
 @pytest.fixture(scope="module")
@@ -85,16 +92,8 @@ def test_state_space_export_of_a_searched_model_simulates_alike(friction_fit):
 def saturating_machine(n_experiments: int = 10, n: int = 300, seed: int = 0):
     """y(k) = min(0.8 y(k−1) + 0.5 u(k−1), 1): a tank that overflows at level 1, whose
     boundary 0.8 y(k−1) + 0.5 u(k−1) = 1 is oblique (no threshold of one signal)."""
-    rng = np.random.default_rng(seed)
-    us, ys = [], []
-    for _ in range(n_experiments):
-        u = np.repeat(rng.uniform(0, 1, n // 10), 10)[:, None]
-        y = np.zeros((n, 1))
-        for k in range(1, n):
-            y[k, 0] = min(0.8 * y[k - 1, 0] + 0.5 * u[k - 1, 0], 1.0)
-        us.append(u)
-        ys.append(y + 0.002 * rng.standard_normal((n, 1)))
-    return us, ys
+    return siso_records(lambda y, u, k: min(0.8 * y[k - 1] + 0.5 * u[k - 1], 1.0),
+                        n_experiments, n, seed, u_low=0, start=1)
 
 
 @pytest.fixture(scope="module")
