@@ -11,6 +11,9 @@
   parameter's description mentions, so a class that moves to another module, or a parameter
   added or changed, shows up without editing this file.
 - ``<!-- generated: hparams -->``: the sets of the bundled ``data/hparams.toml``.
+
+Every page also drops the machine's load from the benchmark results it includes (`LOAD`):
+a results file records the load its times were taken under, the docs show the figures.
 """
 
 import importlib
@@ -23,6 +26,11 @@ from pathlib import Path
 ESTIMATORS_MARKER = "<!-- generated: estimators -->"
 HPARAMS_MARKER = "<!-- generated: hparams -->"
 PAGE = "configuration.md"
+#: The load statements of the benchmarks' results (``benchmarks._common.describe_load`` and
+#: older wordings), with the separator before them, and a paragraph left empty by them.
+LOAD = re.compile(r"(?:[;,] )?1-minute load(?: average)? [\d.]+ at the start, [\d.]+ at the "
+                  r"end(?:, [\d.]+% of the CPU time stolen by the hypervisor)?")
+EMPTY_MACHINE = re.compile(r"<p>Machine: ?\.?</p>")
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
     if page.file.src_uri != PAGE:
@@ -33,6 +41,10 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
     if HPARAMS_MARKER in markdown:
         markdown = markdown.replace(HPARAMS_MARKER, hparams_reference(root / "data" / "hparams.toml"))
     return markdown
+
+
+def on_page_content(html: str, page, config, files) -> str:
+    return EMPTY_MACHINE.sub("", LOAD.sub("", html))
 
 
 # --- estimators -------------------------------------------------------------------------

@@ -40,6 +40,7 @@ RAW = {
     "reST literal": re.compile(r"``"),
     "unresolved cross-reference": re.compile(r"\]\[[\w.]+\]"),
     "LaTeX": re.compile(r"\\frac|\$\$|\\\(|\\\[|\\begin\{"),
+    "machine load": re.compile(r"load average|1-minute load"),
 }
 #: What a renderer left raw inside inline code: a table's escaped pipe, which the reader copies.
 RAW_IN_CODE = {"escaped table pipe": re.compile(r"\\\|")}
@@ -76,6 +77,7 @@ def test_raw_markup_is_found():
     """The patterns catch each kind of raw markup, and not rendered prose."""
     assert set(raw_markup("see :meth:PWARX.paper and ``x``")) == {"Sphinx role", "reST literal"}
     assert set(raw_markup("\\[ \\frac{a}{b} \\]")) == {"LaTeX"}
+    assert set(raw_markup("taken under 1-minute load average 1.20")) == {"machine load"}
     assert set(raw_markup("fitted [`X`][pwa_pipeline.pwa.X]")) == {"unresolved cross-reference"}
     assert set(raw_markup("", "--partition 'kuka_robot\\|paper'")) == {"escaped table pipe"}
     assert raw_markup("H_i z ≤ h_i, x(k+1) = A_i x(k) [y1; y2]: a ratio",
