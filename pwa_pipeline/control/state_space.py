@@ -543,7 +543,7 @@ class PWAStateSpace:
         """
         return read_json(source, cls)
 
-    def to_mpt3(self, path: str | Path | None = None, Ts: float = 1.0) -> str:
+    def to_mpt3(self, path: str | Path | None = None, Ts: float | None = None) -> str:
         """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``
         (`mpt3_script`, whose parameters these are)."""
         return mpt3_script(self, path, Ts)

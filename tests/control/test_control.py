@@ -535,6 +535,12 @@ def test_mpt3_refuses_a_sample_time_that_is_not_positive_and_finite(default_ss, 
     assert "Ts = 0.01;" in default_ss.to_mpt3(Ts=0.01)
 
 
+def test_mpt3_says_when_the_sample_time_is_unknown(default_ss):
+    given, unknown = default_ss.to_mpt3(Ts=0.25), default_ss.to_mpt3()
+    assert "Ts = 0.25;" in given and "unknown" not in given
+    assert "% sample time unknown: Ts = 1 counts samples" in unknown and "Ts = 1;" in unknown
+
+
 # --- stability ---------------------------------------------------------------------------
 
 def test_stability_of_the_identified_system_is_certified(default_ss):
