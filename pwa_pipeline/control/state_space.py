@@ -538,8 +538,8 @@ class PWAStateSpace:
         ValueError
             If the document is not JSON or not an object, is of another schema or version,
             lacks a field, a field is not of its JSON type or does not have the shape the
-            others imply, or a region is empty or overlaps another inside the envelope (the
-            message names the field).
+            others imply, a region is empty or overlaps another inside the envelope, or the
+            regions leave a point of it uncovered (the message names the field or the point).
         """
         return read_json(source, cls)
 
