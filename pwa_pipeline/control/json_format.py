@@ -302,11 +302,11 @@ COVERAGE_STEP = 1e-6
 def _uncovered(units: list[tuple[np.ndarray, np.ndarray]], centres: list[np.ndarray],
                seed: int = 0) -> np.ndarray | None:
     """A point of the box [−1, 1]ⁿ (the envelope in its own coordinates) inside no region
-    {z̃ : H̃ z̃ ≤ h̃} of ``units``, or None if none is found.
+    {z̃ : H̃ z̃ ≤ h̃} of `units`, or None if none is found.
 
     A sampled check: `COVERAGE_SAMPLES` seeded uniform points of the box, and for each
     region the points `COVERAGE_STEP` beyond its boundary along rays from its Chebyshev
-    centre (in ``centres``) in the direction of each of its rows and of each coordinate
+    centre (in `centres`) in the direction of each of its rows and of each coordinate
     both ways. Where two regions meet, the point beyond one lies in the other, so a gap
     left between regions (a region shrunk or removed) is found wherever such a ray crosses
     it; a gap narrower than the step, or that no ray and no sample meets, is not.

@@ -28,7 +28,7 @@ class Table:
     ----------
     u, y : lists of ndarrays of shapes (N_e, r) and (N_e, m)
     ids : list of str
-        Each experiment's id as text (``"0"`` without an experiment column); the j-th
+        Each experiment's id as text (`"0"` without an experiment column); the j-th
         separate block of rows of one id (j ≥ 2) is the experiment `<id>#j`.
     origins : list of str
         Each experiment's id in the file (`<id>` for `<id>#j`).

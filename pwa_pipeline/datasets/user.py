@@ -102,7 +102,7 @@ class UserDataset:
     time : str, optional
         Numeric or date-time column, strictly increasing within each experiment.
     test_experiments : tuple of str
-        Experiment ids held out for testing (needs ``experiment``): an id holds out every
+        Experiment ids held out for testing (needs `experiment`): an id holds out every
         block of rows it has in the file, `<id>#j` only its j-th (`read_table`).
     test_fraction : float, optional
         Without ``test_experiments``: with two or more experiments, the last

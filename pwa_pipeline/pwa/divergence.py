@@ -37,8 +37,8 @@ def spectral_radii(thetas: np.ndarray, m: int, r: int, lags: int, nb: int,
 
 def free_run_nrmse(model, experiments: list[tuple[Float2D, Float2D]],
                    max_samples: int = MAX_CHECKED) -> float:
-    """The largest free-run NRMSE (eq. 21) of any output of ``model`` simulated from each
-    training experiment's first samples, on at most ``max_samples`` samples in all; inf
+    """The largest free-run NRMSE (eq. 21) of any output of `model` simulated from each
+    training experiment's first samples, on at most `max_samples` samples in all; inf
     when the run leaves float64's range."""
     worst, left, n0 = 0.0, max_samples, model.n_initial_
     for u, y in experiments:
@@ -53,8 +53,8 @@ def free_run_nrmse(model, experiments: list[tuple[Float2D, Float2D]],
 def warn_if_diverging(model, experiments: list[tuple[Float2D, Float2D]],
                       divergence: float = DIVERGENCE) -> None:
     """Warn ([`DivergenceWarning`][pwa_pipeline.pwa.DivergenceWarning]) when the free run of the fitted
-    ``model`` (on the paper's route: one output group over eq. 3's φ) on its training
-    ``experiments`` has an NRMSE above ``divergence`` (`free_run_nrmse`, the evaluation's
+    `model` (on the paper's route: one output group over eq. 3's φ) on its training
+    `experiments` has an NRMSE above `divergence` (`free_run_nrmse`, the evaluation's
     threshold for a diverged run), naming its unstable sub-models and what to try."""
     nrmse = free_run_nrmse(model, experiments)
     if nrmse <= divergence:

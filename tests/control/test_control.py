@@ -452,7 +452,7 @@ def test_a_tampered_document_is_refused_naming_the_field(default_ss, change, mes
 
 
 def _shrunk(doc: dict, i: int, factor: float) -> None:
-    """Region ``i`` of the document scaled by ``factor`` about its Chebyshev centre, which
+    """Region `i` of the document scaled by `factor` about its Chebyshev centre, which
     leaves a gap between it and its neighbours."""
     ss = PWAStateSpace.from_json(json.dumps(doc))
     box = Box(*ss.envelope)

@@ -32,7 +32,7 @@ def vehicle(n: int, seed: int, noise: float = 0.01) -> tuple[np.ndarray, np.ndar
 def sticky_valve(n: int, seed: int, stick: float = 0.4, jump: float = 0.2,
                  noise: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
     """A flow y behind a valve with stick-slip (Kano's model): the stem x stays until the
-    command u is more than ``stick`` away, then slips to ``stick − jump`` short of it;
+    command u is more than `stick` away, then slips to `stick − jump` short of it;
     y⁺ = 0.9 y + 0.1 x⁺. u: levels held 25 samples, with a little noise."""
     rng = np.random.default_rng(seed)
     u = np.repeat(rng.uniform(0, 1, n // 25 + 1), 25)[:n] + 0.02 * rng.standard_normal(n)

@@ -51,7 +51,7 @@ class RefinedSubModels(BaseSubModels):
        leaves fewer rows unexplained.
 
     Sub-models need at least max(d + 1, MinPts) rows. On a record of more than
-    ``max_rows`` regressor rows, steps 1–4 run on ``max_rows`` of them (the rows DBSCAN
+    `max_rows` regressor rows, steps 1–4 run on `max_rows` of them (the rows DBSCAN
     clustered, then a seeded random choice of the others), so that their cost stays
     bounded; the other rows get no label (−1, weight 0: the region step leaves them out).
 
@@ -105,7 +105,7 @@ class RefinedSubModels(BaseSubModels):
     ----------
     thetas_ : ndarray of shape (s, d, m)
     labels_ : ndarray of shape (n,)
-        Sub-model of every row (−1 for the rows left out by ``max_rows``).
+        Sub-model of every row (−1 for the rows left out by `max_rows`).
     weights_ : ndarray of shape (n,)
         Region-SVM weight of each row (`margin_weights`; 0 for the rows left out).
     n_submodels_ : int
@@ -200,7 +200,7 @@ class RefinedSubModels(BaseSubModels):
 
     def rows(self, clustered: np.ndarray) -> np.ndarray | None:
         """The rows steps 1–4 run on, given the clustering's labels (−1: not clustered):
-        None (every row) up to ``max_rows`` rows, else ``max_rows`` of them in row order,
+        None (every row) up to `max_rows` rows, else `max_rows` of them in row order,
         the clustered ones first, then a seeded random choice of the others."""
         n = clustered.size
         if self.max_rows is None or n <= self.max_rows:
