@@ -95,9 +95,9 @@ class RefinedSubModels(BaseSubModels):
         cache is not emptied when this library changes.
     max_rows : int, optional, default 500000
         Run on at most this many rows (see above). Steps 1–4 take time and memory in
-        proportion to the rows (about 40 s and 2 GB per million rows of the simulated
-        section 5 system, more with more sub-models): with every row of a 5-million-row
-        record they ran for minutes and took 15 GB. None: every row.
+        proportion to the rows (15.5 s and about 0.8 GB for 400,000 rows of the simulated
+        section 5 system in `benchmarks.scale`, more with more sub-models): with every row
+        of a 5-million-row record they ran for minutes and took 15 GB. None: every row.
     random_state : int, default 0
         Seed of that choice.
 
