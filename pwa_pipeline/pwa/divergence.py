@@ -15,7 +15,6 @@ import numpy as np
 from .._typing import Float2D
 from ..control.conversion import mode_matrices
 from ..scoring.evaluation import DIVERGENCE
-from ..scoring.metrics import nrmse
 
 #: Samples of the training experiments simulated by the check, in file order (its cost
 #: stays bounded on long records; a model that diverges does so within a few hundred).
@@ -38,16 +37,24 @@ def spectral_radii(thetas: np.ndarray, m: int, r: int, lags: int, nb: int,
 def free_run_nrmse(model, experiments: list[tuple[Float2D, Float2D]],
                    max_samples: int = MAX_CHECKED) -> float:
     """The largest free-run NRMSE (eq. 21) of any output of `model` simulated from each
-    training experiment's first samples, on at most `max_samples` samples in all; inf
-    when the run leaves float64's range."""
-    worst, left, n0 = 0.0, max_samples, model.n_initial_
+    training experiment's first samples, on at most `max_samples` samples in all (RMS
+    error over those samples, divided by the output's standard deviation over every
+    training sample); inf when the run leaves float64's range."""
+    n0, left = model.n_initial_, max_samples
+    sq, count = 0.0, 0
     for u, y in experiments:
         n = min(len(u), left)
-        if n <= n0 + 1:
-            break
+        if n <= n0:
+            continue
         left -= n
-        worst = max(worst, float(np.max(nrmse(y[n0:n], model.simulate(u[:n], y[:n0])[n0:]))))
-    return worst
+        err = model.simulate(u[:n], y[:n0])[n0:] - y[n0:n]
+        if not np.all(np.isfinite(err)):
+            return float("inf")
+        sq, count = sq + (err ** 2).sum(axis=0), count + len(err)
+    if not count:
+        return 0.0
+    scale = np.vstack([y for _, y in experiments]).std(axis=0)
+    return float(np.max(np.sqrt(sq / count) / np.maximum(scale, np.finfo(float).tiny)))
 
 
 def warn_if_diverging(model, experiments: list[tuple[Float2D, Float2D]],
