@@ -16,8 +16,8 @@ from .._typing import Float2D
 from ..control.conversion import mode_matrices
 from ..scoring.evaluation import DIVERGENCE
 
-#: Samples of the training experiments simulated by the check, in file order (its cost
-#: stays bounded on long records; a model that diverges does so within a few hundred).
+#: Samples of the training experiments simulated by the check, in file order: its cost
+#: stays bounded on long records, and a divergence that starts only later is not seen.
 MAX_CHECKED = 5000
 
 
