@@ -88,9 +88,10 @@ def read_json(source: str | Path, model: Callable):
 
     Every field is required (``D`` from version 2 on) and of its own JSON type: nothing is
     converted (``"false"`` is not a boolean, 1.7 not a whole number) and nothing takes a
-    default. The regions must each hold a ball inside the envelope, and no two may overlap
-    there (a region without rows, all of z, only in a model of one mode), as
-    `to_state_space` makes them.
+    default. The regions must each hold a ball inside the envelope, no two may overlap
+    there (a region without rows, all of z, only in a model of one mode), and together they
+    must cover it (a sampled check, `_uncovered`), as `to_state_space` makes them: a
+    partition of the envelope.
 
     Parameters
     ----------
@@ -105,8 +106,8 @@ def read_json(source: str | Path, model: Callable):
     ValueError
         If the document is not JSON, not an object, nested too deeply, of another schema
         or schema version, lacks a field, a field is not of its type or does not have the
-        shape the others imply, or the regions are empty or overlap (the message names
-        the field).
+        shape the others imply, or the regions are empty, overlap or leave a point of the
+        envelope uncovered (the message names the field, or the point).
     """
     doc = _document(source)
     if doc.get("schema") != SCHEMA:
@@ -259,17 +260,21 @@ def _check_fields(doc: dict) -> None:
 
 
 def _check_regions(ss) -> None:
-    """Each region holds a ball inside the envelope and no two overlap there (they may
-    share a boundary), by the Chebyshev balls of `polyhedra`."""
+    """Each region holds a ball inside the envelope, no two overlap there (they may share a
+    boundary), by the Chebyshev balls of `polyhedra`, and together they cover it
+    (`_uncovered`)."""
     box = Box(*ss.envelope)
     units = [box.to_unit(H, h) for H, h in ss.regions]
+    centres = []
     for i, (H, h) in enumerate(ss.regions):
         if not len(h) and ss.n_modes > 1:
             raise ValueError(f"region {i} has no rows: all of z, which overlaps the other "
                              f"{ss.n_modes - 1} regions")
-        if chebyshev_ball(*units[i])[0] <= EMPTY_RADIUS:
+        radius, centre = chebyshev_ball(*units[i])
+        if radius <= EMPTY_RADIUS:
             raise ValueError(f"region {i} is empty inside the envelope (it holds no ball "
                              f"of radius {EMPTY_RADIUS:g} half-widths), so it is no mode")
+        centres.append(centre)
     for i, j in combinations(range(ss.n_modes), 2):
         radius, _ = chebyshev_ball(np.vstack([units[i][0], units[j][0]]),
                                    np.concatenate([units[i][1], units[j][1]]))
@@ -277,3 +282,50 @@ def _check_regions(ss) -> None:
             raise ValueError(f"regions {i} and {j} overlap inside the envelope (they share a "
                              f"ball of radius {radius:.3g} half-widths), so the regions no "
                              f"longer partition it")
+    point = _uncovered(units, centres)
+    if point is not None:
+        z = box.centre + box.half_width * point
+        shown = ", ".join(f"{name} = {v:.6g}"
+                          for name, v in zip([*ss.state_names, *ss.input_names], z,
+                                             strict=True))
+        raise ValueError(f"the regions do not cover the envelope: the point {shown} inside "
+                         f"it lies in no region, so the regions no longer partition it")
+
+
+#: Points drawn at random in the envelope by the coverage check (`_uncovered`).
+COVERAGE_SAMPLES = 4096
+#: How far beyond a region's boundary (in half-widths) the coverage check looks for the
+#: next region; a point counts as inside a region within a tenth of it.
+COVERAGE_STEP = 1e-6
+
+
+def _uncovered(units: list[tuple[np.ndarray, np.ndarray]], centres: list[np.ndarray],
+               seed: int = 0) -> np.ndarray | None:
+    """A point of the box [−1, 1]ⁿ (the envelope in its own coordinates) inside no region
+    {z̃ : H̃ z̃ ≤ h̃} of `units`, or None if none is found.
+
+    A sampled check: `COVERAGE_SAMPLES` seeded uniform points of the box, and for each
+    region the points `COVERAGE_STEP` beyond its boundary along rays from its Chebyshev
+    centre (in `centres`) in the direction of each of its rows and of each coordinate
+    both ways. Where two regions meet, the point beyond one lies in the other, so a gap
+    left between regions (a region shrunk or removed) is found wherever such a ray crosses
+    it; a gap narrower than the step, or that no ray and no sample meets, is not.
+    """
+    p = units[0][0].shape[1]
+    rng = np.random.default_rng(seed)
+    points = [rng.uniform(-1.0, 1.0, (COVERAGE_SAMPLES, p))]
+    for (Ht, ht), centre in zip(units, centres, strict=True):
+        rays = np.vstack([Ht, np.eye(p), -np.eye(p)])
+        rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-300)
+        slack = ht - Ht @ centre
+        speed = Ht @ rays.T  # (rows, rays)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            exit_ = np.where(speed > 0, slack[:, None] / speed, np.inf).min(axis=0)
+        beyond = centre + (np.minimum(exit_, 4.0) + COVERAGE_STEP)[:, None] * rays
+        points.append(beyond)
+    z = np.vstack(points)
+    z = z[np.all(np.abs(z) < 1.0, axis=1)]
+    covered = np.zeros(len(z), bool)
+    for Ht, ht in units:
+        covered |= np.all(z @ Ht.T <= ht + COVERAGE_STEP / 10, axis=1)
+    return z[np.argmin(covered)] if not covered.all() else None

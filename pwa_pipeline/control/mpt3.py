@@ -20,7 +20,7 @@ def comment_text(text: str) -> str:
                    else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
-def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
+def mpt3_script(ss, path: str | Path | None = None, Ts: float | None = None) -> str:
     """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``.
 
         Each mode becomes ``LTISystem('A', A, 'B', B, 'C', C, 'D', D, 'f', f, 'g', g,
@@ -33,8 +33,10 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
         ----------
         path : str or Path, optional
             Also write the script there (e.g. ``model_pwa.m``).
-        Ts : float, default 1
-            Sampling time (the model counts samples), a finite number > 0.
+        Ts : float, optional
+            Sampling time in seconds, a finite number > 0 (a data set's `sample_time`).
+            None (unknown): the script sets `Ts = 1` (the model counts samples) and says
+            that the sample time is unknown.
 
         Returns
         -------
@@ -45,7 +47,8 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
         ValueError
             If ``Ts`` is not a finite number > 0.
     """
-    if isinstance(Ts, bool) or not isinstance(Ts, Real) or not math.isfinite(Ts) or Ts <= 0:
+    if Ts is not None and (isinstance(Ts, bool) or not isinstance(Ts, Real)
+                           or not math.isfinite(Ts) or Ts <= 0):
         raise ValueError(f"Ts must be a finite number > 0 (the sampling time), got {Ts!r}")
     def mat(a: np.ndarray) -> str:
         a = np.atleast_2d(a)
@@ -65,7 +68,9 @@ def mpt3_script(ss, path: str | Path | None = None, Ts: float = 1.0) -> str:
         f"% outputs y: {comment_text(', '.join(ss.output_names))}",
         f"% {ss.n_modes} mode(s); the regions are bounded by the data envelope "
         f"z_min <= [x; u] <= z_max.",
-        f"Ts = {Ts:.17g};",
+        *(["% sample time unknown: Ts = 1 counts samples; set it to the data's sample "
+           "time in seconds"] if Ts is None else []),
+        f"Ts = {1.0 if Ts is None else Ts:.17g};",
         f"z_min = {mat(lower[:, None])};",
         f"z_max = {mat(upper[:, None])};",
     ]

@@ -538,12 +538,12 @@ class PWAStateSpace:
         ValueError
             If the document is not JSON or not an object, is of another schema or version,
             lacks a field, a field is not of its JSON type or does not have the shape the
-            others imply, or a region is empty or overlaps another inside the envelope (the
-            message names the field).
+            others imply, a region is empty or overlaps another inside the envelope, or the
+            regions leave a point of it uncovered (the message names the field or the point).
         """
         return read_json(source, cls)
 
-    def to_mpt3(self, path: str | Path | None = None, Ts: float = 1.0) -> str:
+    def to_mpt3(self, path: str | Path | None = None, Ts: float | None = None) -> str:
         """A MATLAB script that builds the model as an MPT3 ``PWASystem`` named ``pwa``
         (`mpt3_script`, whose parameters these are)."""
         return mpt3_script(self, path, Ts)

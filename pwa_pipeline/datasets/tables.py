@@ -28,12 +28,16 @@ class Table:
     ----------
     u, y : lists of ndarrays of shapes (N_e, r) and (N_e, m)
     ids : list of str
-        Each experiment's id as text (``"0"`` without an experiment column).
+        Each experiment's id as text (`"0"` without an experiment column); the j-th
+        separate block of rows of one id (j ≥ 2) is the experiment `<id>#j`.
+    origins : list of str
+        Each experiment's id in the file (`<id>` for `<id>#j`).
     """
 
     u: list[Float2D]
     y: list[Float2D]
     ids: list[str]
+    origins: list[str]
 
 
 def read_table(
@@ -52,7 +56,10 @@ def read_table(
     u_columns, y_columns : list of str
         Column names of the inputs and outputs.
     experiment_column : str, optional
-        Column identifying separate experiments (rows kept in file order within each).
+        Column identifying separate experiments (rows kept in file order within each): each
+        block of consecutive rows with one id is an experiment, a later block of an id
+        that appeared before is `<id>#2`, `<id>#3` … (its rows do not follow the
+        earlier block's, so no lag spans the gap).
     time_column : str, optional
         Numeric or date-time column that must increase strictly within each experiment; the
         rows are not reordered, so an unsorted or repeated time is an error.
@@ -66,7 +73,8 @@ def read_table(
     FileNotFoundError, ValueError
         Missing file, unknown format, a file that cannot be read as its format (empty,
         binary), a column named twice in a CSV header, missing columns, no data rows, an
-        empty experiment id, a u/y column of date-times or booleans, a non-numeric, missing,
+        empty experiment id, a block's name `<id>#j` that is another id, a u/y column of
+        date-times or booleans, a non-numeric, missing,
         infinite or huge (beyond ``MAX_MAGNITUDE``) value in the u/y columns, an output that holds
         one value in every row, or a missing, repeated or decreasing time. Each message names
         the file; rows are numbered from 0 in file order, not counting the header.
@@ -128,7 +136,7 @@ def read_table(
                 f"{p.name}: column {experiment_column!r} is empty in {no_id.size} row(s) "
                 f"(first: row {no_id[0]}); every row needs an experiment id"
             )
-        groups = [(str(k), g) for k, g in df.groupby(experiment_column, sort=False)]
+        groups = _blocks(df, experiment_column, p.name)
     if time_column is not None:
         times = _time_values(df[time_column], p.name, time_column)
         for key, g in groups:
@@ -136,7 +144,29 @@ def read_table(
                               time_column, key if experiment_column else None)
     return Table(u=[g[list(u_columns)].to_numpy(dtype=float) for _, g in groups],
                  y=[g[list(y_columns)].to_numpy(dtype=float) for _, g in groups],
-                 ids=[k for k, _ in groups])
+                 ids=[k for k, _ in groups],
+                 origins=[k if experiment_column is None else str(g[experiment_column].iloc[0])
+                          for k, g in groups])
+
+
+def _blocks(df, column: str, file: str) -> list[tuple[str, object]]:
+    """The experiments of `df`: each run of consecutive rows with one id in `column`,
+    in file order, named by the id, and `<id>#j` for the j-th separate run of an id
+    (j ≥ 2): rows apart in the file are not consecutive samples, so no lag spans the gap."""
+    ids = df[column]
+    start = (ids != ids.shift()).to_numpy()
+    runs, seen, out = np.cumsum(start), {}, []
+    given = set(ids.astype(str))
+    for _, g in df.groupby(runs, sort=True):
+        key = str(g[column].iloc[0])
+        seen[key] = seen.get(key, 0) + 1
+        name = key if seen[key] == 1 else f"{key}#{seen[key]}"
+        if seen[key] > 1 and name in given:
+            raise ValueError(f"{file}: experiment id {key!r} appears in separate blocks of "
+                             f"rows, and {name!r}, the name of its block {seen[key]}, is "
+                             f"another id of column {column!r}; give each block its own id")
+        out.append((name, g))
+    return out
 
 
 def _repeated_header(path: Path, names: list[str]) -> list[str]:

@@ -102,7 +102,8 @@ class UserDataset:
     time : str, optional
         Numeric or date-time column, strictly increasing within each experiment.
     test_experiments : tuple of str
-        Experiment ids held out for testing (needs ``experiment``).
+        Experiment ids held out for testing (needs `experiment`): an id holds out every
+        block of rows it has in the file, `<id>#j` only its j-th (`read_table`).
     test_fraction : float, optional
         Without ``test_experiments``: with two or more experiments, the last
         ``round(f · n)`` of them (at least one, at most all but one) in file order; with one,
@@ -223,14 +224,16 @@ class UserDataset:
                   for e, u, y in zip(table.ids, table.u, table.y, strict=True)]
         n = len(pieces)
         if self.test_experiments:
-            unknown = [e for e in self.test_experiments if e not in table.ids]
+            unknown = [e for e in self.test_experiments
+                       if e not in table.ids and e not in table.origins]
             if unknown:
                 raise ValueError(f"test experiment(s) {unknown} are not in column "
                                  f"{self.experiment!r}; its ids are {table.ids}")
-            if len(set(self.test_experiments)) == n:
+            held = [e in self.test_experiments or o in self.test_experiments
+                    for e, o in zip(table.ids, table.origins, strict=True)]
+            if all(held):
                 raise ValueError("every experiment is held out for testing; none is left "
                                  "for training")
-            held = [e in self.test_experiments for e in table.ids]
             return ([p for p, h in zip(pieces, held, strict=True) if not h],
                     [p for p, h in zip(pieces, held, strict=True) if h])
         fraction = DEFAULT_TEST_FRACTION if self.test_fraction is None else self.test_fraction

@@ -10,6 +10,7 @@ clustering, sub-models, regions), the model structures for machines (`structures
 (`kernels`).
 """
 
+from .divergence import DivergenceWarning
 from .estimator import PWARX, STEPS
 from .groups import OutputGroup
 from .memory import FitMemoryError
@@ -21,7 +22,7 @@ from .steps.local_models import LocalLeastSquares
 from .steps.regions import SVMRegions
 from .steps.submodels import ClusterCentres, RefinedSubModels
 
-__all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "FitMemoryError",
-           "LocalLeastSquares", "OutputGroup", "RefinedSubModels", "RegionMap",
-           "ResidualRegions", "SVMRegions", "SearchBudgetSpent", "SearchReport",
+__all__ = ["PWARX", "STEPS", "ClusterCentres", "DBSCANClustering", "DivergenceWarning",
+           "FitMemoryError", "LocalLeastSquares", "OutputGroup", "RefinedSubModels",
+           "RegionMap", "ResidualRegions", "SVMRegions", "SearchBudgetSpent", "SearchReport",
            "SearchTimeLimit", "StructureSearch"]

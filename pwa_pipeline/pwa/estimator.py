@@ -13,6 +13,7 @@ from .._validation import as_experiments
 from ..envelope import training_range
 from ..regressors import Regressors, build_regressors
 from .arx import ARXModelBase
+from .divergence import warn_if_diverging
 from .groups import OutputGroup
 from .memory import check_fit_memory
 from .search import StructureSearch
@@ -305,6 +306,12 @@ class PWARX(ARXModelBase):
             At once, before any step, when the fit's estimated memory exceeds what the
             machine has available (`check_fit_memory`); the
             message gives the estimate and the setting to change.
+
+        Warns
+        -----
+        pwa_pipeline.pwa.DivergenceWarning
+            On the paper's route, when the fitted model's free run on the training
+            experiments diverges (`warn_if_diverging`), naming what to try.
         """
         experiments = as_experiments(u, y)
         self.signal_range_ = training_range(experiments)
@@ -318,6 +325,7 @@ class PWARX(ARXModelBase):
             self.groups_, self.structures_ = self._fit_structure(experiments)
         else:
             self.groups_, self.structures_ = self._fit_steps(experiments)
+            warn_if_diverging(self, experiments)
         return self
 
     @property

@@ -86,7 +86,8 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
     out["clustering"] = kept + n * d * m * 8 + max(dbscan, counts)
 
     s = 30 if type(submodels).__name__ == "RefinedSubModels" else 0  # sub-models met at most
-    out["submodels"] = kept + s * n * m * 8 * 3
+    refined = n if getattr(submodels, "max_rows", None) is None else min(n, submodels.max_rows)
+    out["submodels"] = kept + s * refined * m * 8 * 3
     rows = n if getattr(regions, "max_rows", None) is None else min(n, regions.max_rows)
     out["regions"] = kept + rows * (d + 2) * 8 * 3
     return {step: size + _SLACK for step, size in out.items()}
@@ -95,7 +96,7 @@ def fit_memory(n: int, d: int, m: int, steps: dict) -> dict[str, int]:
 _KNOB = {"local_models": "local_models__n_rho (smaller local sets), local_models__max_sets "
                         "(fewer local models) or the record's length",
          "clustering": "clustering__max_clustered (cluster a subset of the local models)",
-         "submodels": "the record's length",
+         "submodels": "submodels__max_rows (refine the sub-models on a subset of the rows)",
          "regions": "regions__max_rows (fit the region SVM on a subset)"}
 
 

@@ -451,6 +451,31 @@ def test_a_tampered_document_is_refused_naming_the_field(default_ss, change, mes
         PWAStateSpace.from_json(json.dumps(doc))
 
 
+def _shrunk(doc: dict, i: int, factor: float) -> None:
+    """Region `i` of the document scaled by `factor` about its Chebyshev centre, which
+    leaves a gap between it and its neighbours."""
+    ss = PWAStateSpace.from_json(json.dumps(doc))
+    box = Box(*ss.envelope)
+    H, h = ss.regions[i]
+    centre = box.centre + box.half_width * chebyshev_ball(*box.to_unit(H, h))[1]
+    doc["regions"][i]["h"] = (H @ centre + factor * (h - H @ centre)).tolist()
+
+
+def test_regions_that_no_longer_cover_the_envelope_are_refused_naming_a_point(default_ss):
+    doc = json.loads(default_ss.to_json())
+    _shrunk(doc, 1, 0.9)
+    with pytest.raises(ValueError, match=r"the regions do not cover the envelope: the point "
+                       r"y1\(k-1\) = \S+, .*, u2 = \S+ inside it lies in no region") as err:
+        PWAStateSpace.from_json(json.dumps(doc))
+    z = np.array([float(v) for v in re.findall(r" = (\S+?)[, ]", str(err.value))])
+    assert z.shape == (6,) and np.all((z >= doc["envelope"]["lower"])
+                                      & (z <= doc["envelope"]["upper"]))
+    assert not any(np.all(np.array(r["H"]) @ z <= np.array(r["h"])) for r in doc["regions"])
+    doc = json.loads(default_ss.to_json())
+    _shrunk(doc, 1, 1 - 1e-12)  # rounding: the regions still meet
+    assert PWAStateSpace.from_json(json.dumps(doc)).n_modes == 4
+
+
 @pytest.mark.parametrize("text, message", [
     ("[1, 2]", "the JSON document is a list, not an object"),
     ("null", "the JSON document is null, not an object"),
@@ -533,6 +558,12 @@ def test_mpt3_refuses_a_sample_time_that_is_not_positive_and_finite(default_ss, 
                                          r"time\), got " + re.escape(repr(Ts))):
         default_ss.to_mpt3(Ts=Ts)
     assert "Ts = 0.01;" in default_ss.to_mpt3(Ts=0.01)
+
+
+def test_mpt3_says_when_the_sample_time_is_unknown(default_ss):
+    given, unknown = default_ss.to_mpt3(Ts=0.25), default_ss.to_mpt3()
+    assert "Ts = 0.25;" in given and "unknown" not in given
+    assert "% sample time unknown: Ts = 1 counts samples" in unknown and "Ts = 1;" in unknown
 
 
 # --- stability ---------------------------------------------------------------------------

@@ -1,6 +1,8 @@
 """The control_model asset: a model that does not convert is said so, and never fails the
 partition; one that does is written to its files."""
 
+import dataclasses
+
 import dagster as dg
 import numpy as np
 
@@ -34,7 +36,7 @@ def test_a_model_that_does_not_convert_is_reported_with_a_warning_check(tmp_path
 
 
 def test_a_model_is_written_to_its_files_with_its_verdict(tmp_path):
-    data = load_dataset("hure_vasak")
+    data = dataclasses.replace(load_dataset("hure_vasak"), sample_time=0.25)
     settings = PipelineSettings(cache_dir=str(tmp_path / "c"))
     model = settings.configuration("paper", "hure_vasak").pwa.fit(data.u_train, data.y_train)
     context = dg.build_asset_context(partition_key="hure_vasak|paper")
@@ -47,7 +49,8 @@ def test_a_model_is_written_to_its_files_with_its_verdict(tmp_path):
     folder = tmp_path / "exports" / "hure_vasak" / "paper"
     read = PWAStateSpace.from_json(folder / "pwa_state_space.json")
     np.testing.assert_array_equal(read.A, ss.A)
-    assert "PWASystem" in (folder / "pwa_system.m").read_text()
+    script = (folder / "pwa_system.m").read_text()
+    assert "PWASystem" in script and "Ts = 0.25;" in script  # the data's sample time
     assert output.metadata["lyapunov_certified"].value == report.certified
     assert output.metadata["max_spectral_radius"].value == float(
         f"{np.max(report.spectral_radius):.4g}")

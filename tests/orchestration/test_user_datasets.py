@@ -63,6 +63,25 @@ def test_default_split_holds_out_the_last_experiments_or_the_end_of_one_record(
     np.testing.assert_array_equal(one.u_test[0], table[["u1", "u2"]].to_numpy()[900:])
 
 
+def test_an_id_in_two_separate_blocks_is_two_experiments(tmp_path, table):
+    # run a, then b, then a again: the second block of a does not follow the first
+    runs = np.repeat(["a", "b", "a", "c"], 300)
+    path = tmp_path / "blocks.csv"
+    table.assign(run=runs, t=np.arange(1200) % 300).to_csv(path, index=False)
+    data = UserDataset("blocks", path, **COLUMNS, experiment="run", time="t",
+                       test_experiments=("c",)).load()
+    assert [len(u) for u in data.u_train] == [300, 300, 300]
+    np.testing.assert_array_equal(data.u_train[2], table[["u1", "u2"]].to_numpy()[600:900])
+    one = UserDataset("blocks", path, **COLUMNS, experiment="run", test_experiments=("a#2",))
+    np.testing.assert_array_equal(one.load().u_test[0], data.u_train[2])
+    both = UserDataset("blocks", path, **COLUMNS, experiment="run", test_experiments=("a",))
+    assert [len(u) for u in both.load().u_test] == [300, 300]  # an id holds out every block
+    table.assign(run=np.repeat(["a", "b", "a", "a#2"], 300)).to_csv(path, index=False)
+    with pytest.raises(ValueError, match=r"blocks.csv: experiment id 'a' appears in separate "
+                       r"blocks of rows, and 'a#2', the name of its block 2, is another id"):
+        UserDataset("blocks", path, **COLUMNS, experiment="run").load()
+
+
 @pytest.mark.parametrize("edit, kwargs, message", [
     (None, dict(u=("u1", "speed")), r"no column\(s\) \['speed'\]"),
     (lambda df: df.assign(y2=df["y2"].astype(object).where(df.index != 17, "abc")), {},

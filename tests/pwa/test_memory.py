@@ -64,3 +64,29 @@ def test_the_search_counts_only_the_local_sets_estimated():
     saved = (fit_memory(400_000, 24, 6, every)["local_models"]
              - fit_memory(400_000, 24, 6, some)["local_models"])
     assert saved == (400_000 - 5_000) * 6 * 72 * 12  # the candidates of the rows not searched
+
+
+def test_step_5_refines_at_most_max_rows_rows_however_long_the_record():
+    steps = PWARX.default().step_objects()
+    kept = {n: fit_memory(n, 4, 1, steps)["submodels"] - fit_memory(n, 4, 1, steps)["regions"]
+            for n in (500_000, 5_000_000, 50_000_000)}  # step 5's own arrays, beyond kept
+    assert kept[500_000] == kept[5_000_000] == kept[50_000_000] > 0
+    every = PWARX.default().set_params(submodels__max_rows=None).step_objects()
+    need = fit_memory(5_000_000, 4, 1, every)
+    assert need["submodels"] - need["regions"] > 9.9 * kept[500_000]  # every row: 10 times
+    with pytest.raises(FitMemoryError, match="submodels__max_rows"):
+        memory.check_fit_memory(5_000_000, 4, 1, every, base=available_memory() or 2**50)
+
+
+def test_step_5_on_a_subset_keeps_the_clustered_rows_and_leaves_the_others_out():
+    data = make_hure_vasak(n_samples=1500, snr_db=None, seed=0)
+    model = PWARX(1, 1).set_params(submodels__max_rows=1200).fit(data.u_train[0],
+                                                               data.y_train[0])
+    subs, clusters = model.steps_["submodels"], model.steps_["clustering"]
+    assert model.n_submodels_ == 4
+    kept = subs.labels_ >= 0
+    assert kept.sum() == 1200 and kept[clusters.labels_ >= 0].all()
+    assert (subs.weights_[~kept] == 0).all() and (subs.weights_[kept] > 0).any()
+    rows = subs.rows(clusters.labels_)
+    np.testing.assert_array_equal(rows, np.flatnonzero(kept))
+    assert subs.rows(clusters.labels_[:1200]) is None  # up to max_rows: every row

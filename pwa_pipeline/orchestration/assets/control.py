@@ -67,7 +67,7 @@ def control_model_asset(partitions_def):
         convert_seconds = time.perf_counter() - t0
         report = ss.stability()
         folder = inside(settings.exports_root(), configuration.dataset, configuration.hparams)
-        files = {JSON_FILE: ss.to_json(), MPT3_FILE: ss.to_mpt3()}
+        files = {JSON_FILE: ss.to_json(), MPT3_FILE: ss.to_mpt3(Ts=data.sample_time)}
         for name, text in files.items():
             atomic_write(folder / name, lambda path, text=text: path.write_text(text))
         states = ss.states(data.u_train, data.y_train)

@@ -105,7 +105,9 @@ def local_least_squares(
     regularisation in scaled units). A local set whose Φ_k is rank-deficient (e.g. every
     row inside one hold of a piecewise-constant input) has no unique θ_k: it gets the
     minimum-norm solution (in the unit-RMS columns, so independent of the channels' units)
-    and is marked degenerate, never an error.
+    and is marked degenerate, never an error; unless its only dependent columns are zero
+    throughout the set (an input at rest, as a vehicle's brake while it accelerates): θ_k is
+    then identified on the other columns, 0 on those (the minimum norm), and not marked.
 
     Parameters
     ----------
@@ -127,7 +129,8 @@ def local_least_squares(
         Root mean square of each regressor column (the column scaling of the solve).
     degenerate : ndarray of shape (q,), bool
         Local sets whose (scaled, ridge-extended) Φ_k has a diagonal entry of R at most 1e-10
-        of its largest: rank-deficient.
+        of its largest (rank-deficient), other than those whose rank is the number of their
+        columns that are not zero throughout.
 
     Raises
     ------
@@ -160,6 +163,10 @@ def local_least_squares(
         elif singular.any():  # plus what R₁₁ θ_k leaves of R₁₂
             top = r12[singular] - r11[singular] @ th[singular]
             ssr[singular] += np.einsum("kij,kij->kj", top, top)
+        if singular.any():  # singular only by columns zero throughout: identified on the rest
+            rank = np.linalg.matrix_rank(r11[singular], rtol=_RANK_TOL)
+            at_rest = ~np.take(both[:, :d], idx[singular], axis=0).any(axis=1)
+            singular[np.flatnonzero(singular)[rank == d - at_rest.sum(axis=1)]] = False
         degenerate[rows] = singular
         theta[rows] = th / scale[:, None]
         resvar[rows] = ssr / (n_rho - d)
@@ -225,7 +232,8 @@ class LocalLeastSquares(BaseLocalModels):
     degenerate_ : ndarray of shape (n,), bool
         Local sets whose regressors are linearly dependent (rank-deficient Φ_k, e.g. inside
         one hold of a piecewise-constant input): θ_k is not identified there, and the
-        clustering step leaves them out.
+        clustering step leaves them out. A set whose only dependent columns are zero
+        throughout (an input at rest) is not degenerate: its θ_k is 0 on those columns.
     n_degenerate_ : int
     n_estimated_ : int
         Local models estimated (each repeat of a sample counted).

@@ -13,6 +13,7 @@ from ...._arrays import array_digest
 from ...._blas import single_threaded_blas
 from ...._typing import Float2D
 from ..base import BaseSubModels
+from ..local_models import _spread
 from ..neighbours import distinct_rows
 from .least_squares import _row_set_key, refit
 from .merge import merge_indistinguishable
@@ -49,7 +50,10 @@ class RefinedSubModels(BaseSubModels):
        sub-models, and step 2 repeats; at most ``n_search`` searches, and only while each
        leaves fewer rows unexplained.
 
-    Sub-models need at least max(d + 1, MinPts) rows.
+    Sub-models need at least max(d + 1, MinPts) rows. On a record of more than
+    `max_rows` regressor rows, steps 1–4 run on `max_rows` of them (the rows DBSCAN
+    clustered, then a seeded random choice of the others), so that their cost stays
+    bounded; the other rows get no label (−1, weight 0: the region step leaves them out).
 
     Parameters
     ----------
@@ -89,14 +93,21 @@ class RefinedSubModels(BaseSubModels):
         or MinPts often consolidate alike, so a sweep fits steps 2–4 once per consolidated
         state. None (default): no caching. The results are the same bit for bit; joblib's
         cache is not emptied when this library changes.
+    max_rows : int, optional, default 500000
+        Run on at most this many rows (see above). Steps 1–4 take time and memory in
+        proportion to the rows (15.5 s and about 0.8 GB for 400,000 rows of the simulated
+        section 5 system in `benchmarks.scale`, more with more sub-models): with every row
+        of a 5-million-row record they ran for minutes and took 15 GB. None: every row.
+    random_state : int, default 0
+        Seed of that choice.
 
     Attributes
     ----------
     thetas_ : ndarray of shape (s, d, m)
     labels_ : ndarray of shape (n,)
-        Sub-model of every row.
+        Sub-model of every row (−1 for the rows left out by `max_rows`).
     weights_ : ndarray of shape (n,)
-        Region-SVM weight of each row (`margin_weights`).
+        Region-SVM weight of each row (`margin_weights`; 0 for the rows left out).
     n_submodels_ : int
     n_merged_ : int
         Merges done.
@@ -116,12 +127,14 @@ class RefinedSubModels(BaseSubModels):
         "split_sweep_tol": [Interval(Real, 0, 1, closed="both")],
         "settle_tol": [Interval(Real, 0, None, closed="left")],
         "memory": [None, str, HasMethods(["cache"])],
+        "max_rows": [Interval(Integral, 2, None, closed="left"), None],
+        "random_state": [Interval(Integral, 0, None, closed="left")],
     }
 
     def __init__(self, merge_tol: float = 1.0, copy_tol: float | None = 25.0,
                  n_refine: int = 20, n_search: int = 3, split_tol: float | None = 1.0,
                  n_split: int = 4, split_sweep_tol: float = 0.0, settle_tol: float = 2.0,
-                 memory=None):
+                 memory=None, max_rows: int | None = 500_000, random_state: int = 0):
         self.merge_tol = merge_tol
         self.copy_tol = copy_tol
         self.n_refine = n_refine
@@ -131,6 +144,8 @@ class RefinedSubModels(BaseSubModels):
         self.split_sweep_tol = split_sweep_tol
         self.settle_tol = settle_tol
         self.memory = memory
+        self.max_rows = max_rows
+        self.random_state = random_state
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, phi: Float2D, target: Float2D, local, clustering, regions
@@ -148,10 +163,15 @@ class RefinedSubModels(BaseSubModels):
         regions : unfitted SVMRegions
             The region estimator of step 6, used to keep rows region-consistent.
         """
+        n = phi.shape[0]
+        subset = self.rows(clustering.labels_)
+        local_theta = local.theta_ if subset is None else local.theta_[subset]
+        if subset is not None:
+            phi, target = phi[subset], target[subset]
         min_pts = clustering.min_pts_
         min_size = max(phi.shape[1] + 1, min_pts)
         merge = dict(tol=self.merge_tol, copy_tol=self.copy_tol, regions=regions)
-        labels = clustering.labels_.copy()
+        labels = clustering.labels_.copy() if subset is None else clustering.labels_[subset]
         rows = labels >= 0
         labels[rows], n_merged = merge_indistinguishable(phi[rows], target[rows], labels[rows],
                                                          **merge)
@@ -168,12 +188,30 @@ class RefinedSubModels(BaseSubModels):
                                                        ignore=["local_theta"])
         (self.thetas_, self.labels_, margin, merged, self.n_iter_,
          self.n_split_) = consolidated(clone(self).set_params(memory=None), phi, target, labels,
-                                       local.theta_, local_key, min_pts,
+                                       local_theta, local_key, min_pts,
                                        *_search_steps(local, clustering), regions)
         self.weights_ = margin_weights(margin)
+        if subset is not None:  # the rows left out: no label, no weight
+            self.labels_ = _spread(self.labels_, subset, n, -1)
+            self.weights_ = _spread(self.weights_, subset, n, 0.0)
         self.n_submodels_ = self.thetas_.shape[0]
         self.n_merged_ = n_merged + merged
         return self
+
+    def rows(self, clustered: np.ndarray) -> np.ndarray | None:
+        """The rows steps 1–4 run on, given the clustering's labels (−1: not clustered):
+        None (every row) up to `max_rows` rows, else `max_rows` of them in row order,
+        the clustered ones first, then a seeded random choice of the others."""
+        n = clustered.size
+        if self.max_rows is None or n <= self.max_rows:
+            return None
+        rng = np.random.default_rng(self.random_state)
+        first = np.flatnonzero(clustered >= 0)
+        if first.size >= self.max_rows:
+            return np.sort(rng.choice(first, self.max_rows, replace=False))
+        others = rng.choice(np.flatnonzero(clustered < 0), self.max_rows - first.size,
+                            replace=False)
+        return np.sort(np.concatenate([first, others]))
 
     def _best_split(self, phi, target, labels, local_theta, min_size, regions, searched,
                     split_once):
