@@ -44,7 +44,13 @@ from ..checks import (
     sub_model_results,
 )
 from ..images import figures_fingerprint, to_markdown
-from ..model_facts import ground_truth, phi_names, prediction_key, truth_metadata
+from ..model_facts import (
+    ground_truth,
+    phi_names,
+    prediction_key,
+    shown_params,
+    truth_metadata,
+)
 from ..partitions import PartitionKey
 from ..reporting import markdown, params_table, regions_table, rounded, theta_table
 from ..settings import PipelineSettings
@@ -357,6 +363,7 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                       f"`structure_search.csv`):\n\n"
                       f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
     figures = model_figures(inputs, model, data, title)
+    params, params_note = shown_params(model)
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
         # what the model is, first: the search's verdict (e.g. the linear model kept)
         **({} if report is None else {"model": report.verdict}),
@@ -365,7 +372,9 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
         "steps_from_cache": ", ".join(sorted(cached)) or "none",
         "structure per output": markdown(structure.set_index("output")),
         **found,
-        "resolved parameters": markdown(params_table(model.resolved_params())),
+        "resolved parameters": dg.MetadataValue.md(
+            "\n\n".join(filter(None, [params_note, params_table(params).to_markdown(
+                floatfmt=".4g")]))),
         **truth_metadata(model, data), "figures_from_cache": memory.hits > 0,
         **{name: dg.MetadataValue.md(text) for name, text in figures.items()}}))
 
