@@ -246,6 +246,13 @@ def _described(model: PWARX, data: Dataset) -> list[str]:
                                                     strict=True)]
 
 
+def switching_note(model) -> str | None:
+    """What the page says of a model that never switches (one sub-model: a linear model,
+    e.g. the one a structure search kept), beside its switching figure, which says so
+    too; None for a model that switches."""
+    return "none: one mode (a single linear model)" if model.n_submodels_ == 1 else None
+
+
 def _not_fitted(model: PWARX, asset: str) -> str:
     """Why a model has no fitted step for ``asset``."""
     if asset == "output_error_refinement":
@@ -367,7 +374,9 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
         # what the model is, first: the search's verdict (e.g. the linear model kept)
         **({} if report is None else {"model": report.verdict}),
-        "n_submodels": model.n_submodels_, "output_groups": len(model.groups_),
+        "n_submodels": model.n_submodels_,
+        **({} if (note := switching_note(model)) is None else {"switching": note}),
+        "output_groups": len(model.groups_),
         "fit_seconds": sum(model.timings_.values()),
         "steps_from_cache": ", ".join(sorted(cached)) or "none",
         "structure per output": markdown(structure.set_index("output")),
