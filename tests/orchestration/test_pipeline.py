@@ -659,7 +659,7 @@ def test_a_failing_noise_check_stops_the_steps_after_clustering(resources, tmp_p
                             resources=resources, raise_on_error=False)
     check = next(e for e in result.get_asset_check_evaluations()
                  if e.check_name == "noise_share_below_limit")
-    assert not check.passed and check.metadata["noise_share"].value > 0.9
+    assert not check.passed and check.metadata["noise_share [hure_vasak|noisy]"].value > 0.9
     done = {e.asset_key.to_user_string() for e in result.get_asset_materialization_events()}
     assert "clusters" in done and not {"sub_models", "svm_regions", "pwa_model"} & done
     assert "linear_arx_model" in done  # what does not depend on the clusters still runs
@@ -804,11 +804,17 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
     assert not check.passed and check.description == (
         f"partition sim|paper: FAILED: free-run NRMSE of PWA ≥ 10 (diverged), of linear "
         f"ARX {calm.mean('free_run'):.4g}")
-    assert check.metadata["pwa_free_run_nrmse"].value == "≥ 10 (diverged)"
+    # the check's numbers keyed by partition (a plot each), a diverged score as text
+    assert check.metadata["pwa_free_run_nrmse [sim|paper]"].value == "≥ 10 (diverged)"
+    assert check.metadata["linear_free_run_nrmse [sim|paper]"].value == float(
+        f"{calm.mean('free_run'):.4g}")
+    assert check.metadata["partition"].value == "sim|paper"
+    assert not {key for key in check.metadata if key.endswith("nrmse")}
     record = method_run(SimpleNamespace(dataset="sim", hparams="paper", warmup=10), "pwa",
                         Fitted(ys, at=37), ev, SimpleNamespace(convention=None))  # MLflow
     assert record.tags == {"free_run_nrmse": "≥ 10 (diverged)",
-                           "free_run_r2": "≤ -99 (diverged)"}
+                           "free_run_r2": "≤ -99 (diverged)",
+                           "mlflow.runColor": METHODS["pwa"].colour}
     assert "free-run NRMSE ≥ 10 (diverged) from sample 37 of held-out experiment 1" \
         in record.description
     assert diverged_tags(calm) == {}
