@@ -498,13 +498,18 @@ def set_alias(hparams: str) -> str:
 def point_best(client, registered_name: str) -> None:
     """Point the alias `BEST` at the version, among those a set's alias points at, whose
     run scored the lowest free-run NRMSE (the headline score; a diverged run logs none and
-    is never best); the lowest version number among equals. No alias while no version has
-    a score."""
+    is never best, nor one whose run is gone from the store); the lowest version number
+    among equals. No alias while no version has a score."""
+    from mlflow.exceptions import MlflowException
+
     scores = {}
     for alias, number in client.get_registered_model(registered_name).aliases.items():
         if alias != BEST:
             run_id = client.get_model_version(registered_name, str(number)).run_id
-            score = client.get_run(run_id).data.metrics.get("free_run_nrmse")
+            try:
+                score = client.get_run(run_id).data.metrics.get("free_run_nrmse")
+            except MlflowException:  # (purged by `mlflow gc`: its score is not known)
+                continue
             if score is not None and np.isfinite(score):
                 scores[int(number)] = score
     if scores:
