@@ -81,10 +81,13 @@ _DESCRIPTIONS = {
     "pwa_model": "The fitted PWARX model, what `pwa_scores` scores and MLflow registers. Its "
                  "page shows what the model is when a structure search built it (`model`: "
                  "e.g. the linear model kept, and whether its budget or time limit "
-                 "stopped it), its resolved parameters, each output's structure, and two "
-                 "figures: *switching*, the region of each sample of the first held-out "
-                 "experiment (one lane per output group), and *regions*, the regions in the "
-                 "2-D slice of φ where they differ most.",
+                 "stopped it), whether it switches (`switching`, for a model that does "
+                 "not), the parameters it ran with (the paper's steps left out, and why, "
+                 "when the search ran none), each output's structure, the ground truth on "
+                 "a simulated system, and two figures: *switching*, the region of each "
+                 "sample of the first held-out experiment (one lane per output group; a "
+                 "model that never switches says so instead), and *regions*, the regions "
+                 "in the 2-D slice of φ where they differ most.",
 }
 #: The figure keys of the ``pwa_model`` page.
 SWITCHING, REGIONS = "switching (first held-out experiment)", "regions"
@@ -320,7 +323,8 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                  configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
                  phi: np.ndarray) -> dg.Output:
     """``pwa_model`` with its page: what the model is (the structure search's verdict,
-    first), resolved parameters, each output's structure, the structure search's report
+    first), whether it switches (`switching_note`), the parameters it ran with
+    (`shown_params`), each output's structure, the structure search's report
     or the structured fit's candidates, the ground truth when comparable, and the
     switching and regions figures (their numbers cached by what the model predicts with,
     drawn titled with this partition's set)."""
