@@ -848,5 +848,7 @@ def test_registered_model_versions_say_where_they_come_from(paper_run):
         assert version.description.startswith(
             f"The {method} model of data set hure_vasak, hyper-parameter set paper.")
         assert f"free-run NRMSE {free:.4g}" in version.description
+        # to 4 significant digits, where MLflow's tables show 2 decimals (0.0027 as 0.00)
+        assert f"free-run R² {run.data.metrics['free_run_r2']:.4g}" in version.description
     assert "2 sub-model(s)." in registry.search_model_versions(
         "name = 'pwa-pipeline.hure_vasak.pwa'")[0].description
