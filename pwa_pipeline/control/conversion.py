@@ -287,7 +287,7 @@ def used_lags(lags: int, m: int, r: int, nb: int, groups, partitions: list[Parti
     Returns
     -------
     used : int
-        Output lags kept, 1 ≤ used ≤ ``lags``.
+        Output lags kept, 1 ≤ used ≤ `lags`.
     columns : ndarray of int
         The columns of φ (the constant last, if any) the state-space model is built on.
     """
@@ -307,9 +307,9 @@ def used_lags(lags: int, m: int, r: int, nb: int, groups, partitions: list[Parti
 
 def model_source(model) -> dict:
     """What an export was converted from, for the record: the class, orders and constant,
-    each output's structure in words (form, orders, regions, as ``model.structures_``
+    each output's structure in words (form, orders, regions, as `model.structures_`
     says: the structure search's choice, not the estimator's defaults) and whether the
-    outputs share one model (``joint``) or form several output groups."""
+    outputs share one model (`joint`) or form several output groups."""
     groups = list(model.groups_)
     return {"model": type(model).__name__, "na": model.na, "nb": model.nb,
             "affine": model.affine, "structures": list(model.structures_),
@@ -328,8 +328,8 @@ def check_regions(ss: PWAStateSpace, groups, columns: np.ndarray, lags: int) -> 
     ``predict`` at `CHECK_POINTS` seeded random points of the envelope: a region map
     whose ``halfspaces()`` do not describe the regions its ``predict()`` gives (a region
     step of one's own that overrides one and not the other) would otherwise export another
-    model than the fitted one. ``columns`` (`used_lags`) place the state in the model's
-    φ of ``lags`` output lags, the lags the state leaves out at 0."""
+    model than the fitted one. `columns` (`used_lags`) place the state in the model's
+    φ of `lags` output lags, the lags the state leaves out at 0."""
     rng = np.random.default_rng(0)
     lower, upper = ss.envelope
     z = lower + rng.random((CHECK_POINTS, lower.size)) * (upper - lower)

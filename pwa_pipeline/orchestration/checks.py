@@ -2,8 +2,8 @@
 
 Every result names its partition twice: its description starts ``partition <key>:`` and
 says what was found (the line Dagster's check lists show), and its metadata holds
-``partition``. Its numbers are keyed by the partition too (`per_partition`:
-``noise_share [hure_vasak|paper]``), as Dagster draws one plot per metadata key over every
+`partition`. Its numbers are keyed by the partition too (`per_partition`:
+`noise_share [hure_vasak|paper]`), as Dagster draws one plot per metadata key over every
 evaluation of a check: one plot per partition, never one line through all of them. A
 diverged free run's score is `score_text`'s text, never its number (which would flatten
 the plot)."""
@@ -42,8 +42,8 @@ COMPARISON_CHECKS = [
 
 
 def per_partition(partition: str, numbers: dict) -> dict:
-    """A check result's metadata: ``partition``, then ``numbers`` keyed
-    ``<name> [<partition>]`` (a plot per partition), floats to 4 significant digits."""
+    """A check result's metadata: `partition`, then `numbers` keyed
+    `<name> [<partition>]` (a plot per partition), floats to 4 significant digits."""
     return rounded({"partition": partition,
                     **{f"{name} [{partition}]": value for name, value in numbers.items()}})
 

@@ -49,11 +49,11 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
 
 def shown_params(model) -> tuple[dict, str]:
     """A fitted model's parameters as its page and its MLflow run show them, and what was
-    left out: ``resolved_params()`` without the paper's steps (local models, clustering,
+    left out: `resolved_params()` without the paper's steps (local models, clustering,
     sub-models, regions) when none of them ran (a structure search that kept no
     clustered regions): the values those steps choose from the data (n_ρ, ε, MinPts)
     were never chosen, and would show as None. The note says why they are missing
-    (``""`` when nothing is)."""
+    (`""` when nothing is)."""
     params = model.resolved_params()
     if not isinstance(model, PWARX) or model.search is None or any(
             g.steps for g in model.groups_):
@@ -67,9 +67,9 @@ def shown_params(model) -> tuple[dict, str]:
 
 
 def constant_text(model) -> str:
-    """Whether a linear ARX model has a constant term (``affine``), in words: sets differ
+    """Whether a linear ARX model has a constant term (`affine`), in words: sets differ
     (the `auto` set's baseline has one, `default`'s none), and a comparison with the model
-    without it is a comparison with the weaker one. ``""`` for any other model."""
+    without it is a comparison with the weaker one. `""` for any other model."""
     if not isinstance(model, LinearARX):
         return ""
     return "affine: with a constant term" if model.affine else "no constant term"
@@ -77,10 +77,10 @@ def constant_text(model) -> str:
 
 def model_note(model) -> str:
     """What a fitted model is when its method's name does not say it: the structure
-    search's verdict (`SearchReport.verdict`, e.g. ``"linear kept (no switching structure
-    beat it)"``) for a searched PWARX, whether a linear ARX model has a constant
-    (`constant_text`), ``""`` for any other model. The scores tables carry it (column
-    ``model``) to the leaderboard."""
+    search's verdict (`SearchReport.verdict`, e.g. `"linear kept (no switching structure
+    beat it)"`) for a searched PWARX, whether a linear ARX model has a constant
+    (`constant_text`), `""` for any other model. The scores tables carry it (column
+    `model`) to the leaderboard."""
     report = getattr(model, "structure_search_", None)
     return constant_text(model) if report is None else report.verdict
 

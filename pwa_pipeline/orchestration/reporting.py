@@ -107,7 +107,7 @@ def model_params(facts: dict) -> dict[str, str]:
     errors, the structure search's verdict, the export's regions) as MLflow params under
     `MODEL`: facts of the run, one value each, shown in its parameters table and never
     drawn as charts (a boolean as a bar, a count as a line, ahead of the scores). Numbers
-    to 4 significant digits, booleans ``true``/``false``; a fact that is not finite (a
+    to 4 significant digits, booleans `true`/`false`; a fact that is not finite (a
     comparison that does not apply) is left out."""
     out = {}
     for key, value in facts.items():

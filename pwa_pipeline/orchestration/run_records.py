@@ -53,11 +53,11 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
 
     Parameters are the model's own (`shown_params`: every parameter, the values the
     fit chose filled in), the evaluation's warm-up and what the model says of itself under
-    ``model/`` (`model_params`: sub-models, output groups, ε and the noise share where the
+    `model/` (`model_params`: sub-models, output groups, ε and the noise share where the
     paper's clustering ran, the ground truth's errors, the structure search's, the
     state-space export's, and whether a linear model has a constant, `constant_text`);
     metrics are the scores (`score_metrics`) and the fit's seconds, from the model
-    (``timings_``); tags are the data set, set and method, ``tags``, the method's colour
+    (`timings_`); tags are the data set, set and method, `tags`, the method's colour
     in MLflow's UI (`RUN_COLOUR`) and, for a diverged free run, its scores as every page
     shows them (`diverged_tags`).
 

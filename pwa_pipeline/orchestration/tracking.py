@@ -375,7 +375,7 @@ class MLflowTracker(dg.ConfigurableResource):
         to this run as its output, and the run's description links the run that logged it
         (runs of other processes that score the same model at the same moment may each log
         it).
-        Either way the version is given the alias of ``hparams`` (`set_alias`), the alias
+        Either way the version is given the alias of `hparams` (`set_alias`), the alias
         `BEST` moves to the best of the sets' versions (`point_best`), and the
         registered model gets its description and tags (`registered_model_description`); the
         run is tagged ``model_uri`` (where the model is), ``model_id`` (its
@@ -460,7 +460,7 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
     on, its headline scores on the held-out experiments (``metrics``, named as
     `score_metrics` names them; the mean over the outputs, to 4 significant digits, which
     MLflow's tables round to 2 decimals; a diverged free run as `score_text` shows it,
-    with where it diverged), and from its parameters (``params``, `MODEL` facts) a PWA
+    with where it diverged), and from its parameters (`params`, `MODEL` facts) a PWA
     model's sub-models and whether a linear ARX model has a constant."""
     params = params or {}
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
@@ -490,7 +490,7 @@ def set_alias(hparams: str) -> str:
     """The registered model alias of hyper-parameter set ``hparams``: its name, or
     ``set-<name>`` for a name MLflow reserves (``latest``, and ``v<digits>``, which name
     versions) or this module gives another meaning (`BEST`). Set names are letters,
-    digits, ``_`` and ``-``, which aliases allow."""
+    digits, `_` and `-`, which aliases allow."""
     reserved = hparams.lower() in ("latest", BEST) or re.fullmatch(r"[vV]\d+", hparams)
     return f"set-{hparams}" if reserved else hparams
 

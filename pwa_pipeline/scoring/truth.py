@@ -18,8 +18,8 @@ def ground_truth_scores(model, thetas: np.ndarray, u, y, modes) -> dict[str, flo
     Parameters
     ----------
     model : fitted PWARX
-        On the true system's regressor (``thetas`` of the same shape as
-        ``model.thetas_[0]``; a larger regressor takes the truth through `embedded_thetas`).
+        On the true system's regressor (`thetas` of the same shape as
+        `model.thetas_[0]`; a larger regressor takes the truth through `embedded_thetas`).
     thetas : ndarray of shape (s, d, m)
         True parameter matrices.
     u, y : array-like or lists of array-likes
@@ -56,9 +56,9 @@ def ground_truth_scores(model, thetas: np.ndarray, u, y, modes) -> dict[str, flo
 
 def embedded_thetas(thetas: np.ndarray, m: int, r: int, na: int, nb: int, affine: bool,
                     lags: int, nb_to: int, affine_to: bool) -> np.ndarray | None:
-    """A PWARX system's parameter matrices (orders ``na``, ``nb``, ``affine``) written over a
-    larger regressor of eq. (2)–(3) (``lags`` output lags, ``nb_to`` input lags, the
-    constant when ``affine_to``): the system's entries where that regressor has them, zero
+    """A PWARX system's parameter matrices (orders `na`, `nb`, `affine`) written over a
+    larger regressor of eq. (2)–(3) (`lags` output lags, `nb_to` input lags, the
+    constant when `affine_to`): the system's entries where that regressor has them, zero
     for the lags and the constant it does not read. The system is the same model over
     either regressor, so a model fitted on the larger one (a structure search's φ of
     na + 1 lags and a constant) is compared with it there. None when the larger regressor
