@@ -458,8 +458,8 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
                       params: dict | None = None) -> str:
     """What a run scored, and its registered model version: the model, what it was fitted
     on, its headline scores on the held-out experiments (``metrics``, named as
-    `score_metrics` names them; the mean over the outputs, to 4 significant digits, which
-    MLflow's tables round to 2 decimals; a diverged free run as `score_text` shows it,
+    `score_metrics` names them; the mean over the outputs, to 4 significant digits, where
+    MLflow's UI may show 2 decimals; a diverged free run as `score_text` shows it,
     with where it diverged), and from its parameters (`params`, `MODEL` facts) a PWA
     model's sub-models and whether a linear ARX model has a constant."""
     params = params or {}
