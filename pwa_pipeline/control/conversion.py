@@ -6,7 +6,9 @@
 whose increments are linear in φ): output p by a parameter row Θ_{p,i} over φ chosen by its
 region i (eq. 1). With the state x(k) = φ(k) without the constant, a mode's C_i and g_i are
 those rows over x and over the constant, and A_i, B_i, f_i shift the lags
-(`mode_matrices`).
+(`mode_matrices`). Output lags that no parameter row or region reads (a structure search's
+φ holds na + 1 of them, its level-form choice of order na reads na) are left out of the
+state (`used_lags`): the state holds no entry that nothing reads.
 
 **Regions.** The fitted model keeps its outputs in groups, each with one region map over φ
 (``model.groups_``, `pwa_pipeline.pwa.groups`) whose ``halfspaces()`` write each
@@ -180,7 +182,10 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     """
     check_is_fitted(model)
     m, r = model.n_outputs_, model.n_inputs_
-    lags, nb, affine = model.output_lags_, model.nb, model.affine
+    nb, affine = model.nb, model.affine
+    groups = list(model.groups_)
+    distinct = [partition(group) for group in groups]
+    lags, columns = used_lags(model.output_lags_, m, r, nb, groups, distinct)
     n = m * lags + r * nb
     if not (isinstance(padding, int | float) and np.isfinite(padding) and padding > 0):
         raise ValueError(f"padding must be a positive share of each span, got {padding!r}")
@@ -201,13 +206,12 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
     p_dim = n + r
     box_H, box_h = box.rows()
 
-    groups = list(model.groups_)
-    distinct = [partition(group) for group in groups]
     part_of = [0] * m
     for k, group in enumerate(groups):
         for p in group.outputs:
             part_of[p] = k
-    zrows = [[_to_z(G, q, n, r, affine) for G, q in part.rows] for part in distinct]
+    zrows = [[_to_z(G[:, columns], q, n, r, affine) for G, q in part.rows]
+             for part in distinct]
 
     def ball(G: Float2D, q: np.ndarray) -> tuple[float, np.ndarray | None]:
         return chebyshev_ball(*box.to_unit(np.vstack([G, box_H]), np.concatenate([q, box_h])))
@@ -248,7 +252,7 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
         labels = labels_of(index)
         theta = np.empty((n + int(affine), m))
         for group in groups:
-            theta[:, group.outputs] = group.thetas[labels[group.outputs[0]]]
+            theta[:, group.outputs] = group.thetas[labels[group.outputs[0]]][columns]
         for name, value in zip("ABfCg", mode_matrices(theta, m, r, lags, nb, affine),
                                strict=True):
             mats[name].append(value)
@@ -264,10 +268,54 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
         np.array(mats["g"]), regions, box.lower, box.upper, output_lags=lags, input_lags=nb,
         affine=affine, input_names=input_names, output_names=output_names, padding=padding,
         mode_regions=mode_regions, dropped_modes=np.array(dropped, dtype=int).reshape(-1, m),
-        source={"model": type(model).__name__, "na": model.na, "nb": nb, "affine": affine,
-                "structures": list(model.structures_)})
-    check_regions(ss, groups)
+        source=model_source(model))
+    check_regions(ss, groups, columns, model.output_lags_)
     return ss
+
+
+def used_lags(lags: int, m: int, r: int, nb: int, groups, partitions: list[Partition]
+              ) -> tuple[int, np.ndarray]:
+    """The output lags the state keeps, and the columns of φ they and the rest take.
+
+    A regressor of more output lags than the model uses (a structure search's φ holds
+    na + 1 lags for its velocity-form candidates; a level-form choice of order na leaves
+    the last lag unused) would give states that no output, region or other state reads:
+    the lags from the last one any sub-model's parameter row or any region's inequality
+    reads (at least one) are left out of the state, so that its simulation is the model's
+    from the same warm-up.
+
+    Returns
+    -------
+    used : int
+        Output lags kept, 1 ≤ used ≤ `lags`.
+    columns : ndarray of int
+        The columns of φ (the constant last, if any) the state-space model is built on.
+    """
+    d = m * lags + r * nb
+    read = np.zeros(d, bool)
+    for group in groups:
+        read |= np.any(np.asarray(group.thetas)[:, :d] != 0, axis=(0, 2))
+    for part in partitions:
+        for G, _ in part.rows:
+            read |= np.any(np.asarray(G)[:, :d] != 0, axis=0)
+    by_lag = read[:m * lags].reshape(m, lags).any(axis=0) if lags else np.zeros(0, bool)
+    used = max(1, int(np.flatnonzero(by_lag).max()) + 1) if by_lag.any() else min(lags, 1)
+    kept = [p * lags + j for p in range(m) for j in range(used)]
+    total = groups[0].thetas.shape[1]
+    return used, np.array([*kept, *range(m * lags, total)], dtype=int)
+
+
+def model_source(model) -> dict:
+    """What an export was converted from, for the record: the class, orders and constant,
+    each output's structure in words (form, orders, regions, as `model.structures_`
+    says: the structure search's choice, not the estimator's defaults) and whether the
+    outputs share one model (`joint`) or form several output groups."""
+    groups = list(model.groups_)
+    return {"model": type(model).__name__, "na": model.na, "nb": model.nb,
+            "affine": model.affine, "structures": list(model.structures_),
+            "outputs": "joint" if len(groups) == 1 else
+            f"{len(groups)} output groups: "
+            + "; ".join(", ".join(f"y{j + 1}" for j in g.outputs) for g in groups)}
 
 
 #: Random points of the envelope at which `check_regions` compares the exported
@@ -275,17 +323,20 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
 CHECK_POINTS = 2000
 
 
-def check_regions(ss: PWAStateSpace, groups) -> None:
+def check_regions(ss: PWAStateSpace, groups, columns: np.ndarray, lags: int) -> None:
     """Raise ValueError where the exported regions disagree with the output groups' own
     ``predict`` at `CHECK_POINTS` seeded random points of the envelope: a region map
     whose ``halfspaces()`` do not describe the regions its ``predict()`` gives (a region
     step of one's own that overrides one and not the other) would otherwise export another
-    model than the fitted one."""
+    model than the fitted one. `columns` (`used_lags`) place the state in the model's
+    φ of `lags` output lags, the lags the state leaves out at 0."""
     rng = np.random.default_rng(0)
     lower, upper = ss.envelope
     z = lower + rng.random((CHECK_POINTS, lower.size)) * (upper - lower)
     x = z[:, :ss.n_states]
-    phi = np.column_stack([x, np.ones(len(z))]) if ss.affine else x
+    full = np.zeros((len(z), ss.n_outputs * lags + ss.n_inputs * ss.input_lags))
+    full[:, columns[:ss.n_states]] = x
+    phi = np.column_stack([full, np.ones(len(z))]) if ss.affine else full
     exported = ss.mode_regions[ss.mode_of(x, z[:, ss.n_states:])]
     for group in groups:
         wrong = int(np.sum(group.regions.predict(phi) != exported[:, group.outputs[0]]))

@@ -102,7 +102,8 @@ class PWAStateSpace:
     dropped_modes : array-like of int, shape (k, m), optional
         The same for the combinations left out as empty inside the envelope.
     source : dict, optional
-        What the model was converted from (class, orders, form, route), for the record.
+        What the model was converted from (class, orders, each output's structure, the
+        outputs' coupling: `model_source`), for the record.
 
     Attributes
     ----------

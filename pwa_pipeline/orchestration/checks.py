@@ -2,8 +2,11 @@
 
 Every result names its partition twice: its description starts ``partition <key>:`` and
 says what was found (the line Dagster's check lists show), and its metadata holds
-``partition``. A diverged free run's score is `score_text`'s text, never its number
-(which would flatten the check's plot)."""
+`partition`. Its numbers are keyed by the partition too (`per_partition`:
+`noise_share [hure_vasak|paper]`), as Dagster draws one plot per metadata key over every
+evaluation of a check: one plot per partition, never one line through all of them. A
+diverged free run's score is `score_text`'s text, never its number (which would flatten
+the plot)."""
 
 import dagster as dg
 import numpy as np
@@ -38,6 +41,13 @@ COMPARISON_CHECKS = [
 ]
 
 
+def per_partition(partition: str, numbers: dict) -> dict:
+    """A check result's metadata: `partition`, then `numbers` keyed
+    `<name> [<partition>]` (a plot per partition), floats to 4 significant digits."""
+    return rounded({"partition": partition,
+                    **{f"{name} [{partition}]": value for name, value in numbers.items()}})
+
+
 def described(partition: str, passed: bool, found: str) -> str:
     """A check result's description: its partition, whether it failed, what was found."""
     return f"partition {partition}: {'' if passed else 'FAILED: '}{found}"
@@ -52,11 +62,11 @@ def sub_model_results(subs, partition: str) -> list[dg.AssetCheckResult]:
                             passed=n_bad == 0,
                             description=described(partition, n_bad == 0,
                                                   f"{n_bad} non-finite entries of θ"),
-                            metadata={"partition": partition, "non_finite_entries": n_bad}),
+                            metadata=per_partition(partition, {"non_finite_entries": n_bad})),
         dg.AssetCheckResult(asset_key="sub_models", check_name="at_least_one_sub_model",
                             passed=n >= 1, description=described(partition, n >= 1,
                                                                  f"{n} sub-model(s)"),
-                            metadata={"partition": partition, "n_submodels": n}),
+                            metadata=per_partition(partition, {"n_submodels": n})),
     ]
 
 
@@ -68,8 +78,7 @@ def cluster_results(clustering, partition: str) -> list[dg.AssetCheckResult]:
         passed=share <= NOISE_LIMIT,
         description=described(partition, share <= NOISE_LIMIT,
                               f"noise share {share:.1%} (limit {NOISE_LIMIT:.0%})"),
-        metadata=rounded({"partition": partition, "noise_share": share,
-                          "limit": NOISE_LIMIT}))]
+        metadata={**per_partition(partition, {"noise_share": share}), "limit": NOISE_LIMIT})]
 
 
 def not_applicable(specs: list[dg.AssetCheckSpec], partition: str,
@@ -99,6 +108,6 @@ def comparison_results(table: pd.DataFrame, partition: str) -> list[dg.AssetChec
         severity=dg.AssetCheckSeverity.WARN,
         description=described(partition, passed, f"free-run NRMSE of PWA {pwa_text}, of "
                                                  f"linear ARX {lin_text}"),
-        metadata=rounded({"partition": partition,
-                          "pwa_free_run_nrmse": pwa if np.isfinite(pwa) else pwa_text,
-                          "linear_free_run_nrmse": lin if np.isfinite(lin) else lin_text}))]
+        metadata=per_partition(partition, {
+            "pwa_free_run_nrmse": pwa if np.isfinite(pwa) else pwa_text,
+            "linear_free_run_nrmse": lin if np.isfinite(lin) else lin_text}))]

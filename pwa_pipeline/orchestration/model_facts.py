@@ -2,10 +2,13 @@
 the comparison with a simulated system's ground truth, what the model is (`model_note`),
 and the key its scores and figures are cached by."""
 
+from dataclasses import replace
+
+from ..baselines.linear import LinearARX
 from ..datasets import Dataset, GroundTruth
 from ..pwa import PWARX
 from ..regressors import regressor_names
-from ..scoring.truth import ground_truth_scores
+from ..scoring.truth import embedded_thetas, ground_truth_scores
 from .mlflow_models import predictor_fingerprint
 
 
@@ -15,13 +18,19 @@ def phi_names(pwa: PWARX, data: Dataset) -> list[str]:
 
 
 def ground_truth(model: PWARX, data: Dataset) -> GroundTruth | None:
-    """The data set's ground truth when it is a PWARX system's and the model has its
-    regressor."""
+    """The data set's ground truth when it is a PWARX system's and the model's regressor
+    holds the system's (its parameter matrices written over the model's regressor,
+    `embedded_thetas`: a structure search's φ has na + 1 lags and a constant)."""
     truth = data.truth
-    if truth is None or truth.thetas is None or (model.output_lags_, model.nb, model.affine) != (
-            truth.na, truth.nb, truth.affine):
+    if truth is None or truth.thetas is None:
         return None
-    return truth
+    lags = (model.output_lags_, model.nb, model.affine)
+    if lags == (truth.na, truth.nb, truth.affine):
+        return truth
+    thetas = embedded_thetas(truth.thetas, len(data.y_names), len(data.u_names), truth.na,
+                             truth.nb, truth.affine, *lags)
+    return None if thetas is None else replace(truth, thetas=thetas, na=lags[0], nb=lags[1],
+                                               affine=lags[2])
 
 
 def truth_metadata(model: PWARX, data: Dataset) -> dict:
@@ -34,17 +43,46 @@ def truth_metadata(model: PWARX, data: Dataset) -> dict:
         t = data.truth
         return {"ground_truth": f"not comparable: the model's regressor has (output lags, nb, "
                                 f"affine) = {(model.output_lags_, model.nb, model.affine)}, "
-                                f"the system's {(t.na, t.nb, t.affine)}"}
+                                f"which lacks entries of the system's {(t.na, t.nb, t.affine)}"}
     return ground_truth_scores(model, truth.thetas, data.u_test, data.y_test, truth.modes_test)
+
+
+def shown_params(model) -> tuple[dict, str]:
+    """A fitted model's parameters as its page and its MLflow run show them, and what was
+    left out: `resolved_params()` without the paper's steps (local models, clustering,
+    sub-models, regions) when none of them ran (a structure search that kept no
+    clustered regions): the values those steps choose from the data (n_ρ, ε, MinPts)
+    were never chosen, and would show as None. The note says why they are missing
+    (`""` when nothing is)."""
+    params = model.resolved_params()
+    if not isinstance(model, PWARX) or model.search is None or any(
+            g.steps for g in model.groups_):
+        return params, ""
+    steps = tuple(model.step_objects())
+    kept = {k: v for k, v in params.items() if k.split("__")[0] not in steps}
+    return kept, (f"The paper's steps ({', '.join(steps)}) did not run: the structure search "
+                  f"kept no clustered regions, so their parameters (n_rho, eps and min_pts "
+                  f"among them, which those steps choose from the data) do not apply and "
+                  f"are left out.")
+
+
+def constant_text(model) -> str:
+    """Whether a linear ARX model has a constant term (`affine`), in words: sets differ
+    (the `auto` set's baseline has one, `default`'s none), and a comparison with the model
+    without it is a comparison with the weaker one. `""` for any other model."""
+    if not isinstance(model, LinearARX):
+        return ""
+    return "affine: with a constant term" if model.affine else "no constant term"
 
 
 def model_note(model) -> str:
     """What a fitted model is when its method's name does not say it: the structure
-    search's verdict (`SearchReport.verdict`, e.g. ``"linear kept (no switching structure
-    beat it)"``) for a searched PWARX, ``""`` for any other model. The scores tables carry
-    it (column ``model``) to the leaderboard."""
+    search's verdict (`SearchReport.verdict`, e.g. `"linear kept (no switching structure
+    beat it)"`) for a searched PWARX, whether a linear ARX model has a constant
+    (`constant_text`), `""` for any other model. The scores tables carry it (column
+    `model`) to the leaderboard."""
     report = getattr(model, "structure_search_", None)
-    return "" if report is None else report.verdict
+    return constant_text(model) if report is None else report.verdict
 
 
 def prediction_key(model, data: Dataset) -> tuple[str, str]:

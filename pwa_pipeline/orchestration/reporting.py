@@ -54,7 +54,8 @@ def regions_table(regions, phi_names: list[str]) -> pd.DataFrame:
 #: The prefix of the per-output metrics in MLflow (its UI groups charts by the part before
 #: the slash, so the run's headline metrics stay few and on top).
 PER_OUTPUT = "per_output/"
-#: The prefix of what a run's model says of itself (sub-models, ε, ground-truth errors).
+#: The prefix of what a run's model says of itself (sub-models, ε, ground-truth errors), its
+#: MLflow params (`model_params`).
 MODEL = "model/"
 
 
@@ -101,13 +102,27 @@ def score_metrics(evaluation: Evaluation) -> dict[str, float]:
     return {k: _round4(v) for k, v in out.items()}
 
 
-def model_metrics(facts: dict, prefix: str = MODEL) -> dict[str, float]:
-    """A model's numeric facts (sub-models, noise share, ground-truth errors) as MLflow
-    metrics under ``prefix``, to 4 significant digits; text and non-finite facts (a
-    comparison that does not apply, a time not recorded) are left out."""
-    return {f"{prefix}{k}": _round4(v) for k, v in facts.items()
-            if isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
-            and np.isfinite(v)}
+def model_params(facts: dict) -> dict[str, str]:
+    """What a model says of itself (sub-models, output groups, ε, the ground truth's
+    errors, the structure search's verdict, the export's regions) as MLflow params under
+    `MODEL`: facts of the run, one value each, shown in its parameters table and never
+    drawn as charts (a boolean as a bar, a count as a line, ahead of the scores). Numbers
+    to 4 significant digits, booleans `true`/`false`; a fact that is not finite (a
+    comparison that does not apply) is left out."""
+    out = {}
+    for key, value in facts.items():
+        if isinstance(value, bool | np.bool_):
+            text = "true" if value else "false"
+        elif isinstance(value, int | np.integer):
+            text = str(int(value))
+        elif isinstance(value, float | np.floating):
+            if not np.isfinite(value):
+                continue
+            text = f"{float(value):.4g}"
+        else:
+            text = str(value)
+        out[f"{MODEL}{key}"] = text
+    return out
 
 
 def _round4(value: float) -> float:

@@ -9,12 +9,13 @@ import pandas as pd
 
 from ..config import Configuration
 from ..datasets import Dataset
+from ..methods import METHODS
 from ..pwa import PWARX
 from ..scoring.conventions import single_run_scores
 from ..scoring.evaluation import Evaluation
-from .model_facts import phi_names, truth_metadata
-from .reporting import diverged_tags, model_metrics, score_metrics
-from .tracking import model_description
+from .model_facts import constant_text, phi_names, shown_params, truth_metadata
+from .reporting import diverged_tags, model_params, score_metrics
+from .tracking import RUN_COLOUR, model_description
 
 
 @dataclass(frozen=True)
@@ -50,14 +51,15 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
                ) -> MethodRun:
     """The run of ``method``'s fitted ``model`` scored by ``evaluation`` on ``data``.
 
-    Parameters are the model's own (``resolved_params()``: every parameter, the values the
-    fit chose filled in) and the evaluation's warm-up; metrics are the scores
-    (`score_metrics`), what the model says of itself under ``model/``
-    (sub-models, output groups, ε and the noise share where the paper's clustering ran, the
-    ground truth's errors, the structure search's, the state-space export's) and the fit's
-    seconds, from the model (``timings_``); tags are the data set, set and method,
-    ``tags`` and, for a diverged free run, its scores as every page shows them
-    (`diverged_tags`).
+    Parameters are the model's own (`shown_params`: every parameter, the values the
+    fit chose filled in), the evaluation's warm-up and what the model says of itself under
+    `model/` (`model_params`: sub-models, output groups, ε and the noise share where the
+    paper's clustering ran, the ground truth's errors, the structure search's, the
+    state-space export's, and whether a linear model has a constant, `constant_text`);
+    metrics are the scores (`score_metrics`) and the fit's seconds, from the model
+    (`timings_`); tags are the data set, set and method, `tags`, the method's colour
+    in MLflow's UI (`RUN_COLOUR`) and, for a diverged free run, its scores as every page
+    shows them (`diverged_tags`).
 
     Parameters
     ----------
@@ -88,29 +90,34 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
         if (search := getattr(model, "structure_search_", None)) is not None:
             # the columns a reader compares first, numbers to 4 significant digits
             artifacts["structure_search.csv"] = _search_table(search.table)
-            facts.update(search_linear=float(search.linear),
-                         search_budget_spent=float(search.budget_spent),
-                         search_time_limited=float(search.time_limited),
+            facts.update(search_linear=bool(search.linear),
+                         search_budget_spent=bool(search.budget_spent),
+                         search_time_limited=bool(search.time_limited),
                          search_candidates=search.n_candidates,
                          search_validation_nrmse=search.validation_nrmse,
                          search_linear_nrmse=search.linear_nrmse,
                          search_seconds=search.seconds)
     if control is not None:
         ss, report = control.state_space, control.stability
-        facts.update(control_modes=ss.n_modes, lyapunov_certified=float(report.certified),
+        facts.update(control_modes=ss.n_modes, lyapunov_certified=bool(report.certified),
                      max_spectral_radius=float(np.max(report.spectral_radius)))
         artifacts.update({f"control/{name}": text for name, text in control.files.items()})
         artifacts["control/stability.json"] = report.to_dict()
-    metrics = {**score_metrics(evaluation), **model_metrics(facts),
-               **model_metrics({"fit_seconds": fit_seconds}, prefix=""),
-               **benchmark_metric(model, data)}
-    params = {**model.resolved_params(), "warmup": configuration.warmup}
+    if (constant := constant_text(model)):
+        facts["constant"] = constant
+    metrics = {**score_metrics(evaluation), **benchmark_metric(model, data),
+               **({"fit_seconds": float(f"{fit_seconds:.4g}")} if np.isfinite(fit_seconds)
+                  else {})}
+    params = {**shown_params(model)[0], "warmup": configuration.warmup,
+              **model_params(facts)}
     ds, hp = configuration.dataset, configuration.hparams
     return MethodRun(
         dataset=ds, hparams=hp, method=method, params=params, metrics=metrics,
-        tags={**(tags or {}), **diverged_tags(evaluation)},
+        tags={**(tags or {}), **diverged_tags(evaluation),
+              **({RUN_COLOUR: METHODS[method].colour} if method in METHODS else {})},
         artifacts={"scores.csv": evaluation.table, **artifacts},
-        description=model_description(ds, hp, method, metrics), fit_seconds=fit_seconds)
+        description=model_description(ds, hp, method, metrics, params),
+        fit_seconds=fit_seconds)
 
 
 def _search_table(table: pd.DataFrame) -> pd.DataFrame:

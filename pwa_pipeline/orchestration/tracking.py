@@ -33,6 +33,11 @@ MODEL_TAGS = ("model_uri", "model_id", "model_run_id")
 #: The experiment tag of MLflow 3 for classic model training (not GenAI); MLflow 3.17's UI
 #: follows its own GenAI / model-training switch instead, so links add ``MLFLOW_TRAINING_VIEW``.
 EXPERIMENT_KIND = ("mlflow.experimentKind", "custom_model_development")
+#: The run tag MLflow's UI reads a run's colour from (and writes when a user picks one in
+#: its colour picker); MLflow has no other way to set it, and otherwise colours a run by a
+#: hash of its id, so that two methods' runs can share a colour. Each method's runs carry
+#: the method's colour (`Method.colour`).
+RUN_COLOUR = "mlflow.runColor"
 #: sqlite tracking stores whose schema this process has created or checked.
 _READY_STORES: set[str] = set()
 
@@ -370,8 +375,9 @@ class MLflowTracker(dg.ConfigurableResource):
         to this run as its output, and the run's description links the run that logged it
         (runs of other processes that score the same model at the same moment may each log
         it).
-        Either way the version is given the alias of ``hparams`` (`set_alias`), and the
-        registered model its description and tags (`registered_model_description`); the
+        Either way the version is given the alias of `hparams` (`set_alias`), the alias
+        `BEST` moves to the best of the sets' versions (`point_best`), and the
+        registered model gets its description and tags (`registered_model_description`); the
         run is tagged ``model_uri`` (where the model is), ``model_id`` (its
         MLflow logged model), ``model_run_id`` (the run that logged it) and
         ``model_fingerprint``.
@@ -411,7 +417,7 @@ class MLflowTracker(dg.ConfigurableResource):
             last = {} if model is None else {**self._log_model(
                 run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
                 self._logged_model(client, exp_id, method, fingerprint), version_tags,
-                model_description(dataset, hparams, method, values)),
+                model_description(dataset, hparams, method, values, params)),
                 "model_fingerprint": fingerprint}
             if "mlflow.note.content" in last and description:
                 last["mlflow.note.content"] = f"{description}\n\n{last['mlflow.note.content']}"
@@ -421,6 +427,8 @@ class MLflowTracker(dg.ConfigurableResource):
             batched = True
             client.log_batch(run_id, **batch, tags=[
                 RunTag(k, v) for k, v in {**last, "latest": "true"}.items()])
+            if model is not None:  # (its score is logged now)
+                point_best(client, f"{self.experiment_prefix}.{dataset}.{method}")
             client.set_terminated(run_id, "FINISHED")
         except BaseException as exc:
             # an interrupt (Ctrl-C, Dagster's termination) is a BaseException: end the run
@@ -446,35 +454,67 @@ class LoggedRun(NamedTuple):
     experiment_id: str
 
 
-def model_description(dataset: str, hparams: str, method: str, metrics: dict[str, float]
-                      ) -> str:
+def model_description(dataset: str, hparams: str, method: str, metrics: dict[str, float],
+                      params: dict | None = None) -> str:
     """What a run scored, and its registered model version: the model, what it was fitted
     on, its headline scores on the held-out experiments (``metrics``, named as
-    `score_metrics` names them; the mean over the outputs; a diverged free run as
-    `score_text` shows it, with where it diverged), and for a PWA model its
-    sub-models."""
+    `score_metrics` names them; the mean over the outputs, to 4 significant digits, where
+    MLflow's UI may show 2 decimals; a diverged free run as `score_text` shows it,
+    with where it diverged), and from its parameters (`params`, `MODEL` facts) a PWA
+    model's sub-models and whether a linear ARX model has a constant."""
+    params = params or {}
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
-    shown = [f"{label} NRMSE {metrics[key]:.4g}" for label, key in (
-        ("one-step", "one_step_nrmse"), ("free-run", "free_run_nrmse")) if key in metrics]
+    shown = [f"{label} {name} {metrics[key]:.4g}" for label, name, key in (
+        ("one-step", "NRMSE", "one_step_nrmse"), ("free-run", "NRMSE", "free_run_nrmse"),
+        ("free-run", "R²", "free_run_r2")) if key in metrics]
     if metrics.get("free_run_diverged"):
         shown.append(f"free-run NRMSE {score_text(np.nan, 'nrmse', diverged=True)} from "
                      f"sample {int(metrics['free_run_divergence_sample'])} of held-out "
                      f"experiment {int(metrics['free_run_divergence_experiment'])}")
     if shown:
         parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs).")
-    if f"{MODEL}n_submodels" in metrics:
-        parts.append(f"{int(metrics[f'{MODEL}n_submodels'])} sub-model(s).")
+    if f"{MODEL}n_submodels" in params:
+        parts.append(f"{params[f'{MODEL}n_submodels']} sub-model(s).")
+    if constant := params.get(f"{MODEL}constant"):
+        parts.append(f"{constant[0].upper()}{constant[1:]}.")
     if "fit_seconds" in metrics:
         parts.append(f"Fitted in {metrics['fit_seconds']:.3g} s.")
     return " ".join(parts)
 
 
+#: The registered model alias of the best version across sets (`point_best`).
+BEST = "best"
+
+
 def set_alias(hparams: str) -> str:
     """The registered model alias of hyper-parameter set ``hparams``: its name, or
     ``set-<name>`` for a name MLflow reserves (``latest``, and ``v<digits>``, which name
-    versions). Set names are letters, digits, ``_`` and ``-``, which aliases allow."""
-    reserved = hparams.lower() == "latest" or re.fullmatch(r"[vV]\d+", hparams)
+    versions) or this module gives another meaning (`BEST`). Set names are letters,
+    digits, `_` and `-`, which aliases allow."""
+    reserved = hparams.lower() in ("latest", BEST) or re.fullmatch(r"[vV]\d+", hparams)
     return f"set-{hparams}" if reserved else hparams
+
+
+def point_best(client, registered_name: str) -> None:
+    """Point the alias `BEST` at the version, among those a set's alias points at, whose
+    run scored the lowest free-run NRMSE (the headline score; a diverged run logs none and
+    is never best, nor one whose run is gone from the store); the lowest version number
+    among equals. No alias while no version has a score."""
+    from mlflow.exceptions import MlflowException
+
+    scores = {}
+    for alias, number in client.get_registered_model(registered_name).aliases.items():
+        if alias != BEST:
+            run_id = client.get_model_version(registered_name, str(number)).run_id
+            try:
+                score = client.get_run(run_id).data.metrics.get("free_run_nrmse")
+            except MlflowException:  # (purged by `mlflow gc`: its score is not known)
+                continue
+            if score is not None and np.isfinite(score):
+                scores[int(number)] = score
+    if scores:
+        best = min(sorted(scores), key=scores.get)
+        client.set_registered_model_alias(registered_name, BEST, str(best))
 
 
 def registered_model_description(dataset: str, method: str, registered_name: str) -> str:
@@ -482,7 +522,8 @@ def registered_model_description(dataset: str, method: str, registered_name: str
     return (f"The {method} model of data set {dataset}, one version per fit by pwa-pipeline. "
             f"Each hyper-parameter set's newest version has the set's name as its alias: "
             f"load it as `models:/{registered_name}@<set>` (e.g. "
-            f"`models:/{registered_name}@default`); `latest` is whichever set ran last.")
+            f"`models:/{registered_name}@default`); `{BEST}` is the version of lowest "
+            f"held-out free-run NRMSE across the sets; `latest` is whichever set ran last.")
 
 
 def _name_version(client, registered_name: str, version, version_tags: dict[str, str]

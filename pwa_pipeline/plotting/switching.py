@@ -54,7 +54,9 @@ class SwitchingDisplay:
     titled with its outputs, their structure and what its regions are the signs of; a group
     of one region says so instead of drawing a flat line. At most the first 606 samples are
     shown, and the title says which; a lane of more than 10 regions gets a level for each
-    region visited.
+    region visited. A model of one region in every group (a linear model, e.g. the one a
+    structure search kept) has no switching to draw: its figure says so in its title
+    (`NO_SWITCHING`) above each group's structure, without axes.
 
     Parameters
     ----------
@@ -168,12 +170,37 @@ class SwitchingDisplay:
         then [`plot`][pwa_pipeline.plotting.SwitchingDisplay.plot]."""
         return cls.compute(model, u, y, **kwargs).plot(context)
 
+    @property
+    def switches(self) -> bool:
+        """Whether any output group has more than one region (the model is piecewise)."""
+        return any(s > 1 for s in self.n_regions)
+
     def plot(self, context: str = "") -> SwitchingDisplay:
         """Draw the figure (``figure_``) with ``context`` (data set, set, method) as the
-        title's first line; returns self."""
+        title's first line; returns self. A model of one region per output group (a
+        linear model) gets a line saying so, and its structure, in place of lanes with
+        nothing to draw."""
         one = len(self.lanes) == 1 and not self.lanes[0].variables
-        self.figure_ = _one_lane(self, context) if one else _panels(self, context)
+        if not self.switches and self.true is None:
+            self.figure_ = _no_switching(self, context)
+        else:
+            self.figure_ = _one_lane(self, context) if one else _panels(self, context)
         return self
+
+
+#: The title of the switching figure of a model with one region per output group.
+NO_SWITCHING = "No switching: one mode (a single linear model) at every sample"
+
+
+def _no_switching(sw: SwitchingDisplay, context: str) -> Figure:
+    """The figure of a model without switching: its title says so, its body each output
+    group's structure, and no axes (there is no region to draw over the samples)."""
+    fig = figure(MAX_WIDTH, 1.2 + 0.25 * len(sw.lanes) + (0.3 if context else 0.0))
+    lines = [f"{lane.outputs}: {lane.structure}" for lane in sw.lanes]
+    fig.text(0.5, 0.35, "\n".join(lines), ha="center", va="center", fontsize=9, color="0.3")
+    suptitle(fig, context, f"{NO_SWITCHING}, held-out experiment 1 ({sw.k.size} samples)",
+             fontsize=11)
+    return fig
 
 
 def _one_lane(sw: SwitchingDisplay, context: str) -> Figure:

@@ -256,6 +256,7 @@ def test_decoupled_outputs_take_the_product_partition():
     z = _random_in_envelope(ss, 5000, seed=1)
     np.testing.assert_array_equal(_closed_membership(ss, z).sum(axis=1), 1)
     assert PWAStateSpace.from_json(ss.to_json()).n_modes == ss.n_modes  # a partition
+    assert ss.source["outputs"] == "2 output groups: y1; y2"
 
 
 def _model_regions(model, phi: np.ndarray) -> np.ndarray:
@@ -775,3 +776,24 @@ def test_a_version_1_document_is_still_read(default_ss):
     back = PWAStateSpace.from_json(json.dumps(doc))
     np.testing.assert_array_equal(back.D, np.zeros_like(default_ss.D))
     np.testing.assert_array_equal(back.A, default_ss.A)
+
+
+def test_output_lags_nothing_reads_are_left_out_of_the_state():
+    """A regressor with an output lag no parameter row or region reads (as a structure
+    search's level-form choice of order na on its φ of na + 1 lags) gives a state without
+    it: no entry that nothing reads, the same free run from the same warm-up, and a JSON
+    that reads back; ``source`` names the outputs' coupling."""
+    data = make_hure_vasak(n_samples=600, snr_db=30.0, seed=3)
+    u, y = data.u_train[0], data.y_train[0]
+    model = LinearARX(na=2, nb=1).fit(u, y)
+    full = model.to_state_space()
+    assert full.n_states == 6 and full.source["outputs"] == "joint"
+    model.theta_[[1, 3]] = 0.0  # y1(k-2), y2(k-2): read by nothing
+    ss = model.to_state_space()
+    assert ss.output_lags == 1 and ss.state_names == ["y1(k-1)", "y2(k-1)", "u1(k-1)",
+                                                      "u2(k-1)"]
+    assert not np.any(np.all(ss.A == 0, axis=(0, 2)) & np.all(ss.C == 0, axis=(0, 1)))
+    np.testing.assert_allclose(ss.simulate(u, y[:5]), model.simulate(u, y[:5]), rtol=0,
+                               atol=1e-10)
+    back = PWAStateSpace.from_json(ss.to_json())
+    np.testing.assert_array_equal(back.simulate(u, y[:5]), ss.simulate(u, y[:5]))

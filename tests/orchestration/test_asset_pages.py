@@ -123,3 +123,14 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     assert [r.split("|")[1].strip() for r in rows] == ["y1 [V]", "y2"]
     assert output.metadata[SWITCHING].value.startswith("![hure_vasak | set select | PWA ")
     assert output.metadata[REGIONS].value.startswith("![hure_vasak | set select | PWA ")
+
+
+def test_a_model_without_switching_says_so_on_its_page(default_30db, sim_30db):
+    """One sub-model (a linear model, as a structure search that kept it): the page says
+    in a line that it does not switch; a model that switches gets no such line."""
+    from pwa_pipeline import LinearARX
+    from pwa_pipeline.orchestration.assets.identification import switching_note
+
+    linear = LinearARX(na=1, nb=1).fit(sim_30db.u_train, sim_30db.y_train)
+    assert switching_note(linear) == "none: one mode (a single linear model)"
+    assert switching_note(default_30db) is None

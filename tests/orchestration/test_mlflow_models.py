@@ -144,8 +144,9 @@ def test_the_training_table_stacks_the_experiments_and_labels_each_rows_experime
 def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what_it_is(
         tmp_path, mlflow_template):
     """``models:/…/latest`` is whichever set ran last: each set's newest version carries the
-    set's name as its alias (a linked model's too; a name MLflow reserves as ``set-<name>``),
-    and the registered model has a description and tags of its own."""
+    set's name as its alias (a linked model's too; a name MLflow reserves, or ``best``, as
+    ``set-<name>``), ``best`` the version of lowest free-run NRMSE across the sets, and the
+    registered model has a description and tags of its own."""
     import mlflow
     import numpy as np
     from mlflow.tracking import MlflowClient
@@ -166,20 +167,25 @@ def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what
         return ModelToLog(Simulator(model, data.u_names, data.y_names), table,
                           mlflow.data.from_pandas(table, name="training"))
 
-    def log(hparams: str, model: ModelToLog) -> str:
+    def log(hparams: str, model: ModelToLog, nrmse: float) -> str:
         return tracker.log_run(dataset="d", hparams=hparams, method="linear_arx", params={},
-                               metrics={}, tags={}, artifacts={}, model=model).run_id
+                               metrics={"free_run_nrmse": nrmse}, tags={}, artifacts={},
+                               model=model).run_id
 
     first, second = to_log(0), to_log(1)
-    log("a", first)
-    run_b = log("b", first)  # links the version a registered
-    log("a", second)  # a new version: a's alias moves to it, b's stays
-    log("latest", second)  # a reserved alias name
     client = MlflowClient(tracking_uri=uri)
+    log("a", first, 0.3)
+    assert client.get_registered_model(name).aliases == {"a": 1, "best": 1}
+    run_b = log("b", first, 0.3)  # links the version a registered
+    log("a", second, 0.2)  # a new version: a's alias moves to it, b's stays; it is best
+    assert client.get_registered_model(name).aliases["best"] == 2
+    log("latest", second, 0.2)  # a reserved alias name
+    log("best", first, float("nan"))  # so is best; a score not logged is never best
     registered = client.get_registered_model(name)
-    assert registered.aliases == {"a": 2, "b": 1, "set-latest": 2}
+    assert registered.aliases == {"a": 2, "b": 1, "set-latest": 2, "set-best": 1, "best": 2}
     assert registered.description.startswith("The linear_arx model of data set d, ")
     assert f"`models:/{name}@<set>`" in registered.description
+    assert "`best` is the version of lowest held-out free-run NRMSE" in registered.description
     assert registered.tags == {"dataset": "d", "method": "linear_arx"}
     assert client.get_model_version_by_alias(name, "b").run_id == \
         client.get_run(run_b).data.tags["model_run_id"]

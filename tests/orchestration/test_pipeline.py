@@ -152,14 +152,27 @@ def test_materialise_hure_vasak_paper(paper_run):
     assert pwa.data.params["submodels"] == "ClusterCentres"
     assert pwa.data.tags["partition"] == "hure_vasak|paper"
     assert pwa.data.tags["dagster_run_id"] == result.run_id
-    assert pwa.data.metrics["model/n_submodels"] == 2
+    assert pwa.data.params["model/n_submodels"] == "2"
     free = table[(table.method == "pwa") & (table["mode"] == "free_run") & (table.output == "mean")]
     # headline metrics to 4 significant digits, per-output ones under their prefix
     assert pwa.data.metrics["free_run_nrmse"] == float(f"{free['nrmse'].iloc[0]:.4g}")
     assert {k for k in pwa.data.metrics if "/" not in k} == {
         "one_step_nrmse", "one_step_r2", "free_run_nrmse", "free_run_r2", "free_run_diverged",
         "one_step_outside_share", "free_run_outside_share", "fit_seconds"}
-    assert {k.split("/")[0] for k in pwa.data.metrics if "/" in k} == {"per_output", "model"}
+    assert {k.split("/")[0] for k in pwa.data.metrics if "/" in k} == {"per_output"}
+    # what the model says of itself: params, never charts; booleans as true/false
+    assert pwa.data.params["model/lyapunov_certified"] in ("true", "false")
+    # each method's runs in a colour of their own in MLflow's UI
+    colours = {r.data.tags["method"]: r.data.tags["mlflow.runColor"] for r in runs}
+    assert colours == {m.name: m.colour for m in METHODS.values()} and \
+        len(set(colours.values())) == len(METHODS)
+    # the paper's linear baseline has no constant, and says so (its page, run, row)
+    linear = next(r for r in runs if r.data.tags["method"] == "linear_arx")
+    assert linear.data.params["model/constant"] == "no constant term"
+    assert "No constant term." in linear.data.tags["mlflow.note.content"]
+    assert materialization(result, "linear_arx_model").metadata["constant"].value == \
+        "no constant term"
+    assert set(result.asset_value("linear_arx_scores")["model"]) == {"no constant term"}
     assert "params.hparams" not in pwa.data.params and "dataset" not in pwa.data.params
     # the run spans the fit it scores, and says what it is
     fit = materialization(result, "pwa_model").metadata["fit_seconds"].value
@@ -179,7 +192,8 @@ def test_materialise_hure_vasak_paper(paper_run):
         run_id=pwa.info.run_id, artifact_path="control/pwa_state_space.json",
         tracking_uri=resources["mlflow"].uri()))
     assert logged.read_text() == stored.read_text()
-    assert pwa.data.metrics["model/control_modes"] == exported.n_modes == shown["n_modes"].value
+    assert pwa.data.params["model/control_modes"] == str(exported.n_modes) and \
+        exported.n_modes == shown["n_modes"].value
     assert shown["regions"].value.startswith("![hure_vasak | set paper | PWA")
     meta = materialization(result, "pwa_scores").metadata
     assert meta["mlflow_run_id"].value == pwa.info.run_id
@@ -545,7 +559,7 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     client, runs = _runs(resources, "hure_vasak")
     pwa_run = next(r for r in runs if r.data.tags.get("method") == "pwa")
     assert pwa_run.data.params["search__max_variables"] == "1"
-    assert pwa_run.data.metrics["model/search_linear"] == float(report.linear)
+    assert pwa_run.data.params["model/search_linear"] == str(report.linear).lower()
     artifact = client.download_artifacts(pwa_run.info.run_id, "structure_search.csv",
                                          str(tmp_path))
     logged = pd.read_csv(artifact)
@@ -554,17 +568,30 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert list(logged.columns[:4]) == ["stage", "outputs", "validation_nrmse", "outcome"]
     np.testing.assert_allclose(logged.validation_nrmse, report.table.validation_nrmse,
                                rtol=5e-4)
-    assert pwa_run.data.metrics["model/search_linear_nrmse"] == pytest.approx(
+    assert float(pwa_run.data.params["model/search_linear_nrmse"]) == pytest.approx(
         report.linear_nrmse, rel=1e-3)
-    assert pwa_run.data.metrics["model/search_candidates"] == report.n_candidates
-    assert pwa_run.data.metrics["model/search_budget_spent"] == 0.0
+    assert pwa_run.data.params["model/search_candidates"] == str(report.n_candidates)
+    assert pwa_run.data.params["model/search_budget_spent"] == "false"
     assert page_meta["structure chosen"].value == report.choice
     # what the model is, on its page and in its scores (which carry it to the leaderboard)
     assert list(page_meta)[0] == "model" and page_meta["model"].value == report.verdict
     assert report.verdict.startswith("linear kept" if report.linear else "switching")
     assert set(result.asset_value("pwa_scores")["model"]) == {report.verdict}
-    assert set(result.asset_value("linear_arx_scores")["model"]) == {""}
+    assert set(result.asset_value("linear_arx_scores")["model"]) == {
+        "affine: with a constant term"}
     assert page_meta["structure per output"].value.count("level (1, 1)") == 2
+    # the steps the search did not run: their parameters left out, and why, on the page
+    # and in MLflow (no n_rho, eps or min_pts of None)
+    params = page_meta["resolved parameters"].value
+    assert params.startswith("The paper's steps (local_models, clustering, submodels, "
+                             "regions) did not run: the structure search kept no clustered "
+                             "regions") and "| None " not in params.replace("search__", "")
+    assert "clustering__eps" not in params and "search__max_variables" in params
+    assert not {k for k in pwa_run.data.params if k.startswith("clustering")}
+    # the true system compared on the search's larger regressor (na + 1 lags, a constant)
+    assert page_meta["true_modes"].value == 4 and 0 < page_meta["region_accuracy"].value <= 1
+    assert "ground_truth" not in page_meta and "max_param_error" in page_meta
+    assert pwa_run.data.params["model/true_modes"] == "4"
     # the export works for a searched model too, and the registered model simulates as it
     assert result.asset_value("control_model").state_space.n_modes >= 1
     from pwa_pipeline.orchestration.mlflow_models import example_table
@@ -632,7 +659,7 @@ def test_a_failing_noise_check_stops_the_steps_after_clustering(resources, tmp_p
                             resources=resources, raise_on_error=False)
     check = next(e for e in result.get_asset_check_evaluations()
                  if e.check_name == "noise_share_below_limit")
-    assert not check.passed and check.metadata["noise_share"].value > 0.9
+    assert not check.passed and check.metadata["noise_share [hure_vasak|noisy]"].value > 0.9
     done = {e.asset_key.to_user_string() for e in result.get_asset_materialization_events()}
     assert "clusters" in done and not {"sub_models", "svm_regions", "pwa_model"} & done
     assert "linear_arx_model" in done  # what does not depend on the clusters still runs
@@ -777,11 +804,17 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
     assert not check.passed and check.description == (
         f"partition sim|paper: FAILED: free-run NRMSE of PWA ≥ 10 (diverged), of linear "
         f"ARX {calm.mean('free_run'):.4g}")
-    assert check.metadata["pwa_free_run_nrmse"].value == "≥ 10 (diverged)"
+    # the check's numbers keyed by partition (a plot each), a diverged score as text
+    assert check.metadata["pwa_free_run_nrmse [sim|paper]"].value == "≥ 10 (diverged)"
+    assert check.metadata["linear_free_run_nrmse [sim|paper]"].value == float(
+        f"{calm.mean('free_run'):.4g}")
+    assert check.metadata["partition"].value == "sim|paper"
+    assert not {key for key in check.metadata if key.endswith("nrmse")}
     record = method_run(SimpleNamespace(dataset="sim", hparams="paper", warmup=10), "pwa",
                         Fitted(ys, at=37), ev, SimpleNamespace(convention=None))  # MLflow
     assert record.tags == {"free_run_nrmse": "≥ 10 (diverged)",
-                           "free_run_r2": "≤ -99 (diverged)"}
+                           "free_run_r2": "≤ -99 (diverged)",
+                           "mlflow.runColor": METHODS["pwa"].colour}
     assert "free-run NRMSE ≥ 10 (diverged) from sample 37 of held-out experiment 1" \
         in record.description
     assert diverged_tags(calm) == {}
@@ -815,5 +848,7 @@ def test_registered_model_versions_say_where_they_come_from(paper_run):
         assert version.description.startswith(
             f"The {method} model of data set hure_vasak, hyper-parameter set paper.")
         assert f"free-run NRMSE {free:.4g}" in version.description
+        # to 4 significant digits, where MLflow's tables show 2 decimals (0.0027 as 0.00)
+        assert f"free-run R² {run.data.metrics['free_run_r2']:.4g}" in version.description
     assert "2 sub-model(s)." in registry.search_model_versions(
         "name = 'pwa-pipeline.hure_vasak.pwa'")[0].description

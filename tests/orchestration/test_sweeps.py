@@ -79,14 +79,16 @@ def test_leaderboard_says_what_a_searched_model_is_in_its_row():
              "output": "mean", "nrmse": 0.6, "r2": 0.64, "diverged": False, "model": note}
             for method, note in (("pwa", "linear kept: the search stopped at its time limit "
                                          "before a switching structure beat it"),
-                                 ("linear_arx", "")) for mode in ("one_step", "free_run")]
+                                 ("linear_arx", "affine: with a constant term"))
+            for mode in ("one_step", "free_run")]
     table = leaderboard(pd.DataFrame(rows), list(METHODS))
-    assert table["model"].tolist() == [rows[0]["model"], ""]
+    assert table["model"].tolist() == [rows[0]["model"], "affine: with a constant term"]
     cells = [[c.strip() for c in line.strip("|").split("|")]
              for line in leaderboard_markdown(table).splitlines() if line.startswith("|")]
     assert cells[2][:3] == ["1", "pwa — linear kept: the search stopped at its time limit "
                                  "before a switching structure beat it", "auto"]
-    assert cells[3][:3] == ["1", "linear_arx", "auto"]
+    # which linear baseline it is: with a constant (another set's may have none)
+    assert cells[3][:3] == ["1", "linear_arx — affine: with a constant term", "auto"]
     # scores stored before the column existed: no note, the method alone
     old = leaderboard(pd.DataFrame(rows).drop(columns="model"), list(METHODS))
     assert old["model"].tolist() == ["", ""] and "—" not in leaderboard_markdown(old)
@@ -137,7 +139,8 @@ def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, m
     assert "hure_vasak|paper: " in summary
     assert board.startswith(f"{len(all_keys(partitions_of(defs))) - 1} not materialised)")
     rows = [line for line in board.splitlines() if line.startswith("|") and "paper" in line]
-    assert sorted(row.split("|")[2].strip() for row in rows) == sorted(METHODS)
+    assert sorted(row.split("|")[2].strip().split(" — ")[0] for row in rows) == sorted(METHODS)
+    assert any("| linear_arx — no constant term |" in row for row in rows)  # the paper's
     assert (tmp_path / "storage" / "leaderboard.parquet").is_file()
     # the stores, with where the control models were written
     exports = tmp_path / "storage" / "exports"

@@ -637,3 +637,26 @@ def test_every_figure_fits_a_laptop_screen(fit, robot_like):
     for fig in figs:
         width, height = _pixels(fig)
         assert width <= 900 and height <= 650, (fig.get_suptitle(), width, height)
+
+
+def test_a_model_without_switching_says_so_in_place_of_empty_lanes(fit):
+    """A linear model (one region per output group, as a structure search that kept the
+    linear model): no lanes over a 0–1 axis, but a title that says there is no switching
+    and each group's structure."""
+    from pwa_pipeline import LinearARX
+    from pwa_pipeline.plotting.switching import NO_SWITCHING
+
+    data, test = fit.data, fit.test
+    for outputs in ("joint", "decoupled"):
+        model = LinearARX(na=1, nb=1, outputs=outputs).fit(data.u_train, data.y_train)
+        display = SwitchingDisplay.compute(model, test.u, test.y, y_names=data.y_names)
+        assert not display.switches
+        fig = display.plot("hure_vasak | set auto | PWA").figure_
+        assert fig.axes == []
+        assert fig.get_suptitle() == (f"hure_vasak | set auto | PWA\n{NO_SWITCHING}, held-out "
+                                      f"experiment 1 ({test.y.shape[0] - 1} samples)")
+        (text,) = [t for t in fig.texts if t.get_text() != fig.get_suptitle()]
+        assert text.get_text().splitlines() == [
+            f"{lane.outputs}: {lane.structure}" for lane in display.lanes]
+        assert "linear" in text.get_text()
+    assert SwitchingDisplay.compute(fit.model, test.u, test.y).switches

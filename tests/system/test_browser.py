@@ -303,12 +303,16 @@ def test_the_mlflow_run_page_shows_its_headline_metrics_description_and_duration
     else:
         assert HEADLINE <= headline and not DIVERGED & headline, headline
     assert len(headline) <= FEW, headline
-    assert {name.split("/")[0] + "/" for name in metrics if "/" in name} == {PER_OUTPUT, MODEL}
-    assert f"{PER_OUTPUT}free_run_nrmse_y1" in metrics and f"{MODEL}n_submodels" in metrics
+    # the model's facts are params, never charts; the run has a colour of its method's
+    assert {name.split("/")[0] + "/" for name in metrics if "/" in name} == {PER_OUTPUT}
+    assert f"{PER_OUTPUT}free_run_nrmse_y1" in metrics
     long = {name: value for name, value in metrics.items() if significant_digits(value) > 4}
     assert not long, long
     fit = float(metrics["fit_seconds"])
     run = MlflowClient(stack.tracking_uri).get_run(href.split("/runs/")[1].split("?")[0])
+    assert f"{MODEL}n_submodels" in run.data.params and not any(
+        name.startswith(MODEL) for name in run.data.metrics)
+    assert run.data.tags["mlflow.runColor"] == METHODS["pwa"].colour
     assert (run.info.end_time - run.info.start_time) / 1000 >= fit, (run.info, fit)
     if fit >= 1:  # as shown: 6.9s, never 244ms
         assert not shown["duration"].endswith("ms"), shown["duration"]
@@ -317,8 +321,9 @@ def test_the_mlflow_run_page_shows_its_headline_metrics_description_and_duration
 
 
 def test_the_mlflow_chart_view_shows_the_headline_metrics_to_scale(page, stack, launched):
-    """The experiment's chart view: sections for the per-output and model metrics and one of
-    few unprefixed ones; once the first two are folded, the headline charts (searched for,
+    """The experiment's chart view: a section for the per-output metrics (the model's facts
+    are params, drawn as no chart) and one of few unprefixed ones; once the first is folded,
+    the headline charts (searched for,
     as the view draws only charts in view): a chart for every headline metric, each score's
     axis spanning the scores' own range (no capped NRMSE of 10, R² of −99 or 1e30 stretching
     it), its labels short."""
@@ -327,10 +332,10 @@ def test_the_mlflow_chart_view_shows_the_headline_metrics_to_scale(page, stack, 
     page.get_by_text("Model metrics").first.wait_for()
     dismiss_mlflow_popups(page)
     sections = re.findall(r"^(.+)\n\((\d+)\)$", page.inner_text("body"), re.MULTILINE)
-    assert {name for name, _ in sections} == {"model", "per_output", "Model metrics",
+    assert {name for name, _ in sections} == {"per_output", "Model metrics",
                                               "System metrics"}, sections
     assert 0 < int(dict(sections)["Model metrics"]) <= FEW, sections  # the unprefixed ones
-    collapse_chart_sections(page, PER_OUTPUT.rstrip("/"), MODEL.rstrip("/"))
+    collapse_chart_sections(page, PER_OUTPUT.rstrip("/"))
     page.get_by_text("fit_seconds", exact=True).first.wait_for()  # the first headline chart
     search_charts(page, f"^({'|'.join(sorted(HEADLINE))})$")  # the rest drawn once in view
     drawn = {title: chart_numbers(page, title) for title in sorted(HEADLINE)}

@@ -9,6 +9,7 @@ from ...config import Configuration
 from ...datasets import Dataset
 from ...methods import Method
 from ..caches import SignedMemory
+from ..model_facts import constant_text
 from ..reporting import (
     markdown,
     params_table,
@@ -28,7 +29,10 @@ def baseline_model_asset(method: Method, partitions_def):
               kinds={"scikit-learn"},
               description=f"The fitted {method.label} model, on the training experiments; "
                           f"cached across the sets of a data set (``cache_baselines``), "
-                          f"whose baseline settings are usually the same.")
+                          f"whose baseline settings are usually the same."
+                          + (" Its page says first whether it has a constant term "
+                             "(`constant`): the sets' linear baselines differ in it."
+                             if method.name == "linear_arx" else ""))
     def model(context: dg.AssetExecutionContext, settings: PipelineSettings,
               configuration: Configuration, raw_benchmark: Dataset) -> BaseEstimator:
         t0 = time.perf_counter()
@@ -39,7 +43,10 @@ def baseline_model_asset(method: Method, partitions_def):
         cached = memory.hits > 0
         context.log.info(f"{method.label}: {'from the cache' if cached else 'fitted'} in "
                          f"{time.perf_counter() - t0:.1f} s")
+        constant = constant_text(fitted)
         context.add_output_metadata(rounded({
+            # (first: the linear baselines of two sets differ in it)
+            **({"constant": constant} if constant else {}),
             "fit_seconds": time.perf_counter() - t0, "from_cache": cached,
             "resolved parameters": markdown(params_table(fitted.resolved_params()))}))
         return fitted

@@ -13,7 +13,7 @@ from ...datasets import Dataset
 from ...methods import METHODS
 from ...plotting import PartitionDisplay, context_title
 from ...pwa import PWARX
-from ..checks import described
+from ..checks import described, per_partition
 from ..files import atomic_write, inside
 from ..images import to_markdown
 from ..reporting import rounded
@@ -92,7 +92,7 @@ def control_model_asset(partitions_def):
         yield dg.AssetCheckResult(check_name="exported", passed=True,
                                   description=described(str(context.partition_key), True,
                                                         f"{ss.n_modes} region(s) exported"),
-                                  metadata={"partition": str(context.partition_key),
-                                            "n_modes": ss.n_modes})
+                                  metadata=per_partition(str(context.partition_key),
+                                                         {"n_modes": ss.n_modes}))
 
     return control_model

@@ -44,7 +44,13 @@ from ..checks import (
     sub_model_results,
 )
 from ..images import figures_fingerprint, to_markdown
-from ..model_facts import ground_truth, phi_names, prediction_key, truth_metadata
+from ..model_facts import (
+    ground_truth,
+    phi_names,
+    prediction_key,
+    shown_params,
+    truth_metadata,
+)
 from ..partitions import PartitionKey
 from ..reporting import markdown, params_table, regions_table, rounded, theta_table
 from ..settings import PipelineSettings
@@ -75,10 +81,13 @@ _DESCRIPTIONS = {
     "pwa_model": "The fitted PWARX model, what `pwa_scores` scores and MLflow registers. Its "
                  "page shows what the model is when a structure search built it (`model`: "
                  "e.g. the linear model kept, and whether its budget or time limit "
-                 "stopped it), its resolved parameters, each output's structure, and two "
-                 "figures: *switching*, the region of each sample of the first held-out "
-                 "experiment (one lane per output group), and *regions*, the regions in the "
-                 "2-D slice of φ where they differ most.",
+                 "stopped it), whether it switches (`switching`, for a model that does "
+                 "not), the parameters it ran with (the paper's steps left out, and why, "
+                 "when the search ran none), each output's structure, the ground truth on "
+                 "a simulated system, and two figures: *switching*, the region of each "
+                 "sample of the first held-out experiment (one lane per output group; a "
+                 "model that never switches says so instead), and *regions*, the regions "
+                 "in the 2-D slice of φ where they differ most.",
 }
 #: The figure keys of the ``pwa_model`` page.
 SWITCHING, REGIONS = "switching (first held-out experiment)", "regions"
@@ -240,6 +249,13 @@ def _described(model: PWARX, data: Dataset) -> list[str]:
                                                     strict=True)]
 
 
+def switching_note(model) -> str | None:
+    """What the page says of a model that never switches (one sub-model: a linear model,
+    e.g. the one a structure search kept), beside its switching figure, which says so
+    too; None for a model that switches."""
+    return "none: one mode (a single linear model)" if model.n_submodels_ == 1 else None
+
+
 def _not_fitted(model: PWARX, asset: str) -> str:
     """Why a model has no fitted step for ``asset``."""
     if asset == "output_error_refinement":
@@ -307,7 +323,8 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                  configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
                  phi: np.ndarray) -> dg.Output:
     """``pwa_model`` with its page: what the model is (the structure search's verdict,
-    first), resolved parameters, each output's structure, the structure search's report
+    first), whether it switches (`switching_note`), the parameters it ran with
+    (`shown_params`), each output's structure, the structure search's report
     or the structured fit's candidates, the ground truth when comparable, and the
     switching and regions figures (their numbers cached by what the model predicts with,
     drawn titled with this partition's set)."""
@@ -357,15 +374,20 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                       f"`structure_search.csv`):\n\n"
                       f"{rows.to_markdown(index=False, floatfmt='.4g', missingval='–')}")}
     figures = model_figures(inputs, model, data, title)
+    params, params_note = shown_params(model)
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
         # what the model is, first: the search's verdict (e.g. the linear model kept)
         **({} if report is None else {"model": report.verdict}),
-        "n_submodels": model.n_submodels_, "output_groups": len(model.groups_),
+        "n_submodels": model.n_submodels_,
+        **({} if (note := switching_note(model)) is None else {"switching": note}),
+        "output_groups": len(model.groups_),
         "fit_seconds": sum(model.timings_.values()),
         "steps_from_cache": ", ".join(sorted(cached)) or "none",
         "structure per output": markdown(structure.set_index("output")),
         **found,
-        "resolved parameters": markdown(params_table(model.resolved_params())),
+        "resolved parameters": dg.MetadataValue.md(
+            "\n\n".join(filter(None, [params_note, params_table(params).to_markdown(
+                floatfmt=".4g")]))),
         **truth_metadata(model, data), "figures_from_cache": memory.hits > 0,
         **{name: dg.MetadataValue.md(text) for name, text in figures.items()}}))
 
