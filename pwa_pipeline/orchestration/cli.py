@@ -221,7 +221,7 @@ def add_dataset(args: argparse.Namespace) -> int:
         test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
         na=args.na, nb=args.nb, affine=args.affine, units=parse_units(args.units))
     hparams = load_hparams()  # read and checked first: a broken file registers nothing
-    data = registry.add(spec, replace=args.replace)
+    data = registry.add(spec, replace=args.replace, one_record=args.no_experiment)
     sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
     others = [s for s in hparams.sets if s not in sets]
     print(f"registered {spec.name!r} in {registry.path}\n"
@@ -401,8 +401,14 @@ def main(argv: list[str] | None = None) -> int:
     p_add.add_argument("file", help="a .csv or .parquet file")
     p_add.add_argument("--u", nargs="+", required=True, metavar="COL", help="input columns")
     p_add.add_argument("--y", nargs="+", required=True, metavar="COL", help="output columns")
-    p_add.add_argument("--experiment", metavar="COL",
-                       help="column of experiment ids (lags never span two experiments)")
+    records = p_add.add_mutually_exclusive_group()
+    records.add_argument("--experiment", metavar="COL",
+                         help="column of experiment ids (lags never span two experiments); "
+                              "without it, a file with a column named like experiment ids "
+                              "(run, run_id, trial, …) or a time that goes back is refused")
+    records.add_argument("--no-experiment", action="store_true",
+                         help="the file is one record, even if a column or its time looks "
+                              "like several experiments")
     p_add.add_argument("--time", metavar="COL",
                        help="numeric or date-time column; must increase strictly within "
                             "each experiment (rows are not reordered)")
