@@ -194,8 +194,10 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
 
 def _summary(key: str, result, table, seconds: float) -> str:
     """One line per partition: sub-models found (and what the model is, `model_note`) and
-    free-run NRMSE of every method (a diverged run as `score_text` shows it)."""
+    free-run NRMSE of every method (a diverged run as `score_text` shows it), and
+    whether the PWA model was reused (`REUSED`)."""
     from ..scoring.evaluation import score_text
+    from .assets.identification import REUSED
     from .model_facts import model_note
 
     free = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
@@ -203,8 +205,12 @@ def _summary(key: str, result, table, seconds: float) -> str:
         free["method"], free["nrmse"], free["diverged"], strict=True))
     model = result.asset_value("pwa_model")
     note = model_note(model)
-    return (f"{key}: {model.n_submodels_} PWA sub-model(s){f' — {note}' if note else ''}; "
-            f"free-run NRMSE {scores} ({seconds:.1f} s)")
+    reused = f" ({REUSED})" if any(
+        getattr(e.materialization.metadata.get("fit"), "value", None) == REUSED
+        for e in result.get_asset_materialization_events()
+        if e.asset_key.to_user_string() == "pwa_model") else ""
+    return (f"{key}: {model.n_submodels_} PWA sub-model(s){reused}"
+            f"{f' — {note}' if note else ''}; free-run NRMSE {scores} ({seconds:.1f} s)")
 
 
 def add_dataset(args: argparse.Namespace) -> int:
