@@ -331,7 +331,7 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
 
 def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                  configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
-                 phi: np.ndarray, reused: bool) -> dg.Output:
+                 phi: np.ndarray, reused: bool = False) -> dg.Output:
     """``pwa_model`` with its page: what the model is (the structure search's verdict,
     first), whether it was fitted or reused (`REUSED`), resolved parameters, each
     output's structure, the structure search's report or the structured fit's candidates,
