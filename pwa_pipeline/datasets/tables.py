@@ -82,16 +82,7 @@ def read_table(
     import pandas as pd
 
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"data file not found: {p.resolve()}")
-    readers = {".csv": pd.read_csv, ".parquet": pd.read_parquet}
-    if p.suffix.lower() not in readers:
-        raise ValueError(f"unsupported file type {p.suffix!r} for {p}: use .csv or .parquet")
-    try:
-        df = readers[p.suffix.lower()](p).reset_index(drop=True)
-    except (ValueError, UnicodeDecodeError, OSError) as exc:  # (pandas' and pyarrow's errors)
-        raise ValueError(f"{p} cannot be read as a {p.suffix.lower()[1:]} table: "
-                         f"{type(exc).__name__}: {exc}") from None
+    df = read_frame(p)
     extra = [c for c in (experiment_column, time_column) if c]
     wanted = list(u_columns) + list(y_columns) + extra
     twice = _repeated_header(p, wanted) if p.suffix.lower() == ".csv" else []
@@ -167,6 +158,30 @@ def _blocks(df, column: str, file: str) -> list[tuple[str, object]]:
                              f"another id of column {column!r}; give each block its own id")
         out.append((name, g))
     return out
+
+
+def read_frame(path: str | os.PathLike):
+    """A CSV or Parquet file as a pandas DataFrame, rows numbered from 0, unchecked.
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        A missing file, another format, or a file that cannot be read as its format (empty,
+        binary); each message names the file.
+    """
+    import pandas as pd
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"data file not found: {p.resolve()}")
+    readers = {".csv": pd.read_csv, ".parquet": pd.read_parquet}
+    if p.suffix.lower() not in readers:
+        raise ValueError(f"unsupported file type {p.suffix!r} for {p}: use .csv or .parquet")
+    try:
+        return readers[p.suffix.lower()](p).reset_index(drop=True)
+    except (ValueError, UnicodeDecodeError, OSError) as exc:  # (pandas' and pyarrow's errors)
+        raise ValueError(f"{p} cannot be read as a {p.suffix.lower()[1:]} table: "
+                         f"{type(exc).__name__}: {exc}") from None
 
 
 def _repeated_header(path: Path, names: list[str]) -> list[str]:

@@ -10,12 +10,14 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .._validation import check_name
 from ..regressors import n_initial, regressor_dim
 from ..scoring.evaluation import WARMUP
 from .builtin import DATASETS
 from .dataset import Dataset
-from .tables import Table, read_table
+from .tables import Table, read_frame, read_table
 
 #: Share of the data held out for testing when no split is given.
 DEFAULT_TEST_FRACTION = 0.25
@@ -30,6 +32,12 @@ MAX_ORDER = 20
 COLUMN_PATTERN = re.compile(r"[\w .-]+")
 #: The longest such name: MLflow's metric names hold at most 250 characters.
 MAX_COLUMN_LENGTH = 100
+#: Column names that read as experiment ids (case, spaces, ``_`` and ``-`` aside): ``run``,
+#: ``run_id``, ``Experiment``, ``trial no``, ``batch``, ``id`` …
+EXPERIMENT_NAME = re.compile(r"(?:(?:experiment|exp|run|trial|episode|record|recording|batch"
+                             r"|session|sequence|seq|cycle)(?:id|no|nr|num|number)?|id)")
+#: Column names that read as time stamps: ``t``, ``time``, ``Time_s``, ``timestamp`` …
+TIME_NAME = re.compile(r"(?:t|time|times|timestamp|datetime)(?:s|sec|ms|us|ns)?")
 
 
 def parse_units(pairs: list[str] | None) -> dict[str, str]:
@@ -217,6 +225,55 @@ class UserDataset:
                        y_train=[y for _, _, y in train], u_test=[u for _, u, _ in test],
                        y_test=[y for _, _, y in test], u_names=list(self.u),
                        y_names=list(self.y), units=dict(self.units))
+
+    def several_experiments(self) -> str | None:
+        """Why the file looks like several experiments although no experiment column is
+        given, in one line that names the column to pass (`--experiment`), or None.
+
+        It looks so when a column other than the inputs and outputs has a name that reads
+        as experiment ids (`EXPERIMENT_NAME`) and holds two or more of them, each on two
+        rows or more, or when the time column (``time``, else one whose name reads as time,
+        `TIME_NAME`) goes back. Registration refuses such a file unless the experiment
+        column or one record is confirmed.
+
+        Raises
+        ------
+        FileNotFoundError, ValueError
+            The file cannot be read (`read_frame`).
+        """
+        import pandas as pd
+
+        if self.experiment is not None:
+            return None
+        frame = read_frame(self.path)
+        others = [c for c in frame.columns if c not in (*self.u, *self.y)]
+
+        def reads_as(pattern: re.Pattern, name: object) -> bool:
+            return pattern.fullmatch(re.sub(r"[\s_-]+", "", str(name).lower())) is not None
+
+        ids = [c for c in others if c != self.time and reads_as(EXPERIMENT_NAME, c)
+               and 2 <= frame[c].nunique() <= len(frame) // 2]
+        resets = []
+        for c in [self.time] if self.time else [c for c in others if reads_as(TIME_NAME, c)]:
+            t = pd.to_numeric(frame[c], errors="coerce")
+            if t.isna().any():  # date-times, as nanoseconds
+                t = pd.to_datetime(frame[c], errors="coerce", format="mixed")
+                t = t.astype("int64").where(t.notna())
+            back = np.flatnonzero(np.diff(t.to_numpy(dtype=float)) < 0)
+            if back.size and t.notna().all():
+                resets.append(f"time column {c!r} goes back {back.size} time(s), first at "
+                              f"row {back[0] + 1}")
+        if not ids and not resets:
+            return None
+        found = [f"column {c!r} looks like experiment ids ({frame[c].nunique()} values: "
+                 f"{', '.join(map(repr, frame[c].drop_duplicates()[:3].tolist()))}"
+                 f"{', …' if frame[c].nunique() > 3 else ''})" for c in ids[:1]]
+        fix = (f"pass --experiment {ids[0]}" if ids else
+               "pass --experiment COLUMN naming the column of experiment ids (add one to the "
+               "file if it has none)")
+        return (f"{Path(self.path).name} looks like several experiments, not one record: "
+                f"{' and '.join([*found, *resets])}; {fix}, or --no-experiment if it is one "
+                f"record")
 
     def _split(self, table: Table) -> tuple[list[tuple], list[tuple]]:
         """The training and held-out pieces, each ``(label, u, y)`` (see the class doc)."""

@@ -1,6 +1,7 @@
-"""Caches in the store: local models, step 5, baselines, scores and figures, reused across
-the hyper-parameter sets of a sweep, in a folder or at an fsspec URL beside the assets (so
-that workers on other machines share them).
+"""Caches in the store: fitted PWA models (reused by a rerun), local models, step 5,
+baselines, scores and figures (reused across the hyper-parameter sets of a sweep), in a
+folder or at an fsspec URL beside the assets (so that workers on other machines share
+them).
 
 Each entry is a signed pickle (`signed_pickles`) keyed by a hash of its inputs and of
 the numerical core's source (`core_fingerprint`), so an entry computed by other code
@@ -13,6 +14,7 @@ import inspect
 import logging
 import pickle
 from collections.abc import Callable, Sequence
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import joblib
@@ -68,6 +70,24 @@ def core_fingerprint() -> str:
     package = Path(__file__).resolve().parents[1]
     return source_fingerprint([p for p in package.rglob("*.py")
                                if "orchestration" not in p.relative_to(package).parts])
+
+
+#: The installed distributions whose versions `versions` reports: this package and the
+#: numerical libraries its fits run on.
+DISTRIBUTIONS = ("pwa-pipeline", "numpy", "scipy", "scikit-learn")
+
+
+@functools.cache
+def versions() -> str:
+    """The installed versions of `DISTRIBUTIONS` (``"pwa-pipeline 0.1.0, numpy 2.4.0, …"``):
+    a salt for entries that another release of any of them could compute otherwise."""
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "not installed"
+
+    return ", ".join(f"{name} {installed(name)}" for name in DISTRIBUTIONS)
 
 
 class SignedMemory:

@@ -194,8 +194,10 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
 
 def _summary(key: str, result, table, seconds: float) -> str:
     """One line per partition: sub-models found (and what the model is, `model_note`) and
-    free-run NRMSE of every method (a diverged run as `score_text` shows it)."""
+    free-run NRMSE of every method (a diverged run as `score_text` shows it), and
+    whether the PWA model was reused (`REUSED`)."""
     from ..scoring.evaluation import score_text
+    from .assets.identification import REUSED
     from .model_facts import model_note
 
     free = table[(table["mode"] == "free_run") & (table["output"] == "mean")]
@@ -203,8 +205,12 @@ def _summary(key: str, result, table, seconds: float) -> str:
         free["method"], free["nrmse"], free["diverged"], strict=True))
     model = result.asset_value("pwa_model")
     note = model_note(model)
-    return (f"{key}: {model.n_submodels_} PWA sub-model(s){f' — {note}' if note else ''}; "
-            f"free-run NRMSE {scores} ({seconds:.1f} s)")
+    reused = f" ({REUSED})" if any(
+        getattr(e.materialization.metadata.get("fit"), "value", None) == REUSED
+        for e in result.get_asset_materialization_events()
+        if e.asset_key.to_user_string() == "pwa_model") else ""
+    return (f"{key}: {model.n_submodels_} PWA sub-model(s){reused}"
+            f"{f' — {note}' if note else ''}; free-run NRMSE {scores} ({seconds:.1f} s)")
 
 
 def add_dataset(args: argparse.Namespace) -> int:
@@ -221,7 +227,7 @@ def add_dataset(args: argparse.Namespace) -> int:
         test_experiments=tuple(args.test_experiments or ()), test_fraction=args.test_fraction,
         na=args.na, nb=args.nb, affine=args.affine, units=parse_units(args.units))
     hparams = load_hparams()  # read and checked first: a broken file registers nothing
-    data = registry.add(spec, replace=args.replace)
+    data = registry.add(spec, replace=args.replace, one_record=args.no_experiment)
     sets = [s for s in hparams.sets if hparams.covers(s, spec.name, registered=True)]
     others = [s for s in hparams.sets if s not in sets]
     print(f"registered {spec.name!r} in {registry.path}\n"
@@ -401,8 +407,14 @@ def main(argv: list[str] | None = None) -> int:
     p_add.add_argument("file", help="a .csv or .parquet file")
     p_add.add_argument("--u", nargs="+", required=True, metavar="COL", help="input columns")
     p_add.add_argument("--y", nargs="+", required=True, metavar="COL", help="output columns")
-    p_add.add_argument("--experiment", metavar="COL",
-                       help="column of experiment ids (lags never span two experiments)")
+    records = p_add.add_mutually_exclusive_group()
+    records.add_argument("--experiment", metavar="COL",
+                         help="column of experiment ids (lags never span two experiments); "
+                              "without it, a file with a column named like experiment ids "
+                              "(run, run_id, trial, …) or a time that goes back is refused")
+    records.add_argument("--no-experiment", action="store_true",
+                         help="the file is one record, even if a column or its time looks "
+                              "like several experiments")
     p_add.add_argument("--time", metavar="COL",
                        help="numeric or date-time column; must increase strictly within "
                             "each experiment (rows are not reordered)")

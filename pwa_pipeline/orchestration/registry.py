@@ -80,8 +80,19 @@ class DatasetRegistry:
                              f"NAME {file} --u … --y … --replace), or remove it "
                              f"(remove-dataset {name})") from None
 
-    def add(self, spec: UserDataset, replace: bool = False) -> Dataset:
+    def add(self, spec: UserDataset, replace: bool = False,
+            one_record: bool = False) -> Dataset:
         """Check ``spec`` by loading its file, then register it.
+
+        Parameters
+        ----------
+        spec : UserDataset
+            The registration.
+        replace : bool
+            Replace a data set registered under the same name.
+        one_record : bool
+            Confirm that a file given without an experiment column is one record even if it
+            looks like several experiments (`UserDataset.several_experiments`).
 
         Returns
         -------
@@ -91,9 +102,12 @@ class DatasetRegistry:
         Raises
         ------
         FileNotFoundError, ValueError
-            From `UserDataset.load`, or the name is taken and ``replace`` is false.
-            Nothing is written then.
+            From `UserDataset.load`; a file that looks like several experiments, given
+            without an experiment column and ``one_record`` false; or the name is taken and
+            ``replace`` is false. Nothing is written then.
         """
+        if not one_record and (several := spec.several_experiments()):
+            raise ValueError(several)
         data = spec.load()
         with self._lock():
             entries = self._read()

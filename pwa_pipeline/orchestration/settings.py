@@ -29,9 +29,13 @@ class PipelineSettings(dg.ConfigurableResource):
         ``build_definitions`` like ``hparams_path``; empty: ``$PWA_DATASETS`` or
         ``<project>/storage/datasets.json``.
     cache_dir : str
-        Cache of local models, of step 5, of the baselines and of scores and figures, a
-        folder or an fsspec URL; empty: ``cache`` in the asset store (``$PWA_STORAGE`` or
-        ``<project>/storage``).
+        Cache of fitted PWA models, of local models, of step 5, of the baselines and of
+        scores and figures, a folder or an fsspec URL; empty: ``cache`` in the asset store
+        (``$PWA_STORAGE`` or ``<project>/storage``).
+    cache_models : bool
+        Reuse a partition's fitted PWA model (with its structure search) while its data,
+        its hyper-parameters and the installed versions of this package and its numerical
+        libraries are unchanged: a rerun then fits nothing. Any change fits again.
     cache_local_models : bool
         Reuse local models across hyper-parameter sets that differ only in later steps.
     cache_sub_models : bool
@@ -52,6 +56,7 @@ class PipelineSettings(dg.ConfigurableResource):
     hparams_path: str = ""
     datasets_path: str = ""
     cache_dir: str = ""
+    cache_models: bool = True
     cache_local_models: bool = True
     cache_sub_models: bool = True
     cache_baselines: bool = True

@@ -5,6 +5,7 @@ import pickle
 import dagster as dg
 import numpy as np
 import pytest
+from sklearn.base import clone
 
 from pwa_pipeline.definitions import defs
 from pwa_pipeline.orchestration import caches
@@ -23,7 +24,8 @@ ALL = holding(defs.assets, ["configuration", "raw_benchmark", "pwa_model"])
 
 @pytest.fixture()
 def settings(tmp_path):
-    return PipelineSettings(cache_dir=str(tmp_path / "cache"))
+    # the fitted model's own cache off: a rerun is to reach the steps' caches
+    return PipelineSettings(cache_dir=str(tmp_path / "cache"), cache_models=False)
 
 
 @pytest.mark.parametrize(("asset", "partition", "fitted"), [
@@ -92,3 +94,50 @@ def test_signed_memory_keys_results_on_the_arguments_and_the_cores_source(tmp_pa
     assert copy.deepcopy(memory) is memory
     assert clone(RefinedSubModels(memory=memory)).memory is memory
 
+
+
+def test_a_rerun_reuses_the_fitted_model_until_data_settings_or_versions_change(
+        tmp_path, monkeypatch):
+    """The partition's PWA model is fitted once for unchanged data, hyper-parameters and
+    versions (`fit_model` says it reused it, and gives an equal model); a changed
+    hyper-parameter, data set or version fits again; without `cache_models` nothing is
+    reused or written. (The fit itself is a linear ARX model here, to be quick.)"""
+    import dataclasses
+
+    from pwa_pipeline import LinearARX
+    from pwa_pipeline.config import BUNDLED_HPARAMS
+    from pwa_pipeline.datasets import make_hure_vasak
+    from pwa_pipeline.orchestration.assets import identification
+
+    fits = []
+
+    def fitted(context, settings, pwa, data):
+        fits.append(pwa)
+        return LinearARX(na=1, nb=1).fit(data.u_train, data.y_train), set()
+
+    monkeypatch.setattr(identification, "fitted", fitted)
+    settings = PipelineSettings(cache_dir=str(tmp_path / "cache"),
+                                hparams_path=str(BUNDLED_HPARAMS))
+    config = settings.configuration("default", "hure_vasak")
+    data = make_hure_vasak(n_samples=300, seed=3)
+    context = dg.build_asset_context()
+
+    def fit(config=config, data=data, settings=settings) -> tuple:
+        model, _, reused = identification.fit_model(context, settings, config, data)
+        return model, reused
+
+    (first, reused_first), (again, reused) = fit(), fit()
+    assert (reused_first, reused, len(fits)) == (False, True, 1)
+    np.testing.assert_array_equal(again.theta_, first.theta_)
+    other = dataclasses.replace(config, estimators={  # one hyper-parameter changed
+        **config.estimators, "pwa": clone(config.pwa).set_params(clustering__min_pts=9)})
+    assert fit(config=other)[1] is False and len(fits) == 2
+    assert fits[1].clustering.min_pts == 9
+    assert fit(data=make_hure_vasak(n_samples=300, seed=4))[1] is False and len(fits) == 3
+    monkeypatch.setattr(identification, "versions", lambda: "pwa-pipeline 9.9")
+    assert [fit()[1] for _ in range(2)] == [False, True] and len(fits) == 4
+    off = PipelineSettings(cache_dir=str(tmp_path / "off"), cache_models=False,
+                           hparams_path=str(BUNDLED_HPARAMS))
+    assert [fit(settings=off)[1] for _ in range(2)] == [False, False] and len(fits) == 6
+    assert not (tmp_path / "off" / "models").exists()
+    assert len(list((tmp_path / "cache" / "models").glob("*.pkl"))) == 4

@@ -32,7 +32,7 @@ from pwa_pipeline.orchestration.partitions import (
 from pwa_pipeline.orchestration.settings import PipelineSettings
 from pwa_pipeline.orchestration.tracking import MLflowTracker
 
-from .._results import materialization
+from .._results import holding, materialization
 
 # every partitioned asset (what a sweep run materialises); the leaderboard has its own tests
 ASSETS = [a for a in defs.assets if a.partitions_def is not None]
@@ -537,7 +537,8 @@ def test_a_structured_set_is_fitted_whole_and_tracked(tmp_path, mlflow_template)
 
 
 def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
-                                                                     mlflow_template):
+                                                                     mlflow_template,
+                                                                     monkeypatch):
     result, resources = _materialize_set(
         tmp_path, mlflow_template, "auto",
         'preset = "auto"\nna = 1\nnb = 1\nsearch.clustering = false\n'
@@ -602,6 +603,30 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     loaded = mlflow.pyfunc.load_model(pwa_run.data.tags["model_uri"]).predict(
         example_table(u, y, data.u_names, data.y_names, 10, rows=200)).to_numpy()
     np.testing.assert_allclose(loaded[10:], model.simulate(u, y[:10])[10:], rtol=1e-12)
+
+    # a rerun with unchanged data and settings searches nothing: the model is reused, and
+    # its page, the run's log and the command line's summary line say so
+    from pwa_pipeline.orchestration.assets import identification
+    from pwa_pipeline.orchestration.cli import _summary
+
+    comparison = result.asset_value("comparison")
+    assert page_meta["fit"].value == "fitted"
+    assert "(reused" not in _summary("hure_vasak|auto", result, comparison, 1.0)
+    monkeypatch.setattr(identification, "fitted", lambda *args: pytest.fail("fitted again"))
+    names = ["configuration", "raw_benchmark", "pwa_model"]
+    custom = build_definitions(resources["settings"].hparams_path)
+    instance = dg.DagsterInstance.ephemeral()
+    again = dg.materialize(holding(custom.assets, names), selection=names,
+                           partition_key="hure_vasak|auto", resources=resources,
+                           instance=instance)
+    assert materialization(again, "pwa_model").metadata["fit"].value == \
+        "reused: unchanged data and settings"
+    assert any(e.user_message.startswith("PWA model reused: unchanged data and settings (")
+               for e in instance.all_logs(again.run_id))
+    np.testing.assert_array_equal(again.asset_value("pwa_model").thetas_, model.thetas_)
+    assert _summary("hure_vasak|auto", again, comparison, 1.0).startswith(
+        f"hure_vasak|auto: {model.n_submodels_} PWA sub-model(s) (reused: unchanged data "
+        f"and settings) — ")
 
 
 def test_a_core_loggers_lines_reach_the_run_log_while_the_step_runs():
@@ -823,7 +848,9 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
 
     searched = SimpleNamespace(n_submodels_=1, structure_search_=SimpleNamespace(
         verdict="linear kept (no switching structure beat it)"))
-    line = _summary("sim|auto", SimpleNamespace(asset_value=lambda name: searched), table, 1.0)
+    run = SimpleNamespace(asset_value=lambda name: searched,
+                          get_asset_materialization_events=list)  # (a model fitted)
+    line = _summary("sim|auto", run, table, 1.0)
     assert line == (f"sim|auto: 1 PWA sub-model(s) — linear kept (no switching structure "
                     f"beat it); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
                     f"{calm.mean('free_run'):.4g} (1.0 s)")

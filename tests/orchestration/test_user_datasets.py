@@ -58,7 +58,7 @@ def test_default_split_holds_out_the_last_experiments_or_the_end_of_one_record(
     np.testing.assert_array_equal(by_exp.y_test[1], table[table.run == "d"][["y1", "y2"]])
     path = tmp_path / "one.parquet"
     table.to_parquet(path)
-    one = registry.add(UserDataset("one", path, **COLUMNS))  # default: the last 25 %
+    one = registry.add(UserDataset("one", path, **COLUMNS), one_record=True)  # the last 25 %
     assert (one.n_train, one.n_test) == (900, 300)
     np.testing.assert_array_equal(one.u_test[0], table[["u1", "u2"]].to_numpy()[900:])
 
@@ -185,7 +185,8 @@ def test_the_cli_registers_lists_and_removes(tmp_path, csv, capsys, monkeypatch)
                  "--experiment", "run", "--time", "t", "--test-experiments", "d"]) == 0
     out = capsys.readouterr().out
     assert "training : 3 experiment(s), 900 samples" in out and "plant|default" in out
-    assert main(["add-dataset", "plant2", str(csv), "--u", "u1", "--y", "y9"]) == 2
+    assert main(["add-dataset", "plant2", str(csv), "--u", "u1", "--y", "y9",
+                 "--experiment", "run"]) == 2
     assert "error: plant.csv has no column(s) ['y9']" in capsys.readouterr().err
     assert main(["list-datasets"]) == 0
     out = capsys.readouterr().out
@@ -195,6 +196,45 @@ def test_the_cli_registers_lists_and_removes(tmp_path, csv, capsys, monkeypatch)
     assert main(["remove-dataset", "plant"]) == 0
     assert main(["remove-dataset", "plant"]) == 2
     assert "no data set 'plant'" in capsys.readouterr().err
+
+
+def test_a_file_of_several_experiments_is_refused_without_its_experiment_column(
+        tmp_path, table, capsys, monkeypatch):
+    """A file whose run-id column or restarting time says it holds several experiments is
+    refused without --experiment, in one line naming the column to pass; --experiment or
+    --no-experiment registers it; a single record registers without either."""
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    restarting = table.assign(t=np.tile(np.arange(300) * 0.01, 4))
+    files = {"runs": restarting, "times": restarting.drop(columns="run"),
+             "single": table.drop(columns="run")}
+    for name, frame in files.items():
+        frame.to_csv(tmp_path / f"{name}.csv", index=False)
+
+    def add(name: str, *extra: str) -> int:
+        return main(["add-dataset", name, str(tmp_path / f"{name}.csv"), "--u", "u1", "u2",
+                     "--y", "y1", "y2", *extra])
+
+    assert add("runs") == 2
+    assert capsys.readouterr().err == (
+        "pwa-pipeline add-dataset: error: runs.csv looks like several experiments, not one "
+        "record: column 'run' looks like experiment ids (4 values: 'a', 'b', 'c', …) and "
+        "time column 't' goes back 3 time(s), first at row 300; pass --experiment run, or "
+        "--no-experiment if it is one record\n")
+    assert add("times", "--time", "t") == 2
+    assert capsys.readouterr().err == (
+        "pwa-pipeline add-dataset: error: times.csv looks like several experiments, not one "
+        "record: time column 't' goes back 3 time(s), first at row 300; pass --experiment "
+        "COLUMN naming the column of experiment ids (add one to the file if it has none), "
+        "or --no-experiment if it is one record\n")
+    assert DatasetRegistry(tmp_path / "datasets.json").names() == []
+    assert add("runs", "--experiment", "run", "--time", "t") == 0
+    assert "training : 3 experiment(s), 900 samples" in capsys.readouterr().out
+    assert add("times", "--no-experiment") == 0
+    assert "training : 1 experiment(s), 900 samples" in capsys.readouterr().out
+    assert add("single", "--time", "t") == 0
+    assert DatasetRegistry(tmp_path / "datasets.json").names() == ["runs", "single", "times"]
 
 
 def test_a_registered_data_set_is_a_partition_that_runs(tmp_path, csv, mlflow_template):
@@ -257,7 +297,8 @@ def test_a_broken_hyper_parameter_file_registers_nothing(tmp_path, csv, capsys, 
     broken = tmp_path / "hp.toml"
     broken.write_text("[default.\n")
     monkeypatch.setenv("PWA_HPARAMS", str(broken))
-    args = ["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2"]
+    args = ["add-dataset", "plant", str(csv), "--u", "u1", "u2", "--y", "y1", "y2",
+            "--experiment", "run"]
     assert main(args) == 2
     assert f"error: {broken} is not valid TOML" in capsys.readouterr().err
     assert DatasetRegistry(tmp_path / "datasets.json").names() == []

@@ -35,7 +35,7 @@ from ...plotting import (
 from ...pwa import PWARX
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
-from ..caches import SignedMemory
+from ..caches import SignedMemory, versions
 from ..checks import (
     CLUSTER_CHECKS,
     SUB_MODEL_CHECKS,
@@ -89,6 +89,9 @@ _DESCRIPTIONS = {
                  "model that never switches says so instead), and *regions*, the regions "
                  "in the 2-D slice of φ where they differ most.",
 }
+#: How the ``pwa_model`` page, the run's log and the command line's summary say that a
+#: rerun took the fitted model from the cache (`fit_model`).
+REUSED = "reused: unchanged data and settings"
 #: The figure keys of the ``pwa_model`` page.
 SWITCHING, REGIONS = "switching (first held-out experiment)", "regions"
 
@@ -128,11 +131,31 @@ def with_caches(pwa: PWARX, settings: PipelineSettings, warn) -> tuple[PWARX, di
 
 
 def fit_model(context: dg.AssetExecutionContext, settings: PipelineSettings,
-              configuration: Configuration, data: Dataset) -> tuple[PWARX, set[str]]:
-    """The partition's PWARX fitted on the training experiments (the steps' caches on, the
-    search's progress in the run's log); returns it with the caches taken off its steps
-    (the stored model is the configured one), and the steps a cache answered."""
-    pwa = configuration.pwa
+              configuration: Configuration, data: Dataset) -> tuple[PWARX, set[str], bool]:
+    """The partition's PWARX fitted on the training experiments (`fitted`), or the one a
+    run with the same data, hyper-parameters and versions (`versions`) fitted before
+    (``cache_models``: a rerun repeats no structure search). Returns it with the steps a
+    cache answered and whether the whole fitted model was reused."""
+    answered: set[str] = set()
+
+    def fit(pwa: PWARX, data_digest: str) -> PWARX:
+        model, steps = fitted(context, settings, pwa, data)
+        answered.update(steps)
+        return model
+
+    if not settings.cache_models:
+        return fit(configuration.pwa, data.digest), answered, False
+    memory = SignedMemory(settings.cache_root(), "models", warn=context.log.warning,
+                          salt=versions())
+    model = memory.cache(fit)(configuration.pwa, data.digest)
+    return model, answered, memory.hits > 0
+
+
+def fitted(context: dg.AssetExecutionContext, settings: PipelineSettings, pwa: PWARX,
+           data: Dataset) -> tuple[PWARX, set[str]]:
+    """``pwa`` fitted on the training experiments (the steps' caches on, the search's
+    progress in the run's log); returns it with the caches taken off its steps (the stored
+    model is the configured one), and the steps a cache answered."""
     if (search := pwa.search) is not None:
         context.log.info(f"structure search: orders up to ({pwa.na}, {pwa.nb}), at most "
                          f"{search.max_candidates} candidates (search.max_candidates; "
@@ -215,14 +238,17 @@ def identification_assets(partitions_def) -> list:
                 "rows": reg.phi.shape[0], "d": reg.phi.shape[1],
                 "regressors": ", ".join(phi_names(pwa, data))})
         t0 = time.perf_counter()
-        model, cached = fit_model(context, settings, configuration, raw_benchmark)
-        context.log.info(f"PWA model: {'; '.join(_described(model, raw_benchmark))} "
-                         f"in {time.perf_counter() - t0:.1f} s"
-                         + (f" ({', '.join(sorted(cached))} from the cache)" if cached else ""))
+        model, cached, reused = fit_model(context, settings, configuration, raw_benchmark)
+        described = "; ".join(_described(model, raw_benchmark))
+        context.log.info(
+            f"PWA model {REUSED} (fitted before in {sum(model.timings_.values()):.1f} s; no "
+            f"structure search or step ran): {described}" if reused else
+            f"PWA model: {described} in {time.perf_counter() - t0:.1f} s"
+            + (f" ({', '.join(sorted(cached))} from the cache)" if cached else ""))
         steps, outputs = shown_steps(model)
         for asset, name in STEP_ASSETS.items():
             events = _step_events(asset, steps.get(name), model, raw_benchmark, outputs,
-                                  partition, name in cached, configuration)
+                                  partition, reused or name in cached, configuration)
             for event in events:
                 if isinstance(event, dg.Output):
                     if asset in selected:
@@ -233,7 +259,7 @@ def identification_assets(partitions_def) -> list:
                         return  # (a blocking check: the model is not stored)
         if "pwa_model" in selected:
             yield model_output(context, settings, configuration, model, raw_benchmark, cached,
-                               reg.phi)
+                               reg.phi, reused)
 
     return [configuration, raw_benchmark, pwa_fit]
 
@@ -321,9 +347,10 @@ def _step_events(asset: str, step, model: PWARX, data: Dataset, outputs: tuple[i
 
 def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                  configuration: Configuration, model: PWARX, data: Dataset, cached: set[str],
-                 phi: np.ndarray) -> dg.Output:
+                 phi: np.ndarray, reused: bool = False) -> dg.Output:
     """``pwa_model`` with its page: what the model is (the structure search's verdict,
-    first), whether it switches (`switching_note`), the parameters it ran with
+    first), whether it switches (`switching_note`), whether it was fitted or
+    reused (`REUSED`), the parameters it ran with
     (`shown_params`), each output's structure, the structure search's report
     or the structured fit's candidates, the ground truth when comparable, and the
     switching and regions figures (their numbers cached by what the model predicts with,
@@ -356,7 +383,8 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
                 "squared):\n\n" + costs.to_markdown(floatfmt=".4g"))
     report = getattr(model, "structure_search_", None)
     if report is not None:
-        context.log.info(f"structure search: {len(report.table)} candidates in "
+        context.log.info(f"structure search{' (reused, not run again)' if reused else ''}: "
+                         f"{len(report.table)} candidates in "
                          f"{report.seconds:.1f} s. {report.choice}")
         # the rows that decided, without the row numbers (the CSV has none), missing
         # errors (a skipped candidate) shown as a dash
@@ -381,8 +409,10 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
         "n_submodels": model.n_submodels_,
         **({} if (note := switching_note(model)) is None else {"switching": note}),
         "output_groups": len(model.groups_),
+        "fit": REUSED if reused else "fitted",
         "fit_seconds": sum(model.timings_.values()),
-        "steps_from_cache": ", ".join(sorted(cached)) or "none",
+        "steps_from_cache": "all (the fitted model reused)" if reused
+        else ", ".join(sorted(cached)) or "none",
         "structure per output": markdown(structure.set_index("output")),
         **found,
         "resolved parameters": dg.MetadataValue.md(
