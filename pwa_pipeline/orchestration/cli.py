@@ -9,6 +9,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 
 import argparse
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -28,6 +29,11 @@ from .paths import (
 )
 from .run_lock import exclusive_run
 from .signed_pickles import signing_key
+
+#: Loggers whose INFO lines are a library's own bookkeeping, not the run's ("Creating
+#: initial MLflow database tables", "Updating database tables"): the command shows their
+#: warnings and errors only (MLflow itself sets alembic's migration steps to WARNING).
+BOOKKEEPING_LOGGERS = ("mlflow.store",)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -352,6 +358,8 @@ def _workers(text: str) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
+    for name in BOOKKEEPING_LOGGERS:
+        logging.getLogger(name).setLevel(logging.WARNING)
     parser = argparse.ArgumentParser(
         prog="pwa-pipeline",
         description="Identify MIMO piecewise-affine ARX models with the Dagster pipeline.")

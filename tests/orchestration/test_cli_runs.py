@@ -255,3 +255,33 @@ def test_a_password_in_the_tracking_uri_is_never_stored_in_a_run(tmp_path, monke
         stored = [dg.serialize_value(run.run_config), dg.serialize_value(run.tags),
                   dg.serialize_value(instance.get_job_snapshot(run.job_snapshot_id))]
         assert not [s for s in stored if "s3cret" in s], run.job_name
+
+
+def test_the_libraries_bookkeeping_lines_are_silenced_and_their_warnings_kept(
+        tmp_path, monkeypatch, capsys):
+    """MLflow's "Creating initial MLflow database tables" (INFO) is not the run's news: the
+    command shows that logger's warnings only."""
+    import logging
+
+    import mlflow  # noqa: F401  (configures MLflow's handler, as a run does)
+
+    from pwa_pipeline.orchestration.cli import BOOKKEEPING_LOGGERS, main
+
+    for name in BOOKKEEPING_LOGGERS:
+        monkeypatch.setattr(logging.getLogger(name), "level", logging.getLogger(name).level)
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    assert main(["list-datasets"]) == 0
+    capsys.readouterr()
+    root = logging.getLogger()  # as an application showing every INFO line configures it
+    shown = logging.StreamHandler(sys.stderr)
+    monkeypatch.setattr(root, "level", logging.INFO)
+    root.addHandler(shown)
+    try:
+        tables = logging.getLogger("mlflow.store.db.utils")
+        tables.info("Creating initial MLflow database tables...")
+        tables.warning("a warning users should see")
+    finally:
+        root.removeHandler(shown)
+    err = capsys.readouterr().err
+    assert "a warning users should see" in err
+    assert "Creating initial" not in err

@@ -142,7 +142,7 @@ def test_the_training_table_stacks_the_experiments_and_labels_each_rows_experime
 
 
 def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what_it_is(
-        tmp_path, mlflow_template):
+        tmp_path, mlflow_template, capsys):
     """``models:/…/latest`` is whichever set ran last: each set's newest version carries the
     set's name as its alias (a linked model's too; a name MLflow reserves as ``set-<name>``),
     and the registered model has a description and tags of its own."""
@@ -175,6 +175,8 @@ def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what
     run_b = log("b", first)  # links the version a registered
     log("a", second)  # a new version: a's alias moves to it, b's stays
     log("latest", second)  # a reserved alias name
+    printed = capsys.readouterr()  # MLflow's fluent registration prints at every version
+    assert "registered model" not in (printed.out + printed.err).lower()
     client = MlflowClient(tracking_uri=uri)
     registered = client.get_registered_model(name)
     assert registered.aliases == {"a": 2, "b": 1, "set-latest": 2}
