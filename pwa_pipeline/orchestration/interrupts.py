@@ -30,8 +30,11 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iter
     it as on the first.
 
     Every signal writes its number to a pipe (``signal.set_wakeup_fd``, at the C level,
-    whatever the Python handler then does); a thread reads the pipe. In a thread other than
-    the main thread (where signals cannot be observed) the block runs as it is.
+    whatever the Python handler then does); a thread reads the pipe. The main thread blocks
+    SIGINT meanwhile, so that the processes the block starts (which inherit the mask) are
+    not stopped by a Ctrl-C to the process group; the reading thread receives it instead. In
+    a thread other than the main thread (where signals cannot be observed) the block runs as
+    it is.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -54,9 +57,15 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iter
 
     watcher = threading.Thread(target=watch, name="interrupts-redelivered", daemon=True)
     watcher.start()
+    # SIGINT reaches the process through the watcher thread from now on (Python runs the
+    # handlers in the main thread all the same); the processes the block starts inherit the
+    # blocked signal, so a terminal's Ctrl-C, sent to the whole process group, does not make
+    # Dagster's log-mirroring helpers print their own KeyboardInterrupt tracebacks
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         done.set()
         watcher.join()
         signal.set_wakeup_fd(previous)
