@@ -1,5 +1,6 @@
 """The ``mlflow`` resource: one MLflow run per method and partition materialisation."""
 
+import errno
 import functools
 import json
 import logging
@@ -432,8 +433,23 @@ class MLflowTracker(dg.ConfigurableResource):
                 logging.getLogger(__name__).warning(
                     f"MLflow run {run_id} could not be marked {status} ({why}); it stays "
                     f"RUNNING until `python -m pwa_pipeline doctor --repair`")
+            if (full := _disk_full(exc)) is not None:  # said with the store it names
+                raise dg.Failure(description=(
+                    f"MLflow store {mask_credentials(self.uri())} could not be written: "
+                    f"{full}; free space on its disk, then materialise the partition again "
+                    f"(its assets already stored are kept)")) from exc
             raise  # the error or interrupt itself, never the failure to mark the run
         return LoggedRun(run_id, exp_id)
+
+
+def _disk_full(exc: BaseException) -> str | None:
+    """What ``exc`` says, when it says that the disk is full: an OSError ENOSPC (or over
+    quota), or sqlite's `database or disk is full` / `disk I/O error`, which name no file;
+    None for any other error."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return exc.strerror or "no space left on device"
+    return next((reason for reason in ("database or disk is full", "disk I/O error")
+                 if reason in str(exc)), None)
 
 
 class LoggedRun(NamedTuple):
