@@ -144,8 +144,9 @@ def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterIn
     the job's runs as a run launched in the UI is (errors are the run's, not raised); tagged
     by `run_tags`. A Ctrl-C that leaves it running is sent again
     (`interrupts_redelivered`). The instance's storage failing (a full disk, a PostgreSQL
-    server stopped) raises `ServiceLost`."""
-    with interrupts_redelivered():
+    server stopped) raises `ServiceLost`, or KeyboardInterrupt when Ctrl-C came while it
+    retried."""
+    with interrupts_redelivered() as interrupted:
         try:
             return defs.resolve_job_def(SWEEP_JOB).execute_in_process(
                 partition_key=key, instance=instance, run_config=run_config, tags=run_tags(),
@@ -153,4 +154,6 @@ def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterIn
         except Exception as exc:
             if (fault := _storage_fault(exc, instance)) is None:
                 raise
+            if interrupted.is_set():  # Ctrl-C while the storage retried: an interrupt
+                raise KeyboardInterrupt from None
             raise fault from None
