@@ -22,7 +22,13 @@ from .credentials import mask_credentials
 from .files import store_root
 from .io_manager import PartitionedFileIOManager
 from .jobs import CONNECT_TIMEOUT, dask_run_config
-from .partition_runs import ServiceLost, root_cause, run_tags, was_interrupted
+from .partition_runs import (
+    ServiceLost,
+    one_line_console,
+    root_cause,
+    run_tags,
+    was_interrupted,
+)
 from .signed_pickles import KEY_FILE
 
 #: Schemes of dask's communication layers an address may name.
@@ -32,10 +38,12 @@ WORKER_TIMEOUT = 30
 
 
 def sweep_dask_job() -> dg.JobDefinition:
-    """The ``sweep_dask`` job of the code location, as every dask worker rebuilds it."""
+    """The ``sweep_dask`` job of the code location, as every dask worker rebuilds it, with
+    the command line's `one_line_console` logger as ``console``."""
     from .definitions import defs
 
-    return defs.resolve_job_def("sweep_dask")
+    return dg.Definitions.merge(defs, dg.Definitions(
+        loggers={"console": one_line_console})).resolve_job_def("sweep_dask")
 
 
 def check_address(address: str) -> None:
