@@ -210,13 +210,19 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
         print(f"dask scheduler {address}" + ("" if args.scheduler else
               f" (a LocalCluster of {args.workers} worker processes; dashboard on port "
               f"8787 if it was free)"), flush=True)
-        t0 = time.perf_counter()
-        for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
-                                         io_manager=defs.resources["io_manager"]):
+        t0, runs = time.perf_counter(), sweep_on_dask(
+            keys, instance, address, run_config, before=announce,
+            io_manager=defs.resources["io_manager"])
+        for key in keys:
+            try:
+                _, result = next(runs)
+            except Exception:  # raised out of the run: a scheduler gone is said in one line
+                check_scheduler(address, key)
+                raise
             yield key, result, time.perf_counter() - t0
             if was_interrupted(result):
                 return
-            if not result.success:
+            if not result.success:  # no further partition against a scheduler gone
                 check_scheduler(address, key)
             t0 = time.perf_counter()
 
