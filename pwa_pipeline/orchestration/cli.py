@@ -9,6 +9,7 @@ UI (``dagster dev -w workspace.yaml``) and the MLflow UI show them afterwards.
 
 import argparse
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -19,7 +20,13 @@ from .credentials import mask_credentials
 from .files import check_writable
 from .instance import prepare_instance
 from .jobs import SCHEDULER_ENV
-from .partition_runs import LOCATION, cli_definitions, run_tags, was_interrupted
+from .partition_runs import (
+    LOCATION,
+    ServiceLost,
+    cli_definitions,
+    run_tags,
+    was_interrupted,
+)
 from .paths import (
     dagster_home,
     default_datasets_path,
@@ -28,6 +35,11 @@ from .paths import (
 )
 from .run_lock import exclusive_run
 from .signed_pickles import signing_key
+
+#: Loggers whose INFO lines are a library's own bookkeeping, not the run's ("Creating
+#: initial MLflow database tables", "Updating database tables"): the command shows their
+#: warnings and errors only (MLflow itself sets alembic's migration steps to WARNING).
+BOOKKEEPING_LOGGERS = ("mlflow.store",)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,7 +59,14 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
     from .dask_sweep import step_failures
     from .definitions import partitions_of
     from .jobs import LEADERBOARD, LEADERBOARD_JOB
-    from .partitions import DEFAULT_SETS, PartitionKey, check_keys, check_runnable, runnable_keys
+    from .partitions import (
+        DEFAULT_SETS,
+        PartitionKey,
+        all_keys,
+        check_keys,
+        check_runnable,
+        runnable_keys,
+    )
     from .reporting import leaderboard_markdown, mean_scores_markdown
 
     defs = cli_definitions(args.tracking_uri)
@@ -108,6 +127,13 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
             summaries.append(_summary(key, result, table, seconds))
     except KeyboardInterrupt:  # one that came outside a run (Dagster records those inside)
         interrupted.append(None)
+    except ServiceLost:  # said in one line by main, after what was done
+        left = [k for k in keys if k not in ended]
+        print("\nSummary\n  " + "\n  ".join(
+            [*summaries, *([f"not run to the end: {', '.join(left)}"] if left else [])]))
+        raise
+    if not interrupted:
+        summaries.append(_outcome(len(keys), len(failed), len(all_keys(partitions_def))))
     print("\nSummary\n  " + "\n  ".join(summaries))
     if interrupted:
         left = [k for k in keys if k not in ended]
@@ -119,8 +145,9 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
         instance=instance, run_config=quiet, tags=run_tags(), raise_on_error=False)
     if board.success:
         meta = board.asset_materializations_for_node(LEADERBOARD)[0].metadata
-        print(f"\nLeaderboard (every partition stored so far; "
-              f"{meta['partitions_missing'].value} not materialised)\n")
+        print(f"\nLeaderboard (the {meta['partitions_scored'].value} partition(s) with "
+              f"results in the store, from this command and earlier ones; "
+              f"{meta['partitions_missing'].value} have none yet)\n")
         print(leaderboard_markdown(board.asset_value(LEADERBOARD)), end="")
     else:
         failed.append(LEADERBOARD)
@@ -173,7 +200,7 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
             if was_interrupted(result):
                 return
         return
-    from .dask_sweep import dask_scheduler, sweep_on_dask, worker_run_config
+    from .dask_sweep import check_scheduler, dask_scheduler, sweep_on_dask, worker_run_config
 
     # the workers build their resources from run configuration: this process's stores
     run_config = {**run_config, **worker_run_config(defs.resources)}
@@ -183,13 +210,32 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
         print(f"dask scheduler {address}" + ("" if args.scheduler else
               f" (a LocalCluster of {args.workers} worker processes; dashboard on port "
               f"8787 if it was free)"), flush=True)
-        t0 = time.perf_counter()
-        for key, result in sweep_on_dask(keys, instance, address, run_config, before=announce,
-                                         io_manager=defs.resources["io_manager"]):
+        t0, runs = time.perf_counter(), sweep_on_dask(
+            keys, instance, address, run_config, before=announce,
+            io_manager=defs.resources["io_manager"])
+        for key in keys:
+            try:
+                _, result = next(runs)
+            except Exception:  # raised out of the run: a scheduler gone is said in one line
+                check_scheduler(address, key)
+                raise
             yield key, result, time.perf_counter() - t0
             if was_interrupted(result):
                 return
+            if not result.success:  # no further partition against a scheduler gone
+                check_scheduler(address, key)
             t0 = time.perf_counter()
+
+
+def _outcome(run: int, failed: int, total: int) -> str:
+    """The summary's last line: how many partitions this command ran and how they ended, and
+    that the others of the `total` were not run by it (not that they failed)."""
+    ended = "all succeeded" if not failed else (
+        "all failed" if failed == run else f"{run - failed} succeeded, {failed} failed")
+    others = total - run
+    return (f"{run} partition(s) run, {ended}" + (
+        f"; {others} other(s) not run in this command (`python -m pwa_pipeline partitions` "
+        f"lists them, `run --all` runs every one)" if others else ""))
 
 
 def _summary(key: str, result, table, seconds: float) -> str:
@@ -296,11 +342,18 @@ def partitions(args: argparse.Namespace) -> int:
 def doctor(args: argparse.Namespace) -> int:
     """Report (and with ``--repair`` fix) what interrupted runs left behind; exit 1 when
     something is found and not repaired."""
+    import dagster as dg
+
     from .doctor import find_orphans, repair
     from .tracking import MLflowTracker, move_store_aside, store_problem
 
-    instance = prepare_instance()
     tracker = MLflowTracker(tracking_uri=args.tracking_uri)
+    if tracker.uri().startswith(("http://", "https://")):
+        try:
+            tracker.check_reachable()
+        except dg.Failure as exc:  # said in one line, not after MLflow's retries
+            raise ValueError(exc.description) from None
+    instance = prepare_instance()
     broken = None
     if (db := tracker._sqlite_db()) is not None and (problem := store_problem(db)):
         if args.repair and problem.half_made:
@@ -356,8 +409,27 @@ def _workers(text: str) -> int:
     return value
 
 
+def _os_error_line(exc: OSError) -> str:
+    """An OSError that stopped a command, in one line: the file, the reason and what to do
+    about it."""
+    import errno
+
+    where = f"{exc.filename}: " if exc.filename else ""
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR):
+        advice = ("make it writable, or set $PWA_PIPELINE_HOME (or $DAGSTER_HOME, "
+                  "$PWA_STORAGE, $PWA_DATASETS) to a folder this user can write")
+    elif exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        advice = "free space on that disk and run again (files are replaced whole, never half)"
+    else:
+        advice = "check the stores' folders ($PWA_PIPELINE_HOME) and run again"
+    return f"{where}{reason}; {advice}"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pwa_pipeline`` and the ``pwa-pipeline`` script."""
+    for name in BOOKKEEPING_LOGGERS:
+        logging.getLogger(name).setLevel(logging.WARNING)
     parser = argparse.ArgumentParser(
         prog="pwa-pipeline",
         description="Identify MIMO piecewise-affine ARX models with the Dagster pipeline.")
@@ -463,6 +535,12 @@ def main(argv: list[str] | None = None) -> int:
         message = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
         print(f"pwa-pipeline {args.command}: error: {message}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a store that cannot be written: read-only, full, not a folder
+        print(f"pwa-pipeline {args.command}: error: {_os_error_line(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # before or between runs (a run records its own)
+        print(f"pwa-pipeline {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

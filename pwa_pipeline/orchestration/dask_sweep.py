@@ -22,7 +22,13 @@ from .credentials import mask_credentials
 from .files import store_root
 from .io_manager import PartitionedFileIOManager
 from .jobs import CONNECT_TIMEOUT, dask_run_config
-from .partition_runs import run_tags, was_interrupted
+from .partition_runs import (
+    ServiceLost,
+    one_line_console,
+    root_cause,
+    run_tags,
+    was_interrupted,
+)
 from .signed_pickles import KEY_FILE
 
 #: Schemes of dask's communication layers an address may name.
@@ -32,10 +38,12 @@ WORKER_TIMEOUT = 30
 
 
 def sweep_dask_job() -> dg.JobDefinition:
-    """The ``sweep_dask`` job of the code location, as every dask worker rebuilds it."""
+    """The ``sweep_dask`` job of the code location, as every dask worker rebuilds it, with
+    the command line's `one_line_console` logger as ``console``."""
     from .definitions import defs
 
-    return defs.resolve_job_def("sweep_dask")
+    return dg.Definitions.merge(defs, dg.Definitions(
+        loggers={"console": one_line_console})).resolve_job_def("sweep_dask")
 
 
 def check_address(address: str) -> None:
@@ -83,6 +91,22 @@ def dask_scheduler(address: str = "", n_workers: int = 2, processes: bool = True
         yield address
 
 
+def check_scheduler(address: str, key: str) -> None:
+    """Raise `ServiceLost` unless the scheduler at `address` still answers (within
+    `CONNECT_TIMEOUT` seconds): checked after a partition's run failed, so that no further
+    partition starts against a scheduler that is gone (its runs would only fail in turn)."""
+    from dask.distributed import Client
+
+    try:
+        with Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False):
+            pass
+    except OSError as exc:  # dask's own TimeoutError is an OSError
+        raise ServiceLost(
+            f"the dask scheduler {address} stopped answering during {key} ({exc}); no "
+            f"further partition was started: start the scheduler and its workers again "
+            f"(`dask scheduler`, `dask worker {address}`), then run again") from None
+
+
 def _check_workers(client, address: str, stores: Sequence[str]) -> None:
     """Raise a ValueError unless the scheduler has a worker, every worker runs
     pwa-pipeline's code and sees every store of ``stores`` (see `dask_scheduler`)."""
@@ -128,14 +152,15 @@ def worker_run_config(resources: Mapping[str, object]) -> dict:
 
 
 def step_failures(instance: dg.DagsterInstance, run_id: str) -> list[str]:
-    """Why the steps of a run failed, one line each (``<step>: <reason>``), read from the
-    instance: a step on a worker logged its failure there, not in this process."""
+    """Why the steps of a run failed, one line each (`<step>: <reason>`: the failure's
+    description, else its `root_cause`), read from the instance: a step on a worker logged
+    its failure there, not in this process."""
     reasons = []
     for record in instance.all_logs(run_id, of_type=dg.DagsterEventType.STEP_FAILURE):
         data = record.dagster_event.event_specific_data
         failure = getattr(data, "user_failure_data", None)
         text = failure.description if failure is not None and failure.description else (
-            data.error.message.strip() if data.error is not None else "no reason recorded")
+            root_cause(data.error) if data.error is not None else "no reason recorded")
         reasons.append(f"{record.dagster_event.step_key}: {text.splitlines()[0]}")
     return reasons
 

@@ -24,17 +24,23 @@ GRACE, RESENDS = 5.0, 3
 
 
 @contextmanager
-def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iterator[None]:
+def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS
+                           ) -> Iterator[threading.Event]:
     """While the block runs, a SIGINT to this process that leaves it running ``grace``
     seconds later is sent again (at most ``resends`` times); the block's own handlers act on
-    it as on the first.
+    it as on the first. Yields an event set once a SIGINT came (for a block that ends by
+    another error meanwhile, e.g. a storage that no longer answers, to be told apart).
 
     Every signal writes its number to a pipe (``signal.set_wakeup_fd``, at the C level,
-    whatever the Python handler then does); a thread reads the pipe. In a thread other than
-    the main thread (where signals cannot be observed) the block runs as it is.
+    whatever the Python handler then does); a thread reads the pipe. The main thread blocks
+    SIGINT meanwhile, so that the processes the block starts (which inherit the mask) are
+    not stopped by a Ctrl-C to the process group; the reading thread receives it instead. In
+    a thread other than the main thread (where signals cannot be observed) the block runs as
+    it is.
     """
+    came = threading.Event()
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield came
         return
     read, write = os.pipe()
     os.set_blocking(write, False)
@@ -48,15 +54,22 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS) -> Iter
                 continue
             if signal.SIGINT not in os.read(read, 512):
                 continue
+            came.set()
             if not done.wait(grace) and sent < resends:
                 sent += 1
                 os.kill(os.getpid(), signal.SIGINT)
 
     watcher = threading.Thread(target=watch, name="interrupts-redelivered", daemon=True)
     watcher.start()
+    # SIGINT reaches the process through the watcher thread from now on (Python runs the
+    # handlers in the main thread all the same); the processes the block starts inherit the
+    # blocked signal, so a terminal's Ctrl-C, sent to the whole process group, does not make
+    # Dagster's log-mirroring helpers print their own KeyboardInterrupt tracebacks
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        yield
+        yield came
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         done.set()
         watcher.join()
         signal.set_wakeup_fd(previous)

@@ -1,5 +1,6 @@
 """The ``mlflow`` resource: one MLflow run per method and partition materialisation."""
 
+import errno
 import functools
 import json
 import logging
@@ -311,11 +312,9 @@ class MLflowTracker(dg.ConfigurableResource):
         with mlflow.start_run(run_id=run_id):
             mlflow.log_input(model.training, context="training")
             if logged is None:
-                info = _log_pyfunc(model, registered_name)
-                version = info.registered_model_version
-                for key, value in version_tags.items():
-                    client.set_model_version_tag(registered_name, version, key, value)
-                client.update_model_version(registered_name, version, description=description)
+                info = _log_pyfunc(model)
+                version = _register(client, registered_name, info, run_id, version_tags,
+                                    description)
                 _name_version(client, registered_name, version, version_tags)
                 return {"model_uri": info.model_uri, "model_id": info.model_id,
                         "model_run_id": run_id}
@@ -442,8 +441,23 @@ class MLflowTracker(dg.ConfigurableResource):
                 logging.getLogger(__name__).warning(
                     f"MLflow run {run_id} could not be marked {status} ({why}); it stays "
                     f"RUNNING until `python -m pwa_pipeline doctor --repair`")
+            if (full := _disk_full(exc)) is not None:  # said with the store it names
+                raise dg.Failure(description=(
+                    f"MLflow store {mask_credentials(self.uri())} could not be written: "
+                    f"{full}; free space on its disk, then materialise the partition again "
+                    f"(its assets already stored are kept)")) from exc
             raise  # the error or interrupt itself, never the failure to mark the run
         return LoggedRun(run_id, exp_id)
+
+
+def _disk_full(exc: BaseException) -> str | None:
+    """What ``exc`` says, when it says that the disk is full: an OSError ENOSPC (or over
+    quota), or sqlite's `database or disk is full` / `disk I/O error`, which name no file;
+    None for any other error."""
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        return exc.strerror or "no space left on device"
+    return next((reason for reason in ("database or disk is full", "disk I/O error")
+                 if reason in str(exc)), None)
 
 
 class LoggedRun(NamedTuple):
@@ -540,9 +554,27 @@ def _name_version(client, registered_name: str, version, version_tags: dict[str,
         client.set_registered_model_tag(registered_name, key, value)
 
 
-def _log_pyfunc(model: "ModelToLog", registered_name: str):
-    """Log ``model`` as the active run's pyfunc model, registered as ``registered_name``;
-    returns MLflow's ``ModelInfo``."""
+def _register(client, registered_name: str, info, run_id: str, version_tags: dict[str, str],
+              description: str) -> str:
+    """Register the logged model ``info`` (MLflow's ``ModelInfo``) of run ``run_id`` as a
+    new version of ``registered_name`` (created if need be), tagged with ``version_tags`` and
+    described by ``description``; returns the version. Through the client, which prints
+    nothing: the fluent registration prints "Successfully registered model" or "already
+    exists" to stderr at every run."""
+    from mlflow.exceptions import MlflowException
+
+    try:
+        client.create_registered_model(registered_name)
+    except MlflowException as exc:
+        if exc.error_code not in ("RESOURCE_ALREADY_EXISTS", "ALREADY_EXISTS"):
+            raise
+    return client.create_model_version(
+        registered_name, source=info.model_uri, run_id=run_id, tags=version_tags,
+        description=description, model_id=info.model_id).version
+
+
+def _log_pyfunc(model: "ModelToLog"):
+    """Log ``model`` as the active run's pyfunc model; returns MLflow's ``ModelInfo``."""
     import mlflow
     from mlflow.models import infer_signature
 
@@ -556,7 +588,7 @@ def _log_pyfunc(model: "ModelToLog", registered_name: str):
         return mlflow.pyfunc.log_model(
             name="model", python_model=model.simulator,
             signature=infer_signature(model.input_example, output),
-            input_example=model.input_example, registered_model_name=registered_name,
+            input_example=model.input_example,
             # given, not inferred: inference imports and inspects the environment
             pip_requirements=[f"{name}=={version(name)}" for name in REQUIREMENTS])
     finally:

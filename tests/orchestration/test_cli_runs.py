@@ -44,8 +44,14 @@ def test_partitions_run_one_after_the_other_and_a_failure_keeps_the_others(
     keys = ["plant|default", "mill|default", "gone|default"]
     args = ["run"] + [a for k in keys for a in ("--partition", k)]
     assert main(args) == 1
-    out = capsys.readouterr().out
+    out, err = capsys.readouterr()
     assert "gone|default: FAILED after" in out
+    assert ("\n    raw_benchmark: ValueError: gone.csv has no column(s) ['u1', 'u2', 'y1', "
+            "'y2']; it has ['a', 'b']\n") in out
+    # the failure's cause in one line, not Dagster's wrapper and its stack traces
+    assert "Error occurred while executing op" not in out + err
+    assert "Stack Trace" not in out + err and "Traceback" not in out + err
+    assert "\n  3 partition(s) run, 2 succeeded, 1 failed; " in out.split("Summary")[1]
     for key in keys[:2]:
         assert f"{key}: mean over the outputs" in out
         assert f"  {key}: " in out.split("Summary")[1]  # its summary line
@@ -255,3 +261,151 @@ def test_a_password_in_the_tracking_uri_is_never_stored_in_a_run(tmp_path, monke
         stored = [dg.serialize_value(run.run_config), dg.serialize_value(run.tags),
                   dg.serialize_value(instance.get_job_snapshot(run.job_snapshot_id))]
         assert not [s for s in stored if "s3cret" in s], run.job_name
+
+
+def test_the_libraries_bookkeeping_lines_are_silenced_and_their_warnings_kept(
+        tmp_path, monkeypatch, capsys):
+    """MLflow's "Creating initial MLflow database tables" (INFO) is not the run's news: the
+    command shows that logger's warnings only."""
+    import logging
+
+    import mlflow  # noqa: F401  (configures MLflow's handler, as a run does)
+
+    from pwa_pipeline.orchestration.cli import BOOKKEEPING_LOGGERS, main
+
+    for name in BOOKKEEPING_LOGGERS:
+        monkeypatch.setattr(logging.getLogger(name), "level", logging.getLogger(name).level)
+    monkeypatch.setenv("PWA_DATASETS", str(tmp_path / "datasets.json"))
+    assert main(["list-datasets"]) == 0
+    capsys.readouterr()
+    root = logging.getLogger()  # as an application showing every INFO line configures it
+    shown = logging.StreamHandler(sys.stderr)
+    monkeypatch.setattr(root, "level", logging.INFO)
+    root.addHandler(shown)
+    try:
+        tables = logging.getLogger("mlflow.store.db.utils")
+        tables.info("Creating initial MLflow database tables...")
+        tables.warning("a warning users should see")
+    finally:
+        root.removeHandler(shown)
+    err = capsys.readouterr().err
+    assert "a warning users should see" in err
+    assert "Creating initial" not in err
+
+
+@pytest.mark.parametrize("command", ["doctor", "add-dataset"])
+def test_a_home_that_cannot_be_written_stops_doctor_and_add_dataset_in_one_line(
+        command, tmp_path, monkeypatch, capsys):
+    """A home under a file (as a read-only one, whoever runs it: root writes anywhere else):
+    one line naming the folder and what to do, exit 2, instead of a traceback."""
+    from pwa_pipeline.orchestration.cli import main
+
+    (tmp_path / "file").write_text("")
+    home = tmp_path / "file" / "home"
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(home))
+    monkeypatch.delenv("DAGSTER_HOME", raising=False)
+    monkeypatch.delenv("PWA_DATASETS", raising=False)
+    d = make_hure_vasak(n_samples=300, seed=7)
+    pd.DataFrame({"u1": d.u_train[0][:, 0], "y1": d.y_train[0][:, 0]}).to_csv(
+        tmp_path / "plant.csv", index=False)
+    args = {"doctor": ["doctor"],
+            "add-dataset": ["add-dataset", "plant", str(tmp_path / "plant.csv"), "--u", "u1",
+                            "--y", "y1"]}[command]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    folder = home / (".dagster_home" if command == "doctor" else "storage")
+    assert err == (f"pwa-pipeline {command}: error: {folder}: Not a directory; make it "
+                   f"writable, or set $PWA_PIPELINE_HOME (or $DAGSTER_HOME, $PWA_STORAGE, "
+                   f"$PWA_DATASETS) to a folder this user can write\n")
+
+
+def test_doctor_on_a_tracking_server_that_refuses_says_so_in_one_line(tmp_path, monkeypatch,
+                                                                      capsys):
+    """`doctor --tracking-uri` naming a port nothing listens on: one line naming the server
+    (password masked), exit 2, instead of MLflow's retries and a 100-line traceback."""
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    _undo_mlflow_environment(monkeypatch)
+    assert main(["doctor", "--tracking-uri", "http://ana:s3cret@127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pwa-pipeline doctor: error: MLflow tracking server "
+                          "http://ana:***@127.0.0.1:9 cannot be reached (")
+    assert "s3cret" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_dagster_storage_failing_mid_run_stops_the_command_in_one_line(
+        tmp_path, monkeypatch, capsys):
+    """The Dagster instance's sqlite storage failing inside a run (a full disk: `disk I/O
+    error`, raised out of the run as a 40-frame traceback): the summary of what was done,
+    then one line naming the storage, the cause and what to do, exit 2."""
+    import sqlite3
+
+    from sqlalchemy.exc import OperationalError
+
+    from pwa_pipeline.orchestration.cli import main
+
+    monkeypatch.setenv("PWA_PIPELINE_HOME", str(tmp_path))
+    monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("PWA_DATASETS", raising=False)
+    _undo_mlflow_environment(monkeypatch)
+
+    def full_disk(*args, **kwargs):
+        raise OperationalError('PRAGMA main.table_xinfo("runs")', {},
+                               sqlite3.OperationalError("disk I/O error"))
+
+    monkeypatch.setattr(dg.JobDefinition, "execute_in_process", full_disk)
+    keys = ["hure_vasak|paper", "hure_vasak|default"]
+    assert main(["run", *[a for k in keys for a in ("--partition", k)]]) == 2
+    printed = capsys.readouterr()
+    assert printed.out.rstrip().endswith(f"not run to the end: {', '.join(keys)}")
+    assert printed.err == (
+        f"pwa-pipeline run: error: the Dagster instance's storage in {tmp_path / 'home'} "
+        f"failed during the run: disk I/O error; free space on that disk, then run again "
+        f"(results already stored are kept)\n")
+
+
+def test_a_dask_scheduler_gone_stops_the_next_partitions_in_one_line(monkeypatch):
+    """After a partition's run failed on a scheduler that no longer answers, no further
+    partition starts against it: one line naming the scheduler and what to do."""
+    from pwa_pipeline.orchestration import dask_sweep
+    from pwa_pipeline.orchestration.partition_runs import ServiceLost
+
+    monkeypatch.setattr(dask_sweep, "CONNECT_TIMEOUT", 0.5)
+    with pytest.raises(ServiceLost) as lost:
+        dask_sweep.check_scheduler("tcp://127.0.0.1:9", "plant|default")
+    message = str(lost.value)
+    assert message.startswith("the dask scheduler tcp://127.0.0.1:9 stopped answering during "
+                              "plant|default (")
+    assert message.endswith("no further partition was started: start the scheduler and its "
+                            "workers again (`dask scheduler`, `dask worker tcp://127.0.0.1:9`),"
+                            " then run again")
+
+
+def test_a_failure_is_told_by_its_root_cause_in_one_line():
+    """Dagster wraps what a step raised (`Error occurred while executing op "X":`) and
+    names it by its module path: the cause the code raised is what is said, a Dagster
+    Failure by its description."""
+    from pwa_pipeline.orchestration.partition_runs import root_cause
+
+    @dg.asset
+    def reads_a_file():
+        try:
+            raise KeyError("u1")
+        except KeyError as exc:
+            raise ValueError("plant.csv has no column 'u1'\nsecond line") from exc
+
+    @dg.asset
+    def writes_a_file():
+        raise dg.Failure(description="cannot write /store/x.pkl: No space left on device")
+
+    failures = dg.materialize([reads_a_file, writes_a_file],
+                              raise_on_error=False).get_step_failure_events()
+    errors = [e.event_specific_data.error for e in sorted(failures, key=lambda e: e.step_key)]
+    assert errors[0].message.startswith(
+        "dagster._core.errors.DagsterExecutionStepExecutionError: Error occurred")
+    assert errors[1].message.startswith("dagster._core.definitions.events.Failure: ")
+    assert [root_cause(e) for e in errors] == [
+        "ValueError: plant.csv has no column 'u1'",
+        "cannot write /store/x.pkl: No space left on device"]

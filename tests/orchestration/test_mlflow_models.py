@@ -142,7 +142,7 @@ def test_the_training_table_stacks_the_experiments_and_labels_each_rows_experime
 
 
 def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what_it_is(
-        tmp_path, mlflow_template):
+        tmp_path, mlflow_template, capsys):
     """``models:/…/latest`` is whichever set ran last: each set's newest version carries the
     set's name as its alias (a linked model's too; a name MLflow reserves, or ``best``, as
     ``set-<name>``), ``best`` the version of lowest free-run NRMSE across the sets, and the
@@ -181,6 +181,8 @@ def test_each_set_has_an_alias_on_its_registered_version_and_the_model_says_what
     assert client.get_registered_model(name).aliases["best"] == 2
     log("latest", second, 0.2)  # a reserved alias name
     log("best", first, float("nan"))  # so is best; a score not logged is never best
+    printed = capsys.readouterr()  # MLflow's fluent registration prints at every version
+    assert "registered model" not in (printed.out + printed.err).lower()
     registered = client.get_registered_model(name)
     assert registered.aliases == {"a": 2, "b": 1, "set-latest": 2, "set-best": 1, "best": 2}
     assert registered.description.startswith("The linear_arx model of data set d, ")

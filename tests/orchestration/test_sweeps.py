@@ -135,9 +135,13 @@ def test_the_command_line_ends_with_the_leaderboard(tmp_path, mlflow_template, m
     monkeypatch.setenv("DAGSTER_HOME", str(tmp_path / "home"))
     assert main(["run", "--partition", "hure_vasak|paper"]) == 0
     out = capsys.readouterr().out
-    summary, board = out.split("\nLeaderboard (every partition stored so far; ")
+    summary, board = out.split("\nLeaderboard (the 1 partition(s) with results in the store, ")
     assert "hure_vasak|paper: " in summary
-    assert board.startswith(f"{len(all_keys(partitions_of(defs))) - 1} not materialised)")
+    others = len(all_keys(partitions_of(defs))) - 1
+    assert summary.rstrip().endswith(
+        f"  1 partition(s) run, all succeeded; {others} other(s) not run in this command "
+        f"(`python -m pwa_pipeline partitions` lists them, `run --all` runs every one)")
+    assert board.startswith(f"from this command and earlier ones; {others} have none yet)")
     rows = [line for line in board.splitlines() if line.startswith("|") and "paper" in line]
     assert sorted(row.split("|")[2].strip().split(" — ")[0] for row in rows) == sorted(METHODS)
     assert any("| linear_arx — no constant term |" in row for row in rows)  # the paper's

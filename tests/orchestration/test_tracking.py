@@ -3,6 +3,7 @@
 import base64
 import json
 import shutil
+import sqlite3
 import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -153,6 +154,30 @@ def test_a_run_that_cannot_be_marked_ended_keeps_its_own_error(tmp_path, mlflow_
     assert run.info.status == "RUNNING"
     assert f"MLflow run {run.info.run_id} could not be marked" in caplog.text
     assert "database is locked" in caplog.text and "doctor --repair" in caplog.text
+
+
+@pytest.mark.parametrize("error", [
+    OSError(28, "No space left on device"),
+    sqlite3.OperationalError("database or disk is full")])
+def test_a_full_disk_fails_the_run_naming_the_store(tmp_path, mlflow_template, error):
+    """A full disk under the MLflow store (an OSError naming no file, or sqlite's `database or
+    disk is full`): the step fails saying which store and what to do; the run is FAILED."""
+    from mlflow.tracking import MlflowClient
+
+    db = tmp_path / "mlflow.db"
+    shutil.copy(mlflow_template, db)
+    tracker = MLflowTracker(tracking_uri=f"sqlite:///{db}")
+    with pytest.raises(dg.Failure) as raised:
+        tracker.log_run(dataset="d", hparams="s", method="pwa", params={}, metrics={},
+                        tags={}, artifacts={"f.json": {"x": _Exploding(error)}})
+    assert raised.value.description == (
+        f"MLflow store sqlite:///{db} could not be written: {str(error).split('] ')[-1]}; "
+        f"free space on its disk, then materialise the partition again (its assets already "
+        f"stored are kept)")
+    assert raised.value.__cause__ is error
+    client = MlflowClient(tracking_uri=f"sqlite:///{db}")
+    [run] = client.search_runs([client.get_experiment_by_name("pwa-pipeline/d").experiment_id])
+    assert run.info.status == "FAILED"
 
 
 class _Server(BaseHTTPRequestHandler):

@@ -124,3 +124,64 @@ def test_the_leaderboard_ranks_every_stored_partition_and_lists_the_missing(dask
     assert list(logged["method"]) == list(table["method"])
     np.testing.assert_allclose(logged["free_run_nrmse"], table["free_run_nrmse"])
     assert run.data.metrics["best_free_run_nrmse"] == pytest.approx(table["free_run_nrmse"].min())
+
+
+@pytest.mark.slow
+def test_a_scheduler_killed_mid_run_stops_the_command_in_one_line(tmp_path, mlflow_template):
+    """The dask scheduler killed (SIGKILL) while ``run --scheduler`` runs its first partition:
+    that partition fails with its cause, and the next does not start against the dead
+    scheduler; the command ends with one line naming it and what to do, exit 2."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from benchmarks._ui import free_port
+
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
+    env["PWA_PIPELINE_HOME"] = str(tmp_path)
+    address = f"tcp://127.0.0.1:{free_port()}"
+    dask = [sys.executable, "-m", "dask"]
+    started = []
+    try:
+        started.append(subprocess.Popen(
+            [*dask, "scheduler", "--port", address.rsplit(":", 1)[1], "--dashboard-address",
+             ":0"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True))
+        started.append(subprocess.Popen(
+            [*dask, "worker", address, "--nthreads", "1"], env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, start_new_session=True))
+        out = tmp_path / "out.txt"
+        with open(out, "w") as sink:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "pwa_pipeline", "run", "--scheduler", address,
+                 *[a for k in KEYS for a in ("--partition", k)]], env=env, stdout=sink,
+                stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.time() + 180
+        while f"=== materialising {KEYS[0]} ===" not in out.read_text():
+            assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
+            time.sleep(0.2)
+        time.sleep(12)  # its steps run on the worker
+        os.killpg(started[0].pid, signal.SIGKILL)
+        try:
+            status = proc.wait(timeout=180)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise AssertionError("not ended:\n" + out.read_text()[-6000:])
+    finally:
+        for process in started:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+    text = out.read_text()
+    assert status == 2, text[-3000:]
+    assert f"=== materialising {KEYS[1]} ===" not in text
+    assert f"  {KEYS[0]}: FAILED after" in text and f"  not run to the end: {KEYS[1]}" in text
+    last = text.rstrip().splitlines()[-1]
+    assert last.startswith(f"pwa-pipeline run: error: the dask scheduler {address} stopped "
+                           f"answering during {KEYS[0]} (")
+    assert last.endswith(f"no further partition was started: start the scheduler and its "
+                         f"workers again (`dask scheduler`, `dask worker {address}`), then run "
+                         f"again")

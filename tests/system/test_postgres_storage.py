@@ -152,3 +152,58 @@ def test_wrong_credentials_fail_within_seconds_naming_the_server_and_masking_the
                               f"***@{rest}) cannot be used: connection to server at")
     assert 'password authentication failed for user "postgres"' in message
     assert "guess3d" not in message and user.split(":")[1] not in message
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("interrupt", [False, True])
+def test_a_server_stopped_mid_run_ends_the_command_in_one_line(interrupt, system_package,
+                                                               tmp_path, mlflow_template):
+    """PostgreSQL stopped (fast shutdown) while ``run`` fits its first partition: after
+    Dagster's retries, the command ends with one line naming the storage and what to do,
+    exit 2, and starts no other partition (it raised ``DagsterPostgresException`` in a
+    traceback, exit 1); with Ctrl-C during the retries, exit 130."""
+    import signal
+
+    import psutil
+
+    system_package("the PostgreSQL storage test needs a PostgreSQL server", postgres_missing())
+    shutil.copy(mlflow_template, tmp_path / "mlflow.db")
+    with postgres_server(("dagster",)) as server:
+        port = server.rsplit(":", 1)[1]
+        env = {k: v for k, v in os.environ.items()
+               if k not in ("DAGSTER_HOME", "MLFLOW_TRACKING_URI", "PWA_DATASETS")}
+        env.update(PWA_PIPELINE_HOME=str(tmp_path), **{POSTGRES_ENV: f"{server}/dagster"})
+        keys = ["hure_vasak|paper", "hure_vasak|default"]
+        out = tmp_path / "out.txt"
+        with open(out, "w") as sink:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "pwa_pipeline", "run",
+                 *[a for k in keys for a in ("--partition", k)]], env=env, stdout=sink,
+                stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.time() + 120
+        while "pwa_fit" not in out.read_text():
+            assert proc.poll() is None and time.time() < deadline, out.read_text()[-3000:]
+            time.sleep(0.2)
+        [postmaster] = [p for p in psutil.process_iter(["cmdline"]) if p.info["cmdline"]
+                        and f"-p {port}" in " ".join(p.info["cmdline"])]
+        postmaster.send_signal(signal.SIGINT)  # PostgreSQL's fast shutdown
+        if interrupt:
+            time.sleep(3)
+            os.killpg(proc.pid, signal.SIGINT)
+        try:
+            status = proc.wait(timeout=180)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            raise AssertionError("not ended:\n" + out.read_text()[-6000:])
+    text = out.read_text()
+    assert "Traceback" not in text and "Stack Trace" not in text, text[-6000:]
+    assert f"=== materialising {keys[1]} ===" not in text
+    assert f"  not run to the end: {', '.join(keys)}" in text
+    if interrupt:
+        assert status == 130
+        return
+    assert status == 2
+    assert text.rstrip().splitlines()[-1] == (
+        "pwa-pipeline run: error: the Dagster instance's PostgreSQL storage failed during the "
+        "run: too many retries for DB connection; check that the PostgreSQL server runs (and "
+        "$PWA_DAGSTER_POSTGRES_URL), then run again (results already stored are kept)")

@@ -17,7 +17,8 @@ def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflo
                                                                   robot):
     """Ctrl-C (SIGINT to the command's process group, as a terminal sends it) while a robot
     partition with local sets of 250 rows runs: it ends as an interrupted run, the next
-    never starts, exit status 130, and no run is left STARTED. An interrupt can wait for
+    never starts, exit status 130, no run is left STARTED, and the output says so in one
+    line per event, without a traceback. An interrupt can wait for
     the step in flight to end, and one that a library dropped is sent again 5 s later, so the
     command is given 150 s to end."""
     shutil.copy(mlflow_template, tmp_path / "mlflow.db")
@@ -49,6 +50,9 @@ def test_an_interrupt_ends_the_run_in_flight_and_starts_no_other(tmp_path, mlflo
         raise AssertionError("not ended 150 s after Ctrl-C:\n" + out.read_text()[-6000:])
     assert status == 130
     text = out.read_text()
+    # one line per event, no stack trace: not Dagster's, nor its log-mirroring helpers'
+    assert "Traceback" not in text and "Stack Trace" not in text, text
+    assert "\n    pwa_fit: interrupted (Ctrl-C or SIGTERM)\n" in text
     summary = text.split("\nSummary\n")[1]
     assert f"  {keys[0]}: INTERRUPTED after" in summary
     assert f"  not run to the end: {keys[1]}" in summary

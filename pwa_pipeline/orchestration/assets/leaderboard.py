@@ -65,8 +65,9 @@ def leaderboard_asset(partitions_def):
                 artifacts={"leaderboard.csv": rows.reset_index(drop=True),
                            "leaderboard.md": leaderboard_markdown(rows)})
             links[f"mlflow_run {dataset}"] = dg.MetadataValue.url(mlflow.run_url(run))
-        context.log.info(f"leaderboard: {len(table)} rows from {len(keys) - len(missing)} of "
-                         f"{len(keys)} partitions ({len(missing)} not (fully) materialised)")
+        context.log.info(f"leaderboard: {len(table)} rows ranking the {len(keys) - len(missing)} "
+                         f"partition(s) with results in the store ({len(missing)} of "
+                         f"{len(keys)} have none yet, or not every method's)")
         context.add_output_metadata({
             "leaderboard": dg.MetadataValue.md(text), "rows": len(table),
             "partitions_scored": len(keys) - len(missing), "partitions_missing": len(missing),
