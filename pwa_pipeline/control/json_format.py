@@ -311,6 +311,8 @@ def _uncovered(units: list[tuple[np.ndarray, np.ndarray]], centres: list[np.ndar
     left between regions (a region shrunk or removed) is found wherever such a ray crosses
     it; a gap narrower than the step, or that no ray and no sample meets, is not.
     """
+    if any(not len(ht) for _, ht in units):  # a region of no rows is all of z
+        return None
     p = units[0][0].shape[1]
     rng = np.random.default_rng(seed)
     points = [rng.uniform(-1.0, 1.0, (COVERAGE_SAMPLES, p))]
