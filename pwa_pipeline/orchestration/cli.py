@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import time
+from typing import TYPE_CHECKING
 
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials
@@ -35,6 +36,9 @@ from .paths import (
 )
 from .run_lock import exclusive_run
 from .signed_pickles import signing_key
+
+if TYPE_CHECKING:
+    import dagster as dg
 
 #: Loggers whose INFO lines are a library's own bookkeeping, not the run's ("Creating
 #: initial MLflow database tables", "Updating database tables"): the command shows their
@@ -124,7 +128,7 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
             table = result.asset_value("comparison")
             print(f"\n{key}: mean over the outputs\n\n"
                   f"{mean_scores_markdown(table)}")
-            summaries.append(_summary(key, result, table, seconds))
+            summaries.append(_summary(key, result, table, seconds, instance))
     except KeyboardInterrupt:  # one that came outside a run (Dagster records those inside)
         interrupted.append(None)
     except ServiceLost:  # said in one line by main, after what was done
@@ -238,10 +242,14 @@ def _outcome(run: int, failed: int, total: int) -> str:
         f"lists them, `run --all` runs every one)" if others else ""))
 
 
-def _summary(key: str, result, table, seconds: float) -> str:
+def _summary(key: str, result, table, seconds: float, instance: "dg.DagsterInstance"
+             ) -> str:
     """One line per partition: sub-models found (and what the model is, `model_note`) and
     free-run NRMSE of every method (a diverged run as `score_text` shows it), and
-    whether the PWA model was reused (`REUSED`)."""
+    whether the PWA model was reused (`REUSED`, read from the run's materialisation in
+    ``instance``, so that a run in process and one on dask workers say it alike)."""
+    import dagster as dg
+
     from ..scoring.evaluation import score_text
     from .assets.identification import REUSED
     from .model_facts import model_note
@@ -251,10 +259,13 @@ def _summary(key: str, result, table, seconds: float) -> str:
         free["method"], free["nrmse"], free["diverged"], strict=True))
     model = result.asset_value("pwa_model")
     note = model_note(model)
+    records = instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey("pwa_model"), asset_partitions=[key]),
+        limit=1).records
     reused = f" ({REUSED})" if any(
-        getattr(e.materialization.metadata.get("fit"), "value", None) == REUSED
-        for e in result.get_asset_materialization_events()
-        if e.asset_key.to_user_string() == "pwa_model") else ""
+        r.run_id == result.run_id and getattr(
+            r.asset_materialization.metadata.get("fit"), "value", None) == REUSED
+        for r in records) else ""
     return (f"{key}: {model.n_submodels_} PWA sub-model(s){reused}"
             f"{f' — {note}' if note else ''}; free-run NRMSE {scores} ({seconds:.1f} s)")
 

@@ -611,7 +611,8 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
 
     comparison = result.asset_value("comparison")
     assert page_meta["fit"].value == "fitted"
-    assert "(reused" not in _summary("hure_vasak|auto", result, comparison, 1.0)
+    assert "(reused" not in _summary("hure_vasak|auto", result, comparison, 1.0,
+                                     dg.DagsterInstance.ephemeral())
     monkeypatch.setattr(identification, "fitted", lambda *args: pytest.fail("fitted again"))
     names = ["configuration", "raw_benchmark", "pwa_model"]
     custom = build_definitions(resources["settings"].hparams_path)
@@ -624,7 +625,7 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert any(e.user_message.startswith("PWA model reused: unchanged data and settings (")
                for e in instance.all_logs(again.run_id))
     np.testing.assert_array_equal(again.asset_value("pwa_model").thetas_, model.thetas_)
-    assert _summary("hure_vasak|auto", again, comparison, 1.0).startswith(
+    assert _summary("hure_vasak|auto", again, comparison, 1.0, instance).startswith(
         f"hure_vasak|auto: {model.n_submodels_} PWA sub-model(s) (reused: unchanged data "
         f"and settings) — ")
 
@@ -848,9 +849,8 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
 
     searched = SimpleNamespace(n_submodels_=1, structure_search_=SimpleNamespace(
         verdict="linear kept (no switching structure beat it)"))
-    run = SimpleNamespace(asset_value=lambda name: searched,
-                          get_asset_materialization_events=list)  # (a model fitted)
-    line = _summary("sim|auto", run, table, 1.0)
+    run = SimpleNamespace(asset_value=lambda name: searched, run_id="r")  # a model fitted
+    line = _summary("sim|auto", run, table, 1.0, dg.DagsterInstance.ephemeral())
     assert line == (f"sim|auto: 1 PWA sub-model(s) — linear kept (no switching structure "
                     f"beat it); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
                     f"{calm.mean('free_run'):.4g} (1.0 s)")

@@ -352,7 +352,7 @@ def test_the_pipeline_writes_and_reads_its_assets_and_caches_at_an_fsspec_url(mo
     assert regressors.phi.shape[0] > 1000
     cache = store.root() / "cache"
     assert resources["settings"].cache_root() == cache  # the caches follow the store
-    assert sorted(p.name for p in cache.iterdir()) == [".signing-key", "local_models"]
+    assert sorted(p.name for p in cache.iterdir()) == [".signing-key", "local_models", "models"]
     files = [p.name for p in (store.root() / "regressors" / "hure_vasak").iterdir()]
     assert files == ["paper.pkl"]  # no temporary file left beside it
 
