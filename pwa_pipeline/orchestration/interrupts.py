@@ -12,8 +12,10 @@ waits before its steps (for a busy dask scheduler) stop at once.
 import os
 import select
 import signal
+import sys
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import dagster as dg
@@ -21,15 +23,28 @@ import dagster as dg
 #: Seconds a run may take to end after a SIGINT before the signal is sent again (a step in
 #: flight may need a few seconds to stop), and how often it is sent again at most.
 GRACE, RESENDS = 5.0, 3
+#: What a Ctrl-C (or SIGINT) from outside says at once, and what a second one says as it
+#: ends the process (`interrupts_redelivered`).
+FIRST_INTERRUPT = ("interrupted: ending the run in flight (its steps stop, its MLflow run "
+                   "is marked KILLED); Ctrl-C again stops at once")
+SECOND_INTERRUPT = ("stopped at once (a second Ctrl-C): the run in flight may be left "
+                    "started; `python -m pwa_pipeline doctor --repair` ends it")
 
 
 @contextmanager
-def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS
+def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS,
+                           say: Callable[[str], None] | None = None
                            ) -> Iterator[threading.Event]:
     """While the block runs, a SIGINT to this process that leaves it running ``grace``
     seconds later is sent again (at most ``resends`` times); the block's own handlers act on
     it as on the first. Yields an event set once a SIGINT came (for a block that ends by
     another error meanwhile, e.g. a storage that no longer answers, to be told apart).
+
+    The first SIGINT from outside is said at once (`FIRST_INTERRUPT`, through ``say``;
+    default: a line on stderr). A second one from outside ends the process at once with
+    exit code 130, saying so (`SECOND_INTERRUPT`): a run whose storage no longer answers
+    retries for about half a minute before any handler can act, and a user who presses
+    Ctrl-C twice wants the command back. What it leaves started, `doctor` ends.
 
     Every signal writes its number to a pipe (``signal.set_wakeup_fd``, at the C level,
     whatever the Python handler then does); a thread reads the pipe. The main thread blocks
@@ -47,17 +62,35 @@ def interrupts_redelivered(grace: float = GRACE, resends: int = RESENDS
     previous = signal.set_wakeup_fd(write, warn_on_full_buffer=False)
     done = threading.Event()
 
+    say = say or (lambda line: print(line, file=sys.stderr, flush=True))
+    own = [0]  # SIGINTs sent by the watcher itself and not yet read back
+
+    def outside() -> int:
+        """SIGINTs read from the pipe that did not come from the watcher."""
+        if not select.select([read], [], [], 0.2)[0]:
+            return 0
+        count = os.read(read, 512).count(signal.SIGINT)
+        mine = min(count, own[0])
+        own[0] -= mine
+        return count - mine
+
     def watch() -> None:
         sent = 0
         while not done.is_set():
-            if not select.select([read], [], [], 0.2)[0]:
-                continue
-            if signal.SIGINT not in os.read(read, 512):
+            if not outside():
                 continue
             came.set()
-            if not done.wait(grace) and sent < resends:
-                sent += 1
-                os.kill(os.getpid(), signal.SIGINT)
+            say(FIRST_INTERRUPT)
+            deadline = time.monotonic() + grace
+            while not done.is_set():
+                if outside():
+                    say(SECOND_INTERRUPT)
+                    os._exit(130)
+                if time.monotonic() >= deadline and sent < resends:
+                    sent += 1
+                    own[0] += 1
+                    os.kill(os.getpid(), signal.SIGINT)
+                    deadline = time.monotonic() + grace
 
     watcher = threading.Thread(target=watch, name="interrupts-redelivered", daemon=True)
     watcher.start()

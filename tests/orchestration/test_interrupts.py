@@ -63,3 +63,33 @@ def test_a_run_that_ends_is_not_signalled_again():
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          timeout=60, check=True).stdout
     assert out.split() == ["1", "-1"]  # one signal, and the wakeup fd restored
+
+
+def test_a_second_ctrl_c_stops_a_run_that_cannot_end_at_once():
+    """A run whose handlers drop every interrupt (a storage retrying its connection): the
+    first Ctrl-C is said at once, the second ends the process with 130, saying so, long
+    before the run or the resends would end it."""
+    from pwa_pipeline.orchestration.interrupts import FIRST_INTERRUPT, SECOND_INTERRUPT
+
+    script = textwrap.dedent("""
+        import os, signal, threading, time
+        from pwa_pipeline.orchestration.interrupts import interrupts_redelivered
+
+        def press(n):
+            print("Ctrl-C", n, flush=True)
+            os.kill(os.getpid(), signal.SIGINT)
+
+        signal.signal(signal.SIGINT, lambda *a: None)  # every interrupt dropped
+        t0 = time.monotonic()
+        with interrupts_redelivered(grace=0.3):
+            for n, delay in ((1, 0.2), (2, 1.0)):  # the second past a resend of the first
+                threading.Timer(delay, press, (n,)).start()
+            while time.monotonic() - t0 < 20:
+                time.sleep(0.01)
+        print("completed")
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=60)
+    # ended by the user's second Ctrl-C, not by the watcher's own resend before it
+    assert out.returncode == 130 and out.stdout.split() == ["Ctrl-C", "1", "Ctrl-C", "2"]
+    assert out.stderr.splitlines() == [FIRST_INTERRUPT, SECOND_INTERRUPT]
