@@ -4,6 +4,7 @@ import base64
 import json
 import logging
 import shutil
+import time
 from pathlib import Path
 
 import dagster as dg
@@ -614,12 +615,24 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert "(reused" not in _summary("hure_vasak|auto", result, comparison, 1.0,
                                      dg.DagsterInstance.ephemeral())
     monkeypatch.setattr(identification, "fitted", lambda *args: pytest.fail("fitted again"))
-    names = ["configuration", "raw_benchmark", "pwa_model"]
+    names = ["configuration", "raw_benchmark", "pwa_model", "pwa_scores"]
     custom = build_definitions(resources["settings"].hparams_path)
     instance = dg.DagsterInstance.ephemeral()
-    again = dg.materialize(holding(custom.assets, names), selection=names,
+    # (a fit of an hour, as its run would be drawn were it fitted here)
+    from dataclasses import replace
+
+    from pwa_pipeline.orchestration.assets import scores
+    from pwa_pipeline.orchestration.run_records import method_run
+
+    monkeypatch.setattr(scores, "method_run", lambda *a, **k: replace(
+        method_run(*a, **k), fit_seconds=3600.0))
+    began = time.time()
+    again = dg.materialize(holding(custom.assets, [*names, "control_model"]), selection=names,
                            partition_key="hure_vasak|auto", resources=resources,
                            instance=instance)
+    # its MLflow run starts with the rerun, not an hour before it (the fit's time)
+    rerun = client.get_run(materialization(again, "pwa_scores").metadata["mlflow_run_id"].value)
+    assert rerun.info.start_time >= 1000 * began
     assert materialization(again, "pwa_model").metadata["fit"].value == \
         "reused: unchanged data and settings"
     assert any(e.user_message.startswith("PWA model reused: unchanged data and settings (")
