@@ -637,6 +637,10 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
         "reused: unchanged data and settings"
     assert any(e.user_message.startswith("PWA model reused: unchanged data and settings (")
                for e in instance.all_logs(again.run_id))
+    # the log counts the candidates as the page does (measured, not the table's rows)
+    assert any(e.user_message.startswith(f"structure search (reused, not run again): "
+                                         f"{report.n_candidates} candidates measured in ")
+               for e in instance.all_logs(again.run_id))
     np.testing.assert_array_equal(again.asset_value("pwa_model").thetas_, model.thetas_)
     assert _summary("hure_vasak|auto", again, comparison, 1.0, instance).startswith(
         f"hure_vasak|auto: {model.n_submodels_} PWA sub-model(s) (reused: unchanged data "
