@@ -888,6 +888,7 @@ def test_registered_model_versions_say_where_they_come_from(paper_run):
             "dataset": "hure_vasak", "hparams": "paper", "method": method,
             "mlflow_run_id": run.info.run_id, "dagster_run_id": result.run_id,
             "partition": "hure_vasak|paper"}
+        assert "mlflow.runColor" in run.data.tags and "mlflow.runColor" not in version.tags
         free = run.data.metrics["free_run_nrmse"]
         assert version.description.startswith(
             f"The {method} model of data set hure_vasak, hyper-parameter set paper.")
