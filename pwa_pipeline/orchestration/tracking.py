@@ -411,8 +411,10 @@ class MLflowTracker(dg.ConfigurableResource):
                         _write_artifact(Path(tmp) / name, obj)
                     client.log_artifacts(run_id, tmp)
             fingerprint = model.fingerprint() if model is not None else None
+            # (the run's colour in MLflow's UI is the run's, not a fact of the version)
             version_tags = {"dataset": dataset, "hparams": hparams, "method": method,
-                            "mlflow_run_id": run_id, **tags}
+                            "mlflow_run_id": run_id,
+                            **{k: v for k, v in tags.items() if k != RUN_COLOUR}}
             last = {} if model is None else {**self._log_model(
                 run_id, f"{self.experiment_prefix}.{dataset}.{method}", model,
                 self._logged_model(client, exp_id, method, fingerprint), version_tags,

@@ -4,6 +4,7 @@ import base64
 import json
 import logging
 import shutil
+import time
 from pathlib import Path
 
 import dagster as dg
@@ -614,15 +615,31 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert "(reused" not in _summary("hure_vasak|auto", result, comparison, 1.0,
                                      dg.DagsterInstance.ephemeral())
     monkeypatch.setattr(identification, "fitted", lambda *args: pytest.fail("fitted again"))
-    names = ["configuration", "raw_benchmark", "pwa_model"]
+    names = ["configuration", "raw_benchmark", "pwa_model", "pwa_scores"]
     custom = build_definitions(resources["settings"].hparams_path)
     instance = dg.DagsterInstance.ephemeral()
-    again = dg.materialize(holding(custom.assets, names), selection=names,
+    # (a fit of an hour, as its run would be drawn were it fitted here)
+    from dataclasses import replace
+
+    from pwa_pipeline.orchestration.assets import scores
+    from pwa_pipeline.orchestration.run_records import method_run
+
+    monkeypatch.setattr(scores, "method_run", lambda *a, **k: replace(
+        method_run(*a, **k), fit_seconds=3600.0))
+    began = time.time()
+    again = dg.materialize(holding(custom.assets, [*names, "control_model"]), selection=names,
                            partition_key="hure_vasak|auto", resources=resources,
                            instance=instance)
+    # its MLflow run starts with the rerun, not an hour before it (the fit's time)
+    rerun = client.get_run(materialization(again, "pwa_scores").metadata["mlflow_run_id"].value)
+    assert rerun.info.start_time >= 1000 * began
     assert materialization(again, "pwa_model").metadata["fit"].value == \
         "reused: unchanged data and settings"
     assert any(e.user_message.startswith("PWA model reused: unchanged data and settings (")
+               for e in instance.all_logs(again.run_id))
+    # the log counts the candidates as the page does (measured, not the table's rows)
+    assert any(e.user_message.startswith(f"structure search (reused, not run again): "
+                                         f"{report.n_candidates} candidates measured in ")
                for e in instance.all_logs(again.run_id))
     np.testing.assert_array_equal(again.asset_value("pwa_model").thetas_, model.thetas_)
     assert _summary("hure_vasak|auto", again, comparison, 1.0, instance).startswith(
@@ -871,6 +888,7 @@ def test_registered_model_versions_say_where_they_come_from(paper_run):
             "dataset": "hure_vasak", "hparams": "paper", "method": method,
             "mlflow_run_id": run.info.run_id, "dagster_run_id": result.run_id,
             "partition": "hure_vasak|paper"}
+        assert "mlflow.runColor" in run.data.tags and "mlflow.runColor" not in version.tags
         free = run.data.metrics["free_run_nrmse"]
         assert version.description.startswith(
             f"The {method} model of data set hure_vasak, hyper-parameter set paper.")

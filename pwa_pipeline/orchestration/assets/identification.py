@@ -384,7 +384,7 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
     report = getattr(model, "structure_search_", None)
     if report is not None:
         context.log.info(f"structure search{' (reused, not run again)' if reused else ''}: "
-                         f"{len(report.table)} candidates in "
+                         f"{report.n_candidates} candidates measured in "
                          f"{report.seconds:.1f} s. {report.choice}")
         # the rows that decided, without the row numbers (the CSV has none), missing
         # errors (a skipped candidate) shown as a dash

@@ -34,6 +34,7 @@ from ..run_records import method_run
 from ..settings import PipelineSettings
 from ..tracking import MLflowTracker
 from .control import ControlModel
+from .identification import REUSED
 
 
 def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluation:
@@ -43,6 +44,21 @@ def scored(model, data: Dataset, warmup: int, key: tuple[str, str]) -> Evaluatio
     by each set, with its own title and the data's units, which a shared entry could not
     hold (the sets sharing it differ in name, and units are not in the data's digest)."""
     return evaluate(model, data.u_test, data.y_test, warmup=warmup, output_names=data.y_names)
+
+
+def fitted_in_run(context: dg.AssetExecutionContext, method: str) -> bool:
+    """Whether this run fitted the model it scores: the latest materialisation of
+    ``<method>_model`` for this partition is of this run and neither reused the fitted
+    model (`REUSED`) nor took it from the cache (``from_cache``). Read from the instance,
+    so that steps on dask workers tell it alike."""
+    records = context.instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey(f"{method}_model"),
+                              asset_partitions=[str(context.partition_key)]), limit=1).records
+    if not records or records[0].run_id != context.run.run_id:
+        return False
+    meta = records[0].asset_materialization.metadata
+    value = lambda key: getattr(meta.get(key), "value", None)  # noqa: E731
+    return value("fit") != REUSED and value("from_cache") is not True
 
 
 def scores_asset(method: Method, partitions_def):
@@ -87,8 +103,10 @@ def scores_asset(method: Method, partitions_def):
         run = mlflow.log_run(
             dataset=record.dataset, hparams=record.hparams, method=record.method,
             params=record.params, metrics=record.metrics, description=record.description,
-            # the run spans the fit it scores (when the fit time was recorded)
-            started=began - (0.0 if np.isnan(record.fit_seconds) else record.fit_seconds),
+            # the run spans the fit it scores, when this run fitted it (a model reused or
+            # from the cache was fitted by an earlier run: the run starts now)
+            started=began - (record.fit_seconds if np.isfinite(record.fit_seconds)
+                             and fitted_in_run(context, method.name) else 0.0),
             tags=record.tags, artifacts={**record.artifacts, "prediction.png": png},
             model=ModelToLog(
                 simulator=Simulator(model, data.u_names, data.y_names),

@@ -695,9 +695,11 @@ class _Search:
         return self.folds[0].cost(models, group)
 
     def judged(self) -> str:
-        """Where the shortlisted candidates are judged, in words."""
-        return ("experiments" if len(self.folds) == 1
-                else f"blocks of {len(self.folds)} folds")
+        """Where the shortlisted candidates are judged, in words: the held-out
+        experiments, or the held-out part of a single record (its split in time)."""
+        if len(self.folds) > 1:
+            return f"blocks of {len(self.folds)} folds"
+        return "experiments" if self.n_experiments > 1 else "part of the record"
 
     def over_folds(self) -> str:
         """The clause saying that a figure is a mean over the folds ("" with one)."""

@@ -208,6 +208,9 @@ def test_one_record_is_split_in_time_and_a_short_one_is_refused():
     model = PWARX.auto(na=2, nb=1, **FAST).fit(u[0], y[0])
     assert "a single record: its last 240 of 1200 samples held out" in \
         model.structure_search_.choice
+    # the candidates judged on that held-out part, not on held-out experiments
+    chosen = model.structure_search_.table.query("stage == 'chosen'").outcome.item()
+    assert "on the held-out part of the record" in chosen and "experiments" not in chosen
     with pytest.raises(ValueError, match="needs at least 2 experiments, or one record of at "
                                          "least 150 samples to split in time; got one record "
                                          "of 100 samples"):
@@ -427,7 +430,7 @@ def test_the_search_is_never_worse_than_the_default_pwarx():
     chosen = table[table.stage == "chosen"]
     assert len(chosen) == 1 and chosen.outcome.item().startswith("chosen: the default PWARX")
     assert "The default PWARX (level (1, 1), clustered (4 regions)) beats the search's " \
-        "choice on the held-out experiments" in report.choice
+        "choice on the held-out part of the record" in report.choice
     assert model.structures_ == ["level (1, 1), clustered (4 regions)"] * 2
     # φ of the search holds y(k-2) and the constant too, at zero; on the others each of the
     # paper's four modes is found within 0.05
