@@ -351,6 +351,12 @@ def _contraction(gamma: float) -> str:
     return f"1 − {1 - gamma:.2g}" if gamma > 0.999 else f"{gamma:.4g}"
 
 
+def spectral_radii(A) -> np.ndarray:
+    """ρ(A_i), the largest eigenvalue modulus of each mode's state matrix A_i (0 for a
+    model without states)."""
+    return np.array([np.abs(np.linalg.eigvals(Ai)).max() if Ai.size else 0.0 for Ai in A])
+
+
 def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float = MAX_SECONDS,
                      max_lmi_size: int = MAX_LMI_SIZE) -> StabilityReport:
     """Each mode's spectral radius, and a common or else a piecewise-quadratic Lyapunov
@@ -376,7 +382,7 @@ def stability_report(ss, solvers: tuple[str, ...] = SOLVERS, max_seconds: float 
     """
     deadline = time.perf_counter() + max_seconds
     A, s = ss.A, ss.n_modes
-    rho = np.array([np.abs(np.linalg.eigvals(Ai)).max() if Ai.size else 0.0 for Ai in A])
+    rho = spectral_radii(A)
     marginal = np.flatnonzero(rho >= 1 - MARGINAL)
     every = "/".join(solvers)
 

@@ -17,7 +17,7 @@ from ..regressors import n_initial, regressor_dim
 from ..scoring.evaluation import WARMUP
 from .builtin import DATASETS
 from .dataset import Dataset
-from .tables import Table, read_frame, read_table
+from .tables import Table, _time_values, read_frame, read_table
 
 #: Share of the data held out for testing when no split is given.
 DEFAULT_TEST_FRACTION = 0.25
@@ -241,8 +241,6 @@ class UserDataset:
         FileNotFoundError, ValueError
             The file cannot be read (`read_frame`).
         """
-        import pandas as pd
-
         if self.experiment is not None:
             return None
         frame = read_frame(self.path)
@@ -255,12 +253,12 @@ class UserDataset:
                and 2 <= frame[c].nunique() <= len(frame) // 2]
         resets = []
         for c in [self.time] if self.time else [c for c in others if reads_as(TIME_NAME, c)]:
-            t = pd.to_numeric(frame[c], errors="coerce")
-            if t.isna().any():  # date-times, as nanoseconds
-                t = pd.to_datetime(frame[c], errors="coerce", format="mixed")
-                t = t.astype("int64").where(t.notna())
-            back = np.flatnonzero(np.diff(t.to_numpy(dtype=float)) < 0)
-            if back.size and t.notna().all():
+            try:
+                t = _time_values(frame[c], Path(self.path).name, c)
+            except ValueError:  # no time column (a named one is refused by `read_table`)
+                continue
+            back = np.flatnonzero(np.diff(t) < 0)
+            if back.size:
                 resets.append(f"time column {c!r} goes back {back.size} time(s), first at "
                               f"row {back[0] + 1}")
         if not ids and not resets:

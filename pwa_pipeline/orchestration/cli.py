@@ -132,18 +132,13 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
     except KeyboardInterrupt:  # one that came outside a run (Dagster records those inside)
         interrupted.append(None)
     except ServiceLost:  # said in one line by main, after what was done
-        left = [k for k in keys if k not in ended]
-        print("\nSummary\n  " + "\n  ".join(
-            [*summaries, *([f"not run to the end: {', '.join(left)}"] if left else [])]))
+        _print_summary(summaries, [k for k in keys if k not in ended])
         raise
-    if not interrupted:
-        summaries.append(_outcome(len(keys), len(failed), len(all_keys(partitions_def))))
-    print("\nSummary\n  " + "\n  ".join(summaries))
     if interrupted:
-        left = [k for k in keys if k not in ended]
-        if left:
-            print(f"  not run to the end: {', '.join(left)}")
+        _print_summary(summaries, [k for k in keys if k not in ended])
         return 130  # as a shell reports SIGINT; the leaderboard is left as it was
+    _print_summary([*summaries,
+                    _outcome(len(keys), len(failed), len(all_keys(partitions_def)))], [])
     # the leaderboard ranks every partition stored so far, not only the ones just run
     board = defs.resolve_job_def(LEADERBOARD_JOB).execute_in_process(
         instance=instance, run_config=quiet, tags=run_tags(), raise_on_error=False)
@@ -229,6 +224,13 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
             if not result.success:  # no further partition against a scheduler gone
                 check_scheduler(address, key)
             t0 = time.perf_counter()
+
+
+def _print_summary(lines: list[str], left: list[str]) -> None:
+    """The command's summary: a line per partition run (and the outcome), then the
+    partitions `left` that a stop (Ctrl-C, a service lost) kept from running to the end."""
+    print("\nSummary\n  " + "\n  ".join(
+        [*lines, *([f"not run to the end: {', '.join(left)}"] if left else [])]))
 
 
 def _outcome(run: int, failed: int, total: int) -> str:

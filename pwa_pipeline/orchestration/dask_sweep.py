@@ -24,10 +24,10 @@ from .io_manager import PartitionedFileIOManager
 from .jobs import CONNECT_TIMEOUT, dask_run_config
 from .partition_runs import (
     ServiceLost,
-    one_line_console,
     root_cause,
     run_tags,
     was_interrupted,
+    with_one_line_console,
 )
 from .signed_pickles import KEY_FILE
 
@@ -42,8 +42,7 @@ def sweep_dask_job() -> dg.JobDefinition:
     the command line's `one_line_console` logger as ``console``."""
     from .definitions import defs
 
-    return dg.Definitions.merge(defs, dg.Definitions(
-        loggers={"console": one_line_console})).resolve_job_def("sweep_dask")
+    return with_one_line_console(defs).resolve_job_def("sweep_dask")
 
 
 def check_address(address: str) -> None:

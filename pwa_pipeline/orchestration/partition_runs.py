@@ -122,6 +122,12 @@ def one_line_console(init_context) -> logging.Logger:
     return logger
 
 
+def with_one_line_console(defs: dg.Definitions) -> dg.Definitions:
+    """``defs`` with the `one_line_console` logger as ``console``, as the command line and
+    the dask workers run their jobs."""
+    return dg.Definitions.merge(defs, dg.Definitions(loggers={"console": one_line_console}))
+
+
 def cli_definitions(tracking_uri: str = "") -> dg.Definitions:
     """The code location's definitions as the command line runs them: read now (a data set
     may have been registered since import), with the MLflow store at ``tracking_uri`` when
@@ -134,8 +140,7 @@ def cli_definitions(tracking_uri: str = "") -> dg.Definitions:
 
     resources = ({"mlflow": MLflowTracker(tracking_uri=credentials_to_environment(tracking_uri))}
                  if tracking_uri else {})
-    return dg.Definitions.merge(build_definitions(**resources),
-                                dg.Definitions(loggers={"console": one_line_console}))
+    return with_one_line_console(build_definitions(**resources))
 
 
 def materialize_partition(defs: dg.Definitions, key: str, instance: dg.DagsterInstance,

@@ -14,6 +14,7 @@ import numpy as np
 
 from .._typing import Float2D
 from ..control.conversion import mode_matrices
+from ..control.stability import spectral_radii
 from ..scoring.evaluation import DIVERGENCE
 
 #: Samples of the training experiments simulated by the check, in file order: its cost
@@ -25,13 +26,12 @@ class DivergenceWarning(UserWarning):
     """The fitted model's free run diverges on its own training data."""
 
 
-def spectral_radii(thetas: np.ndarray, m: int, r: int, lags: int, nb: int,
-                   affine: bool) -> np.ndarray:
+def mode_radii(thetas: np.ndarray, m: int, r: int, lags: int, nb: int,
+               affine: bool) -> np.ndarray:
     """ρ(A_i) of each sub-model θ_i (s, d, m) of eq. (1) over eq. (3)'s φ, A_i its state
-    matrix of past outputs and inputs (`mode_matrices`)."""
-    return np.array([np.max(np.abs(np.linalg.eigvals(
-        mode_matrices(theta, m, r, lags, nb, affine)[0]))) if m * lags + r * nb else 0.0
-        for theta in thetas])
+    matrix of past outputs and inputs (`mode_matrices`, `spectral_radii`)."""
+    return spectral_radii([mode_matrices(theta, m, r, lags, nb, affine)[0]
+                           for theta in thetas])
 
 
 def free_run_nrmse(model, experiments: list[tuple[Float2D, Float2D]],
@@ -66,7 +66,7 @@ def warn_if_diverging(model, experiments: list[tuple[Float2D, Float2D]],
     nrmse = free_run_nrmse(model, experiments)
     if nrmse <= divergence:
         return
-    rho = spectral_radii(model.thetas_, model.n_outputs_, model.n_inputs_, model.na,
+    rho = mode_radii(model.thetas_, model.n_outputs_, model.n_inputs_, model.na,
                          model.nb, model.affine)
     unstable = ", ".join(f"{i} ({v:.4g})" for i, v in enumerate(rho) if v > 1)
     shown = "inf" if not np.isfinite(nrmse) else f"{nrmse:.3g}"

@@ -7,7 +7,7 @@ import pytest
 
 from pwa_pipeline import PWARX
 from pwa_pipeline.pwa import DivergenceWarning, LocalLeastSquares
-from pwa_pipeline.pwa.divergence import free_run_nrmse, spectral_radii
+from pwa_pipeline.pwa.divergence import free_run_nrmse, mode_radii
 from pwa_pipeline.scoring.metrics import nrmse
 
 
@@ -77,7 +77,7 @@ def test_a_valve_with_stiction_that_diverges_warns_at_fit_time():
 def test_the_divergence_check_reads_the_modes_and_the_free_run():
     # y⁺ = 1.1 y + u (ρ = 1.1) and y⁺ = 0.5 y − 0.2 y⁻ + u (ρ = √0.2)
     thetas = np.array([[[1.1], [0.0], [1.0]], [[0.5], [-0.2], [1.0]]])
-    assert np.allclose(spectral_radii(thetas, 1, 1, 2, 1, False), [1.1, np.sqrt(0.2)])
+    assert np.allclose(mode_radii(thetas, 1, 1, 2, 1, False), [1.1, np.sqrt(0.2)])
     u, y = vehicle(300, seed=1)
     model = PWARX(1, 1, affine=True).fit(u, y)
     assert free_run_nrmse(model, [(u, y)]) < 0.05
