@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from ..datasets.user import DEFAULT_TEST_FRACTION
 from .credentials import mask_credentials
 from .files import check_writable
-from .instance import prepare_instance
+from .instance import prepare_instance, retries_in_one_line
 from .jobs import SCHEDULER_ENV
 from .partition_runs import (
     LOCATION,
@@ -108,6 +108,7 @@ def _run(args: argparse.Namespace, held: contextlib.ExitStack) -> int:
     # INFO shows each step's one-line summary; Dagster's own events are DEBUG
     quiet = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
     failed, ended, interrupted, summaries = [], [], [], []
+    held.enter_context(retries_in_one_line())
     try:
         for key, result, seconds in _partition_runs(args, defs, keys, instance, quiet):
             ended.append(key)
@@ -199,13 +200,20 @@ def _partition_runs(args: argparse.Namespace, defs, keys: list[str], instance,
             if was_interrupted(result):
                 return
         return
-    from .dask_sweep import check_scheduler, dask_scheduler, sweep_on_dask, worker_run_config
+    from .dask_sweep import (
+        check_scheduler,
+        dask_scheduler,
+        quiet_client_logs,
+        sweep_on_dask,
+        worker_run_config,
+    )
 
     # the workers build their resources from run configuration: this process's stores
     run_config = {**run_config, **worker_run_config(defs.resources)}
     stores = [str(defs.resources["io_manager"].root()),
               str(defs.resources["settings"].cache_root())]
-    with dask_scheduler(args.scheduler, n_workers=args.workers, stores=stores) as address:
+    with dask_scheduler(args.scheduler, n_workers=args.workers, stores=stores) as address, \
+            quiet_client_logs():  # a scheduler lost is said in one line (check_scheduler)
         print(f"dask scheduler {address}" + ("" if args.scheduler else
               f" (a LocalCluster of {args.workers} worker processes; dashboard on port "
               f"8787 if it was free)"), flush=True)

@@ -164,6 +164,24 @@ def step_failures(instance: dg.DagsterInstance, run_id: str) -> list[str]:
     return reasons
 
 
+@contextlib.contextmanager
+def quiet_client_logs() -> Iterator[None]:
+    """Silence this process's ``distributed`` loggers (its client, locks and semaphores)
+    while the context lasts, then restore their levels: a scheduler lost mid-run made them
+    print several stack traces of reconnection attempts before the command's own line
+    (`check_scheduler`), which says what happened and what to do."""
+    names = ["distributed", *(n for n in logging.root.manager.loggerDict
+                              if n.startswith("distributed."))]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for n, level in levels.items():
+            logging.getLogger(n).setLevel(level)
+
+
 def _quiet_sizeof() -> None:
     """Silence distributed's warning, at every task, that it cannot size Dagster's events."""
     logging.getLogger("distributed.sizeof").setLevel(logging.ERROR)

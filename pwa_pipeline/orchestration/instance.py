@@ -10,8 +10,11 @@ live run page follows. A file this module generated follows the variable; a ``da
 edited by hand is kept as it is.
 """
 
+import contextlib
+import logging
 import os
 import urllib.parse
+from collections.abc import Iterator
 
 import dagster as dg
 from filelock import FileLock
@@ -147,3 +150,38 @@ def prepare_instance() -> dg.DagsterInstance:
                 f"used: {message}. Start the server, or fix the URL in ${POSTGRES_ENV}; "
                 f"nothing was run") from None
     return instance
+
+
+class _RetriesInOneLine(logging.Filter):
+    """dagster-postgres logs each retry of a lost connection on the root logger, a
+    4-line psycopg2 message every second or so for about 30 s: the first is said in one
+    line of ours, the others dropped."""
+
+    PREFIX = "Retrying failed database"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.said = False
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not str(record.msg).startswith(self.PREFIX):
+            return True
+        if self.said:
+            return False
+        self.said = True
+        cause = str(record.args[0]).splitlines()[0] if record.args else "no cause given"
+        record.msg, record.args = ("the Dagster instance's PostgreSQL storage does not answer "
+                                   "(%s); Dagster retries for about 30 s", (cause,))
+        return True
+
+
+@contextlib.contextmanager
+def retries_in_one_line() -> Iterator[None]:
+    """While the context lasts, dagster-postgres' retries of a lost connection are said in
+    one line (`_RetriesInOneLine`); the command's own line then says what failed."""
+    retries = _RetriesInOneLine()
+    logging.getLogger().addFilter(retries)
+    try:
+        yield
+    finally:
+        logging.getLogger().removeFilter(retries)

@@ -161,7 +161,8 @@ def test_a_server_stopped_mid_run_ends_the_command_in_one_line(interrupt, system
     """PostgreSQL stopped (fast shutdown) while ``run`` fits its first partition: after
     Dagster's retries, the command ends with one line naming the storage and what to do,
     exit 2, and starts no other partition (it raised ``DagsterPostgresException`` in a
-    traceback, exit 1); with Ctrl-C during the retries, exit 130."""
+    traceback, exit 1); with Ctrl-C during the retries, exit 130. The retries are said in
+    one line (each was four lines of psycopg2's)."""
     import signal
 
     import psutil
@@ -197,6 +198,9 @@ def test_a_server_stopped_mid_run_ends_the_command_in_one_line(interrupt, system
             raise AssertionError("not ended:\n" + out.read_text()[-6000:])
     text = out.read_text()
     assert "Traceback" not in text and "Stack Trace" not in text, text[-6000:]
+    # dagster-postgres logged each retry, four lines each, for 30 s: said once, in one line
+    assert "Retrying failed database" not in text and "sqlalche.me" not in text, text[-6000:]
+    assert text.count("the Dagster instance's PostgreSQL storage does not answer (") == 1
     assert f"=== materialising {keys[1]} ===" not in text
     assert f"  not run to the end: {', '.join(keys)}" in text
     if interrupt:
