@@ -17,7 +17,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from .._typing import Float2D
 
 #: Which parameters differ between the scheduled regions.
-SWITCHES = ("all", "offset", "select")
+SWITCHES = ("all", "offset", "continuous", "select")
 
 
 class SignScheduling(BaseEstimator):
@@ -31,12 +31,15 @@ class SignScheduling(BaseEstimator):
         list of combinations shared by every output, each a dict from regressor names (as in
         `regressor_names` with outputs ``y1, y2, …`` and inputs
         ``u1, u2, …``, e.g. ``{"y1(k-1)": 1.0, "y1(k-2)": -1.0}``) to coefficients.
-    switch : {"all", "offset", "select"}, default "all"
+    switch : {"all", "offset", "continuous", "select"}, default "all"
         ``"all"``: every parameter of a sub-model differs between regions; ``"offset"``:
         only the constant term does (a sign-dependent offset, Coulomb friction; needs
-        ``affine=True``); ``"select"``: per output, whichever of one linear model,
-        ``"offset"`` and ``"all"`` has the lowest free-run error on the held-out training
-        experiments (needs ``outputs="decoupled"``).
+        ``affine=True``); ``"continuous"``: one linear model plus a hinge γ_v max(0, z_v)
+        per variable, a PWA map continuous across every boundary, whose slopes bend there
+        (a smooth nonlinearity; a threshold is the variable ``{"y1(k-1)": 1.0, "1": -4.7}``);
+        ``"select"``: per output, whichever of one linear model, ``"offset"`` and ``"all"``
+        has the lowest free-run error on the held-out training experiments (needs
+        ``outputs="decoupled"``).
     min_gain : float, default 0.01
         With ``"select"``: a richer structure (``"offset"`` over linear, ``"all"`` over
         the structure kept so far) is kept only when it lowers the held-out free-run error

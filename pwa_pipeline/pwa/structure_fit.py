@@ -35,6 +35,7 @@ from .structures import (
     output_lags,
     output_regressors,
     phi_names,
+    switching_entries,
 )
 
 
@@ -112,9 +113,8 @@ def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str
             om = OutputModel(M, c, np.zeros(len(psi_names), bool), 1, None, kind, psi_names)
         else:
             sign = SignRegions(scheduling.weights(j, names, lags))
-            switching = np.array([n == "1" for n in psi_names]) if kind == "offset" \
-                else np.ones(len(psi_names), bool)
-            om = OutputModel(M, c, switching, sign.n_regions_, sign, kind, psi_names)
+            om = OutputModel(M, c, switching_entries(kind, psi_names), sign.n_regions_, sign,
+                             kind, psi_names)
         out[j] = om.fit(reg.phi, reg.target[:, j])
     return out
 

@@ -19,6 +19,16 @@ y_j(k) − c_jᵀφ(k), regions λ_j(φ) and sub-models θ_{j,i}:
 The sub-models' parameters are a vector p_j with θ_{j,i} = A_i p_j: all entries switching
 (``"all"``, or clusters), only the constant (``"offset"``) or none (one linear model). The
 effective parameter row over φ is Θ_{j,i} = c_j + M_jᵀ A_i p_j.
+
+``"continuous"`` is a continuous PWA map, a linear model plus a hinge max(0, z_v) of each
+scheduling variable z_v = w_vᵀφ (Breiman's hinging hyperplanes with the hinges fixed):
+
+    ŷ_j(k) = c_jᵀ φ(k) + θ_jᵀ M_j φ(k) + Σ_v γ_v max(0, w_vᵀ φ(k)),
+
+p_j = (θ_j, γ). In the region of bits β (z_v > 0 where β_v = 1) the map is affine,
+Θ_{j,β} = c_j + M_jᵀ θ_j + Σ_v β_v γ_v w_v, and two regions that share a boundary z_v = 0
+agree on it: a smooth nonlinearity (a square-root outflow, a saturation that sets in
+gradually) gets slopes that bend, not offsets that jump.
 """
 
 from dataclasses import dataclass, field
@@ -103,6 +113,15 @@ def output_regressors(j: int, m: int, r: int, na: int, nb: int, affine: bool, fo
     return np.array(rows).reshape(len(rows), dim), c, names
 
 
+def switching_entries(structure: str, names: list[str]) -> np.ndarray:
+    """Which of ψ's entries (``names``) switch between the scheduled regions of a
+    ``structure``: the constant alone (``"offset"``), none (``"continuous"``: its hinges
+    carry the change) or all."""
+    if structure == "offset":
+        return np.array([n == "1" for n in names])
+    return np.full(len(names), structure != "continuous")
+
+
 @dataclass
 class OutputModel:
     """The sub-models of one output (see the module doc).
@@ -117,7 +136,8 @@ class OutputModel:
     region_of : RegionMap or None
         The map of φ rows to regions (`partitions`); None with one region.
     structure : str
-        ``"linear"``, ``"offset"``, ``"all"`` or ``"clustered"``.
+        ``"linear"``, ``"offset"``, ``"all"``, ``"continuous"`` (``switching`` all
+        False: the hinges' parameters come after ψ's) or ``"clustered"``.
     names : list of str
         ψ's entry names.
     p : ndarray of shape (P,)
@@ -139,12 +159,24 @@ class OutputModel:
 
     @property
     def n_params(self) -> int:
-        """P = shared entries + regions × switching entries."""
+        """P = shared entries + regions × switching entries (continuous: ψ's entries and
+        one per hinge)."""
+        if self.structure == "continuous":
+            return self.switching.size + self.hinges().shape[0]
         n_sw = int(self.switching.sum())
         return self.switching.size - n_sw + self.n_regions * n_sw
 
+    def hinges(self) -> Float2D:
+        """The continuous structure's w_v over φ, shape (v, D)."""
+        return self.region_of.compiled()[1]
+
     def G(self) -> np.ndarray:
         """M_jᵀ A_i for each region: shape (s, D, P)."""
+        if self.structure == "continuous":
+            w = self.hinges()
+            bits = (np.arange(self.n_regions)[:, None] >> np.arange(len(w))) & 1
+            linear = np.broadcast_to(self.M.T, (self.n_regions, *self.M.T.shape))
+            return np.concatenate([linear, np.einsum("sv,vD->sDv", bits, w)], axis=2)
         d, sw = self.switching.size, self.switching
         n_shared, n_sw = d - int(sw.sum()), int(sw.sum())
         a = np.zeros((self.n_regions, d, self.n_params))

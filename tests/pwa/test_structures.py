@@ -91,6 +91,58 @@ def test_user_scheduling_regions_select_the_sub_model_of_the_truth():
     np.testing.assert_allclose(model.predict(u, y)[1:], y[1:], atol=1e-8)
 
 
+def _soft_limit(n: int, seed: int, knots=(1.0,)) -> tuple[np.ndarray, np.ndarray]:
+    """y(k) = 0.5 y(k−1) + u(k−1) − Σ_t 0.8 max(0, y(k−1) − t) + noise: a gain that falls
+    continuously past each level t (no jump anywhere)."""
+    rng = np.random.default_rng(seed)
+    u, y = rng.uniform(-1, 2.5, (n, 1)), np.zeros((n, 1))
+    for k in range(1, n):
+        y[k] = (0.5 * y[k - 1] + u[k - 1] - sum(0.8 * max(0.0, y[k - 1, 0] - t) for t in knots)
+                + 0.02 * rng.standard_normal())
+    return u, y
+
+
+def test_a_continuous_structure_recovers_the_hinge_and_is_continuous_across_it():
+    """Regions z = y(k−1) − 1 ≷ 0 with ``switch="continuous"``: one linear model and one
+    hinge, Θ₁ − Θ₀ = γ w exactly (the pieces agree on the boundary), the slopes of the
+    truth within 0.02, and the exported state space simulates as the model does."""
+    u, y = _soft_limit(2000, seed=1)
+    scheduling = SignScheduling(variables=[{"y1(k-1)": 1.0, "1": -1.0}], switch="continuous")
+    model = PWARX(na=1, nb=1, affine=True, scheduling=scheduling).fit(u, y)
+    out = model.structure_fit_.outputs[0]
+    assert out.n_params == 4 and model.structures_ == ["level (1, 1), continuous (2 regions)"]
+    thetas = out.thetas()  # over y1(k-1), u1(k-1), 1
+    np.testing.assert_allclose(thetas, [[0.5, 1.0, 0.0], [-0.3, 1.0, 0.8]], atol=0.02)
+    np.testing.assert_allclose(thetas[1] - thetas[0], out.p[-1] * np.array([1.0, 0.0, -1.0]),
+                               atol=1e-12)
+    test_u, test_y = _soft_limit(1000, seed=2)
+    assert evaluate(model, [test_u], [test_y]).mean("free_run") < 0.03
+    ss = model.to_state_space()
+    np.testing.assert_allclose(ss.simulate(test_u, test_y[:1]), model.simulate(test_u, test_y[:1]),
+                               rtol=0, atol=1e-9)
+
+
+def test_two_hinges_of_one_signal_leave_an_empty_region_and_stay_continuous():
+    """Knots at 0.5 and 1.5 on y(k−1): the region above the second and below the first is
+    empty; its Θ is still the continuous map's (no row decides it), and the fit recovers
+    both slope changes."""
+    u, y = _soft_limit(3000, seed=3, knots=(0.5, 1.5))
+    scheduling = SignScheduling(variables=[{"y1(k-1)": 1.0, "1": -0.5},
+                                           {"y1(k-1)": 1.0, "1": -1.5}], switch="continuous")
+    model = PWARX(na=1, nb=1, affine=True, scheduling=scheduling).fit(u, y)
+    out = model.structure_fit_.outputs[0]
+    slopes = out.thetas()[:, 0]  # regions 0 (below both), 1 (above 0.5), 3 (above both)
+    np.testing.assert_allclose(slopes[[0, 1, 3]], [0.5, -0.3, -1.1], atol=0.03)
+    np.testing.assert_allclose(out.thetas()[3] - out.thetas()[1] - out.thetas()[2]
+                               + out.thetas()[0], 0.0, atol=1e-12)
+    assert np.bincount(out.regions(np.column_stack([y[:-1, 0], u[:-1, 0], np.ones(2999)])),
+                       minlength=4)[2] == 0
+    test_u, test_y = _soft_limit(1000, seed=4, knots=(0.5, 1.5))
+    ss = model.to_state_space()
+    np.testing.assert_allclose(ss.simulate(test_u, test_y[:1]), model.simulate(test_u, test_y[:1]),
+                               rtol=0, atol=1e-9)
+
+
 def test_the_choice_per_output_keeps_the_linear_output_linear_and_switches_the_other():
     u, y = _experiments(10, 400, seed=2, outputs=_two_axes)
     rng = np.random.default_rng(7)

@@ -376,6 +376,7 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
             costs = pd.DataFrame({kind: [fit.validation_cost[j].get(kind, float("nan"))
                                          for j in range(model.n_outputs_)]
                                   for kind in sorted(kinds, key=["linear", "offset", "all",
+                                                                 "continuous",
                                                                  "clustered"].index)},
                                  index=[data.label(y) for y in data.y_names])
             found["candidates"] = dg.MetadataValue.md(

@@ -84,9 +84,13 @@ from ..structures import (
     assign_params,
     output_regressors,
     phi_names,
+    switching_entries,
 )
 
-#: Which parameters differ between scheduled regions (see `OutputModel`).
+#: Which parameters may differ between scheduled regions (see `OutputModel`):
+#: the constant, all, or none with a hinge per variable (a continuous map).
+SWITCH_OPTIONS = ("offset", "all", "continuous")
+#: The switches tried by default.
 SWITCHES = ("offset", "all")
 #: Quantiles of a signal's training values at which thresholds are proposed.
 QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
@@ -146,6 +150,9 @@ class OutputSpec:
             return f"{base}, clustered"
         if not self.variables:
             return f"{base}, linear"
+        if self.switch == "continuous":
+            bends = ", ".join(v.name.replace(" > ", " = ") for v in self.variables)
+            return f"{base}, continuous, slopes bend at [{bends}]"
         return f"{base}, {self.switch} on [{', '.join(v.name for v in self.variables)}]"
 
 
@@ -413,7 +420,11 @@ class StructureSearch(BaseEstimator):
     couplings : list of {"joint", "decoupled"}, default both
     max_variables : int, default 2
         Scheduling variables per output at most (2^v regions).
-    switches : list of {"offset", "all"}, default both
+    switches : list of {"offset", "all", "continuous"}, default ["offset", "all"]
+        What a scheduling variable changes: the constant only, every parameter, or the
+        slopes continuously (a hinge γ max(0, z) per variable, `structures`: a smooth
+        nonlinearity such as a square-root outflow gets bending slopes rather than
+        jumping offsets).
     min_gain : float, default 0.02
         Relative lowering of the held-out NRMSE a richer structure must bring.
     oblique : bool, default True
@@ -520,7 +531,7 @@ class StructureSearch(BaseEstimator):
     def _check(self) -> None:
         self._validate_params()
         for name, allowed in (("forms", FORMS), ("couplings", COUPLINGS),
-                              ("switches", SWITCHES)):
+                              ("switches", SWITCH_OPTIONS)):
             values = list(getattr(self, name))
             bad = [v for v in values if v not in allowed]
             if not values or bad:
@@ -676,9 +687,8 @@ class _Search:
             om = OutputModel(M, c, np.zeros(len(names), bool), 1, None, "linear", names)
         else:
             sign = SignRegions(np.array([v.weights for v in spec.variables]))
-            switching = np.array([n == "1" for n in names]) if spec.switch == "offset" \
-                else np.ones(len(names), bool)
-            om = OutputModel(M, c, switching, sign.n_regions_, sign, spec.switch, names)
+            om = OutputModel(M, c, switching_entries(spec.switch, names), sign.n_regions_,
+                             sign, spec.switch, names)
         return om.fit(self.reg.phi, self.reg.target[:, j])
 
     def on_all_rows(self, group: list[int], models: dict) -> dict:
@@ -908,7 +918,12 @@ class _Search:
         return out
 
     def enough_rows(self, om: OutputModel) -> bool:
-        """Whether every region of a scheduled model holds enough fitting rows."""
+        """Whether every region of a scheduled model holds enough fitting rows (a
+        continuous one: each side of each hinge, its regions may be empty)."""
+        if om.structure == "continuous":
+            need = ROWS_PER_PARAMETER * om.switching.size + 1
+            above = (self.reg.phi @ om.hinges().T > 0).sum(axis=0)
+            return bool(np.all(np.minimum(above, len(self.reg.phi) - above) >= need))
         need = ROWS_PER_PARAMETER * int(om.switching.sum()) + 1
         counts = np.bincount(om.regions(self.reg.phi), minlength=om.n_regions)
         return bool(counts.min() >= need)
@@ -951,7 +966,8 @@ class _Search:
                 self.record("scheduled", group, specs, current,
                             f"kept for y{j + 1}: lowers the held-out NRMSE by "
                             f"{self.p.min_gain:.0%} or more", models)
-                if self.p.oblique and len(specs[j].variables) == 1:
+                if self.p.oblique and len(specs[j].variables) == 1 \
+                        and specs[j].switch != "continuous":  # already hinged
                     current = self.hinge(group, j, specs, models, coupling, current)
                 path.append((dict(specs), dict(models)))
         return path
