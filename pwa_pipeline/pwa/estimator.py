@@ -402,8 +402,7 @@ class PWARX(ARXModelBase):
             cluster=self._cluster if self.scheduling is None else None)
         self.timings_["structure"] = time.perf_counter() - t0
         outputs = self.structure_fit_.outputs
-        described = [f"{self.form} ({self.na}, {self.nb}), {o.structure}"
-                     + (f" ({o.n_regions} regions)" if o.n_regions > 1 else "")
+        described = [f"{self.form} ({self.na}, {self.nb}), {o.structure}{o.size()}"
                      for o in outputs]
         return output_groups(outputs), described
 

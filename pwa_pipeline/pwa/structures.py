@@ -166,6 +166,14 @@ class OutputModel:
         n_sw = int(self.switching.sum())
         return self.switching.size - n_sw + self.n_regions * n_sw
 
+    def size(self) -> str:
+        """Its size in words for a structure's description: ``" (4 regions)"``, ``" (3
+        hinges)"`` for a continuous one (whose regions may be empty), ``""`` with one
+        region."""
+        if self.structure == "continuous":
+            return f" ({len(self.hinges())} hinge{'s' * (len(self.hinges()) > 1)})"
+        return f" ({self.n_regions} regions)" if self.n_regions > 1 else ""
+
     def hinges(self) -> Float2D:
         """The continuous structure's w_v over φ, shape (v, D)."""
         return self.region_of.compiled()[1]

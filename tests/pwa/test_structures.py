@@ -110,7 +110,7 @@ def test_a_continuous_structure_recovers_the_hinge_and_is_continuous_across_it()
     scheduling = SignScheduling(variables=[{"y1(k-1)": 1.0, "1": -1.0}], switch="continuous")
     model = PWARX(na=1, nb=1, affine=True, scheduling=scheduling).fit(u, y)
     out = model.structure_fit_.outputs[0]
-    assert out.n_params == 4 and model.structures_ == ["level (1, 1), continuous (2 regions)"]
+    assert out.n_params == 4 and model.structures_ == ["level (1, 1), continuous (1 hinge)"]
     thetas = out.thetas()  # over y1(k-1), u1(k-1), 1
     np.testing.assert_allclose(thetas, [[0.5, 1.0, 0.0], [-0.3, 1.0, 0.8]], atol=0.02)
     np.testing.assert_allclose(thetas[1] - thetas[0], out.p[-1] * np.array([1.0, 0.0, -1.0]),
@@ -131,6 +131,7 @@ def test_two_hinges_of_one_signal_leave_an_empty_region_and_stay_continuous():
                                            {"y1(k-1)": 1.0, "1": -1.5}], switch="continuous")
     model = PWARX(na=1, nb=1, affine=True, scheduling=scheduling).fit(u, y)
     out = model.structure_fit_.outputs[0]
+    assert model.structures_ == ["level (1, 1), continuous (2 hinges)"]
     slopes = out.thetas()[:, 0]  # regions 0 (below both), 1 (above 0.5), 3 (above both)
     np.testing.assert_allclose(slopes[[0, 1, 3]], [0.5, -0.3, -1.1], atol=0.03)
     np.testing.assert_allclose(out.thetas()[3] - out.thetas()[1] - out.thetas()[2]

@@ -213,8 +213,8 @@ class SearchReport:
         elif self.budget_spent:
             stop = "the search spent its budget of candidates"
         else:
-            return ("linear kept (no switching structure beat it)" if self.linear
-                    else "switching structure kept (it beats the linear model)")
+            return ("linear kept (no switching structure beat it held out)" if self.linear
+                    else "switching structure kept (it beat the linear model held out)")
         return (f"linear kept: {stop} before a switching structure beat it" if self.linear
                 else f"switching structure kept: {stop}, the best found kept")
 
@@ -778,9 +778,7 @@ class _Search:
             lin_costs.append(scores[0])
             self.record("chosen", group, best_specs, final_costs[-1], outcome, best_models)
             for j in group:
-                described[j] = best_specs[j].describe() + (
-                    f" ({best_models[j].n_regions} regions)" if best_models[j].n_regions > 1
-                    else "")
+                described[j] = best_specs[j].describe() + best_models[j].size()
             kept = "; ".join(f"y{j + 1}: {described[j]}" for j in group)
             notes.append(f"{kept}. Held-out free-run NRMSE {final_costs[-1]:#.4g}, refined "
                          f"linear reference {scores[0]:#.4g}" + self.over_folds() + "." +
