@@ -183,7 +183,7 @@ def leaderboard_markdown(table: pd.DataFrame, missing: dict[str, list[str]] | No
                          ) -> str:
     """The leaderboard (`pwa_pipeline.scoring.comparison.leaderboard`) as Markdown: one
     table per data set, each method named with what its model is when the name does not say
-    it (``pwa — linear kept (no switching structure beat it)``, the table's ``model``),
+    it (``pwa — linear kept (no switching structure beat it held out)``, the table's ``model``),
     numbers to 4 significant digits, a diverged free run's scores as `score_text` shows
     them everywhere (``≥ 10 (diverged)``, ``≤ -99 (diverged)``); then the partitions never
     materialised (``missing``: key → methods)."""

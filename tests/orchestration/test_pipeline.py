@@ -865,11 +865,11 @@ def test_a_diverged_run_is_shown_one_way_on_every_page():
     from pwa_pipeline.orchestration.cli import _summary
 
     searched = SimpleNamespace(n_submodels_=1, structure_search_=SimpleNamespace(
-        verdict="linear kept (no switching structure beat it)"))
+        verdict="linear kept (no switching structure beat it held out)"))
     run = SimpleNamespace(asset_value=lambda name: searched, run_id="r")  # a model fitted
     line = _summary("sim|auto", run, table, 1.0, dg.DagsterInstance.ephemeral())
     assert line == (f"sim|auto: 1 PWA sub-model(s) — linear kept (no switching structure "
-                    f"beat it); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
+                    f"beat it held out); free-run NRMSE pwa ≥ 10 (diverged), linear_arx "
                     f"{calm.mean('free_run'):.4g} (1.0 s)")
 
 

@@ -182,7 +182,7 @@ def test_a_linear_machine_gets_the_linear_model_and_the_report_says_so():
     assert report.linear is True
     assert [o.structure for o in model.structure_fit_.outputs] == ["linear"]
     assert "Linear ARX: no switching structure beat it" in report.choice
-    assert report.verdict == "linear kept (no switching structure beat it)"
+    assert report.verdict == "linear kept (no switching structure beat it held out)"
     assert report.validation_nrmse == report.linear_nrmse
     # with the best switching candidate's number, the one the table lists: none was
     # shortlisted (none lowered the first block's error by min_gain), so the number is the
