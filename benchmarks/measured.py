@@ -18,6 +18,7 @@ Usage: python -m benchmarks.measured [--datasets cascaded_tanks emps]
 
 import argparse
 import itertools
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -83,32 +84,36 @@ def quartile_hinges(data: Dataset) -> tuple[PWARX, str]:
     return model, ", ".join(f"{t:g}" for t in knots)
 
 
-def emps_physical_model(u: np.ndarray, y: np.ndarray, Ts: float, warmup: int) -> np.ndarray:
+def emps_physical_model(u: np.ndarray, y_init: np.ndarray, Ts: float) -> np.ndarray:
     """Free run of EMPS' physical model M q̈ = g·u − F_v q̇ − F_c sign(q̇) − offset
     (`EMPS_IDIM`), explicit Euler at the record's sample time, position and velocity
-    set by the first ``warmup`` measured samples: the grey-box reference in the I/O
-    benchmark's own convention."""
-    p = EMPS_IDIM
-    q = np.array(y, dtype=float).ravel()
+    set by the measured positions ``y_init`` (the warm-up): the grey-box reference in the
+    I/O benchmark's own convention. Returns the positions, shape (len(u), 1)."""
+    p, w = EMPS_IDIM, len(y_init)
+    q = np.empty(len(u))
+    q[:w] = np.asarray(y_init, dtype=float).ravel()
     force = p["gain"] * np.asarray(u, dtype=float).ravel()
-    v = (q[warmup - 1] - q[warmup - 2]) / Ts
-    for k in range(warmup, len(q)):
+    v = (q[w - 1] - q[w - 2]) / Ts
+    for k in range(w, len(q)):
         a = (force[k - 1] - p["viscous"] * v - p["coulomb"] * np.sign(v) - p["offset"]) / p["mass"]
         v += Ts * a
         q[k] = q[k - 1] + Ts * v
-    return q
+    return q[:, None]
 
 
 def physical_row(data: Dataset) -> dict:
-    """The row of `emps_physical_model` on the test record, scored as every model is."""
+    """The row of `emps_physical_model` on the test record, scored by the benchmark's own
+    `single_run_scores` as every model is (nothing fitted: no fit time)."""
     convention, w = data.convention, data.convention.warmup
+    physical = SimpleNamespace(simulate=lambda u, y_init: emps_physical_model(
+        u, y_init, data.sample_time))
+    official = float(single_run_scores(physical, data.u_test, data.y_test, convention)[0])
     y = data.y_test[0].ravel()
-    q = emps_physical_model(data.u_test[0], y, data.sample_time, w)
-    rmse = float(np.sqrt(np.mean((q[w:] - y[w:]) ** 2)))
     return {"benchmark": data.name, "model": "physical model, IDIM-LS (Janot et al. 2019), "
-            "simulated here", "official": rmse * convention.scale,
+            "simulated here", "official": official,
             "unit": f"{convention.unit}, RMSE from sample {w + 1}",
-            "project_nrmse": rmse / float(np.std(y[w:])), "fit_seconds": np.nan}  # nothing fitted
+            "project_nrmse": official / convention.scale / float(np.std(y[w:])),
+            "fit_seconds": np.nan}
 
 
 def score_row(name: str, label: str, model, data: Dataset, seconds: float,
