@@ -171,7 +171,8 @@ class OutputModel:
         hinges)"`` for a continuous one (whose regions may be empty), ``""`` with one
         region."""
         if self.structure == "continuous":
-            return f" ({len(self.hinges())} hinge{'s' * (len(self.hinges()) > 1)})"
+            v = len(self.hinges())
+            return f" ({v} hinge{'s' * (v > 1)})"
         return f" ({self.n_regions} regions)" if self.n_regions > 1 else ""
 
     def hinges(self) -> Float2D:
