@@ -246,24 +246,24 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
         rest = [range(len(rows)) for rows in zrows[len(prefix):]]
         dropped += [labels_of(prefix + tail) for tail in itertools.product(*rest)]
 
+    limits = getattr(model, "output_limits_", None)
     mats = {name: [] for name in "ABfCg"}
     regions, mode_regions = [], []
-    for index, G, q, centre in cells:
+    for index, G0, q0, centre0 in cells:
         labels = labels_of(index)
         theta = np.empty((n + int(affine), m))
         for group in groups:
             theta[:, group.outputs] = group.thetas[labels[group.outputs[0]]][columns]
-        for name, value in zip("ABfCg", mode_matrices(theta, m, r, lags, nb, affine),
-                               strict=True):
-            mats[name].append(value)
-        Ht, ht = box.to_unit(np.vstack([G, box_H]), np.concatenate([q, box_h]))
-        # a box row of a coordinate no other row involves always shapes the region
-        touched = np.any(G != 0, axis=0)
-        protected = np.concatenate([np.zeros(len(q), bool), ~touched, ~touched])
-        keep = irredundant_rows(Ht, ht, protected, interior=centre)
-        regions.append(box.from_unit(Ht[keep], ht[keep]))
-        mode_regions.append(labels)
+        for G, q, centre, held in _limited_parts(theta, limits, G0, q0, centre0, n, r,
+                                                 affine, ball):
+            for name, value in zip("ABfCg", _held(mode_matrices(theta, m, r, lags, nb,
+                                                                affine), held, lags),
+                                   strict=True):
+                mats[name].append(value)
+            regions.append(_irredundant(box, box_H, box_h, G, q, centre))
+            mode_regions.append(labels)
     ss = PWAStateSpace(
+
         np.array(mats["A"]), np.array(mats["B"]), np.array(mats["f"]), np.array(mats["C"]),
         np.array(mats["g"]), regions, box.lower, box.upper, output_lags=lags, input_lags=nb,
         affine=affine, input_names=input_names, output_names=output_names, padding=padding,
@@ -271,6 +271,64 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
         source=model_source(model))
     check_regions(ss, groups, columns, model.output_lags_)
     return ss
+
+
+def _irredundant(box: Box, box_H: Float2D, box_h: np.ndarray, G: Float2D, q: np.ndarray,
+                 centre: np.ndarray | None) -> tuple[Float2D, np.ndarray]:
+    """A mode's region {z : G z ≤ q} inside the envelope ``box``, without redundant rows."""
+    Ht, ht = box.to_unit(np.vstack([G, box_H]), np.concatenate([q, box_h]))
+    # a box row of a coordinate no other row involves always shapes the region
+    touched = np.any(G != 0, axis=0)
+    protected = np.concatenate([np.zeros(len(q), bool), ~touched, ~touched])
+    keep = irredundant_rows(Ht, ht, protected, interior=centre)
+    return box.from_unit(Ht[keep], ht[keep])
+
+
+def _limited_parts(theta: Float2D, limits: Float2D | None, G: Float2D, q: np.ndarray,
+                   centre: np.ndarray | None, n: int, r: int, affine: bool, ball):
+    """The parts of one cell {z : G z ≤ q} that the outputs' limits (`pwa_pipeline.pwa.limits`)
+    make: for each output p with a limit, the part where Θ_pᵀφ lies within its limits and
+    those where it is past one (ŷ_p held there), each non-empty inside the envelope.
+
+    Returns
+    -------
+    list of (G, q, centre, held)
+        ``held`` maps each output held at a limit in that part to the limit.
+    """
+    parts = [(G, q, centre, {})]
+    if limits is None:
+        return parts
+    for p in np.flatnonzero(np.any(np.isfinite(limits), axis=0)):
+        lo, hi = limits[:, p]
+        t = theta[:, p][None, :]
+        inside = [(row, bound) for row, bound in ((t, hi), (-t, -lo)) if np.isfinite(bound)]
+        pieces = [(inside, None)]
+        pieces += [([(-t, -hi)], hi)] if np.isfinite(hi) else []
+        pieces += [([(t, lo)], lo)] if np.isfinite(lo) else []
+        grown = []
+        for Gc, qc, centre_c, held in parts:
+            for rows, level in pieces:
+                Gz, qz = _to_z(np.vstack([row for row, _ in rows]),
+                               np.array([bound for _, bound in rows], dtype=float), n, r,
+                               affine)
+                G2, q2 = np.vstack([Gc, Gz]), np.concatenate([qc, qz])
+                radius, centre2 = ball(G2, q2)
+                if radius > EMPTY_RADIUS:
+                    grown.append((G2, q2, centre2,
+                                  held if level is None else {**held, int(p): level}))
+        parts = grown
+    return parts
+
+
+def _held(matrices: tuple, held: dict, lags: int) -> tuple:
+    """A mode's A, B, f, C, g with each output p of ``held`` constant at its limit:
+    ŷ_p = held[p], which the state's lag-1 entry of p takes on."""
+    A, B, f, C, g = (x.copy() for x in matrices)
+    for p, level in held.items():
+        C[p], g[p] = 0.0, level
+        if lags:
+            A[p * lags], f[p * lags] = 0.0, level
+    return A, B, f, C, g
 
 
 def used_lags(lags: int, m: int, r: int, nb: int, groups, partitions: list[Partition]

@@ -15,6 +15,7 @@ from ..regressors import Regressors, build_regressors
 from .arx import ARXModelBase
 from .divergence import warn_if_diverging
 from .groups import OutputGroup
+from .limits import MEASURED, describe, has_limits, resolve_limits
 from .memory import check_fit_memory
 from .search import StructureSearch
 from .steps.boundaries import ResidualRegions
@@ -105,6 +106,14 @@ class PWARX(ARXModelBase):
         training experiments and refined; never worse there than its linear reference.
         Needs ``affine=True`` and leaves ``form``, ``outputs``, ``scheduling`` and
         ``refinement`` to the search.
+    output_limits : "measured", array-like of shape (2, m) or None, default None
+        Levels the outputs saturate at (`limits`): ŷ_j is clipped to
+        [lo_j, hi_j] in prediction, in simulation and in every free run the fit measures or
+        refines, still a PWA model (each region split by Θ_iᵀφ = lo_j, hi_j;
+        `to_state_space` exports the parts). ``"measured"``: the extremes a training
+        experiment holds for several samples in a row (a sensor's range, a tank's rim);
+        given: lower limits, then upper ones, NaN where an output has none. None: no limits.
+        [`auto`][pwa_pipeline.PWARX.auto] sets ``"measured"``.
 
     Attributes
     ----------
@@ -135,6 +144,8 @@ class PWARX(ARXModelBase):
     structure_search_ : SearchReport
         With ``search`` only: every candidate the search tried, its held-out free-run NRMSE
         and outcome, and why it chose ([`SearchReport`][pwa_pipeline.pwa.SearchReport]).
+    output_limits_ : ndarray of shape (2, m)
+        The outputs' lower and upper limits in use, ±inf where none.
     signal_range_ : ndarray of shape (2, m + r)
         Smallest and largest training value of each output, then each input: the data
         envelope of `outside_envelope` and of
@@ -167,6 +178,7 @@ class PWARX(ARXModelBase):
         "outputs": [StrOptions(set(COUPLINGS))],
         "scheduling": [HasMethods(["weights"]), None],
         "search": [HasMethods(["search"]), None],
+        "output_limits": [StrOptions({MEASURED}), "array-like", None],
     }
 
     def __init__(
@@ -183,6 +195,7 @@ class PWARX(ARXModelBase):
         outputs: str = "joint",
         scheduling: BaseEstimator | None = None,
         search: BaseEstimator | None = None,
+        output_limits: str | np.ndarray | None = None,
     ):
         self.na = na
         self.nb = nb
@@ -196,6 +209,7 @@ class PWARX(ARXModelBase):
         self.outputs = outputs
         self.scheduling = scheduling
         self.search = search
+        self.output_limits = output_limits
 
     @classmethod
     def default(cls, na: int = 1, nb: int = 1, affine: bool = False) -> "PWARX":
@@ -212,7 +226,8 @@ class PWARX(ARXModelBase):
         the paper's clustering, modes per output and orders up to (``na``, ``nb``), each
         judged by its free run on held-out training experiments, refined on the free-run
         error; never worse there than the best linear ARX model it also fits (which it then
-        returns, and says so in ``structure_search_``).
+        returns, and says so in ``structure_search_``). The outputs' measured limits
+        (``output_limits="measured"``, `limits`) clip every candidate.
 
         The clustered candidate runs the default's steps with at most 3 re-assignment
         sweeps of the sub-models and no search for missed modes (``submodels__n_refine``,
@@ -230,7 +245,7 @@ class PWARX(ARXModelBase):
         """
         return cls(na=na, nb=nb, affine=True,
                    submodels=RefinedSubModels(n_refine=3, n_search=0),
-                   search=StructureSearch(**search))
+                   search=StructureSearch(**search), output_limits=MEASURED)
 
     @classmethod
     def paper(cls, na: int, nb: int, *, n_rho: int, eps: float, min_pts: int,
@@ -314,6 +329,7 @@ class PWARX(ARXModelBase):
             experiments diverges (`warn_if_diverging`), naming what to try.
         """
         experiments = as_experiments(u, y)
+        self.output_limits_ = resolve_limits(self.output_limits, [e[1] for e in experiments])
         self.signal_range_ = training_range(experiments)
         self.n_inputs_ = experiments[0][0].shape[1]
         self.n_outputs_ = experiments[0][1].shape[1]
@@ -326,7 +342,13 @@ class PWARX(ARXModelBase):
         else:
             self.groups_, self.structures_ = self._fit_steps(experiments)
             warn_if_diverging(self, experiments)
+        self.structures_ = [text + describe(self.output_limits_, j, f"y{j + 1}")
+                            for j, text in enumerate(self.structures_)]
         return self
+
+    def _limits(self) -> np.ndarray | None:
+        """``output_limits_`` when some output has a limit, else None (nothing to clip)."""
+        return self.output_limits_ if has_limits(self.output_limits_) else None
 
     @property
     def output_lags_(self) -> int:
@@ -379,10 +401,12 @@ class PWARX(ARXModelBase):
             t0 = time.perf_counter()
             steps["refinement"] = clone(self.refinement).fit(
                 thetas, [e[0] for e in experiments], [e[1] for e in experiments], self.na,
-                self.nb, self.affine, region_of=steps["regions"].predict)
+                self.nb, self.affine, region_of=steps["regions"].predict,
+                limits=self._limits())
             thetas = steps["refinement"].thetas_
             self.timings_["refinement"] = time.perf_counter() - t0
-        group = OutputGroup(tuple(range(reg.n_outputs)), steps["regions"], thetas, steps)
+        group = OutputGroup(tuple(range(reg.n_outputs)), steps["regions"], thetas, steps,
+                            self._limits())
         kind = f"clustered ({group.n_regions} regions)" if group.n_regions > 1 else \
             "clustered (1 region: linear)"
         return [group], [f"level ({self.na}, {self.nb}), {kind}"] * reg.n_outputs
@@ -399,12 +423,13 @@ class PWARX(ARXModelBase):
         self.structure_fit_ = fit_structure(
             experiments, self.na, self.nb, self.affine, self.form, self.outputs,
             scheduling=self.scheduling, refinement=self.refinement,
-            cluster=self._cluster if self.scheduling is None else None)
+            cluster=self._cluster if self.scheduling is None else None,
+            limits=self._limits())
         self.timings_["structure"] = time.perf_counter() - t0
         outputs = self.structure_fit_.outputs
         described = [f"{self.form} ({self.na}, {self.nb}), {o.structure}{o.size()}"
                      for o in outputs]
-        return output_groups(outputs), described
+        return output_groups(outputs, self._limits()), described
 
     def _fit_search(self, experiments: list) -> tuple[list[OutputGroup], list[str]]:
         """The structure search of `search` ([`auto`][pwa_pipeline.PWARX.auto])."""
@@ -424,9 +449,9 @@ class PWARX(ARXModelBase):
         default = PWARX.default(self.na, self.nb)
         self.structure_fit_, self.structure_search_ = self.search.search(
             experiments, self.na, self.nb, cluster=self._cluster,
-            default=lambda reg: default._run_steps(reg, eq3=True))
+            default=lambda reg: default._run_steps(reg, eq3=True), limits=self._limits())
         self.timings_["search"] = time.perf_counter() - t0
-        return output_groups(self.structure_fit_.outputs), list(
+        return output_groups(self.structure_fit_.outputs, self._limits()), list(
             self.structure_search_.structures)
 
     def resolved_params(self) -> dict:
@@ -436,7 +461,12 @@ class PWARX(ARXModelBase):
         (``memory``) are left out: they change no result."""
         check_is_fitted(self)
         out = {"na": self.na, "nb": self.nb, "affine": self.affine, "form": self.form,
-               "outputs": self.outputs}
+               "outputs": self.outputs,
+               "output_limits": "none" if self.output_limits is None else
+               str(self.output_limits) if isinstance(self.output_limits, str) else "given"}
+        out.update({f"output_limits_y{j + 1}": f"[{lo:.6g}, {hi:.6g}]"
+                    for j, (lo, hi) in enumerate(self.output_limits_.T)
+                    if np.isfinite(lo) or np.isfinite(hi)})
         options = {"scheduling": self.scheduling, "search": self.search,
                    "refinement": self.refinement}
         for name, option in options.items():

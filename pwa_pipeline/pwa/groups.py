@@ -21,6 +21,7 @@ import joblib
 import numpy as np
 
 from .._typing import Float2D
+from .limits import has_limits
 from .partitions import ProductRegions, RegionMap, SingleRegion
 
 #: Modes above which `modes` refuses to build the stacked parameter matrices (they
@@ -44,13 +45,17 @@ class OutputGroup:
         The fitted steps that found the regions and sub-models, by step name (the paper's
         ``local_models``, ``clustering``, ``submodels``, ``regions``, and the
         ``refinement``); empty where none ran (a linear group, scheduled regions). The record
-        of the fit: prediction reads ``regions`` and ``thetas`` alone.
+        of the fit: prediction reads ``regions``, ``thetas`` and ``limits`` alone.
+    limits : ndarray of shape (2, len(outputs)) or None
+        The outputs' lower and upper limits (`limits`: ŷ is clipped to them), ±inf where
+        an output has none; None: no output has any.
     """
 
     outputs: tuple[int, ...]
     regions: RegionMap
     thetas: np.ndarray
     steps: dict = field(default_factory=dict, compare=False, repr=False)
+    limits: np.ndarray | None = field(default=None, compare=False)
 
     @property
     def n_regions(self) -> int:
@@ -58,10 +63,13 @@ class OutputGroup:
         return self.regions.n_regions_
 
     def predict_phi(self, phi: Float2D) -> Float2D:
-        """ŷ of the group's outputs for each row of φ: shape (n, len(outputs))."""
+        """ŷ of the group's outputs for each row of φ: shape (n, len(outputs)), clipped to
+        the outputs' ``limits``."""
         if isinstance(self.regions, SingleRegion):  # no partition: one matrix product
-            return phi @ self.thetas[0]
-        return np.einsum("nd,ndm->nm", phi, self.thetas[self.regions.predict(phi)])
+            out = phi @ self.thetas[0]
+        else:
+            out = np.einsum("nd,ndm->nm", phi, self.thetas[self.regions.predict(phi)])
+        return out if self.limits is None else np.clip(out, self.limits[0], self.limits[1])
 
 
 def predict_groups(groups: Sequence[OutputGroup], phi: Float2D, n_outputs: int) -> Float2D:
@@ -106,7 +114,8 @@ def modes(groups: Sequence[OutputGroup], n_outputs: int) -> tuple[RegionMap, np.
 
 
 def grouped(regions: Sequence[RegionMap], thetas: Sequence[np.ndarray],
-            steps: Sequence[dict] | None = None) -> list[OutputGroup]:
+            steps: Sequence[dict] | None = None, limits: np.ndarray | None = None
+            ) -> list[OutputGroup]:
     """Output groups from each output's region map and parameter rows: outputs whose maps
     are the same object or equal (same class and content) form one group.
 
@@ -118,6 +127,8 @@ def grouped(regions: Sequence[RegionMap], thetas: Sequence[np.ndarray],
         Output j's rows over φ.
     steps : sequence of dict, optional
         Output j's fitted steps (a group keeps its first output's).
+    limits : ndarray of shape (2, m), optional
+        Each output's lower and upper limit (`limits`), ±inf where none.
     """
     keys: list[str] = []
     members: dict[str, list[int]] = {}
@@ -133,5 +144,6 @@ def grouped(regions: Sequence[RegionMap], thetas: Sequence[np.ndarray],
         groups.append(OutputGroup(
             outputs=tuple(outs), regions=regions[outs[0]],
             thetas=np.stack([thetas[j] for j in outs], axis=2),
-            steps={} if steps is None else steps[outs[0]]))
+            steps={} if steps is None else steps[outs[0]],
+            limits=limits[:, outs] if has_limits(limits) else None))
     return groups

@@ -122,7 +122,8 @@ def _build(kind: str, group: list[int], reg: Regressors, shape: tuple, form: str
 def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, affine: bool,
                   form: str, coupling: str, scheduling: BaseEstimator | None = None,
                   refinement: BaseEstimator | None = None,
-                  cluster: Callable | None = None) -> StructureFit:
+                  cluster: Callable | None = None, limits: Float2D | None = None
+                  ) -> StructureFit:
     """Fit a structured model (see the module doc).
 
     Parameters
@@ -139,6 +140,9 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
     cluster : callable, optional
         ``cluster(reg)`` → (θ of shape (s, d, group size), the fitted steps by name): the
         paper's steps 2–6 on a group's regressors.
+    limits : ndarray of shape (2, m), optional
+        The outputs' limits (`pwa_pipeline.pwa.limits`): every free run, held out or
+        refined, is clipped to them.
 
     Raises
     ------
@@ -179,7 +183,7 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                         affine, warmup, validation=held_uy, max_iter=refinement.max_iter,
                         max_seconds=refinement.max_seconds, tol=refinement.tol,
                         patience=refinement.patience,
-                        one_step_weight=refinement.one_step_weight)
+                        one_step_weight=refinement.one_step_weight, limits=limits)
                 except ValueError:
                     if len(kinds) == 1:
                         raise
@@ -191,7 +195,8 @@ def fit_structure(experiments: list[tuple[Float2D, Float2D]], na: int, nb: int, 
                         "cost": res.cost, "one_step_start": res.one_step_start,
                         "one_step": res.one_step_cost}
             elif held_uy is not None:
-                runs = OutputFreeRuns(*held_uy, lags, nb, affine, warmup, models, group)
+                runs = OutputFreeRuns(*held_uy, lags, nb, affine, warmup, models, group,
+                                      limits)
                 cost = runs.simulate(np.concatenate([models[j].p for j in group]), False)[0]
             else:
                 cost = np.nan

@@ -245,9 +245,12 @@ def assign_params(models: dict[int, "OutputModel"], group: list[int], p: np.ndar
         models[j].p = p[offsets[jj]:offsets[jj + 1]]
 
 
-def output_groups(outputs: list[OutputModel]) -> list[OutputGroup]:
+def output_groups(outputs: list[OutputModel], limits: np.ndarray | None = None
+                  ) -> list[OutputGroup]:
     """The fitted shape of a structured model (`groups`): each output's rows
-    Θ_{j,i} over φ, outputs with the same region map in one group."""
+    Θ_{j,i} over φ, outputs with the same region map in one group, with their ``limits``
+    (2, m; `limits`)."""
     regions = [SingleRegion(o.M.shape[1]) if o.region_of is None else o.region_of
                for o in outputs]
-    return grouped(regions, [o.thetas() for o in outputs], [o.steps for o in outputs])
+    return grouped(regions, [o.thetas() for o in outputs], [o.steps for o in outputs],
+                   limits)

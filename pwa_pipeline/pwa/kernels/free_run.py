@@ -72,10 +72,20 @@ def region_index(phi: np.ndarray, weights: np.ndarray, bias: np.ndarray, n_vars:
 
 
 @njit(nogil=True, cache=True)
+def clipped(s: float, lower: float, upper: float) -> float:
+    """``s`` clipped to [lower, upper]; NaN stays NaN (the run's divergence is seen)."""
+    if s < lower:
+        return lower
+    if s > upper:
+        return upper
+    return s
+
+
+@njit(nogil=True, cache=True)
 def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: int,
                     lags: int, nb: int, outputs: np.ndarray, thetas: np.ndarray,
                     kinds: np.ndarray, weights: np.ndarray, bias: np.ndarray,
-                    n_vars: np.ndarray) -> np.ndarray:
+                    n_vars: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Sum of squared free-run errors of each simulated output, over every experiment.
 
     Each experiment e runs from sample ``warmup`` to ``lengths[e]``, its outputs before
@@ -101,6 +111,9 @@ def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: i
         Each output's scheduling variables or scores w_vᵀφ + b_v (its first ``n_vars[g]``
         rows).
     n_vars : ndarray of shape (G,)
+    lower, upper : ndarrays of shape (m,)
+        Each output's limits (`pwa_pipeline.pwa.limits`; ±inf where none): the
+        simulated value is clipped to them.
 
     Returns
     -------
@@ -122,7 +135,7 @@ def region_free_run(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup: i
                 s = 0.0
                 for a in range(d):
                     s += thetas[jj, region, a] * phi[a]
-                yk[jj] = s
+                yk[jj] = clipped(s, lower[outputs[jj]], upper[outputs[jj]])
             for jj in range(g):
                 j = outputs[jj]
                 err = yk[jj] - y[e, k, j]

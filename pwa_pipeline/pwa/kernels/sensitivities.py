@@ -18,7 +18,7 @@ clusters' SVM regions); others are simulated by the numpy loop.
 import numpy as np
 from numba import njit
 
-from .free_run import fill_phi, region_index
+from .free_run import clipped, fill_phi, region_index
 
 
 @njit(nogil=True, cache=True)
@@ -26,8 +26,9 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
                       lags: int, nb: int, outputs: np.ndarray, thetas: np.ndarray,
                       gmat: np.ndarray, offsets: np.ndarray, kinds: np.ndarray,
                       weights: np.ndarray, bias: np.ndarray, n_vars: np.ndarray,
-                      k0: int, k1: int, ysim: np.ndarray, ring: np.ndarray,
-                      rows: np.ndarray, residuals: np.ndarray,
+                      lower: np.ndarray, upper: np.ndarray, k0: int, k1: int,
+                      ysim: np.ndarray, ring: np.ndarray, rows: np.ndarray,
+                      residuals: np.ndarray,
                       sensitivities: bool) -> float:
     """The free run of time steps k0 ≤ k < k1 of every experiment: the sum of squared
     errors, and (with ``sensitivities``) the rows dŷ_j(k)/dp and residuals ŷ_j(k) − y_j(k).
@@ -35,7 +36,8 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
     φ̂(k) is eq. (3)'s (per output its ``lags`` lags, most recent first, per input its
     ``nb`` lags, then 1); the outputs before ``warmup`` and those not in ``outputs`` are
     the measured ones. dŷ_j(k)/dp = φ̂(k)ᵀ G_j[λ_j(k)] + Σ_lag Σ_q θ_{j,λ_j(k)}[q, lag]
-    dŷ_q(k − lag)/dp, the region held locally constant (as the numpy loop).
+    dŷ_q(k − lag)/dp, the region held locally constant (as the numpy loop); 0 where ŷ_j(k)
+    is clipped to one of its limits.
 
     Parameters
     ----------
@@ -53,6 +55,8 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
     offsets : ndarray of shape (G + 1,)
     kinds, weights, bias, n_vars : ndarrays of shape (G,), (G, V, D), (G, V), (G,)
         Each output's regions (`region_index`).
+    lower, upper : ndarrays of shape (m,)
+        Each output's limits (`pwa_pipeline.pwa.limits`; ±inf where none).
     k0, k1 : int
         The block of time steps run.
     ysim : ndarray of shape (E, N, m)
@@ -74,6 +78,7 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
     phi = np.empty(d)
     yk = np.empty(n_out)
     region = np.zeros(n_out, dtype=np.int64)
+    held = np.zeros(n_out, dtype=np.bool_)
     cost = 0.0
     for e in range(n_exp):
         for k in range(k0, k1):
@@ -90,7 +95,8 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
                 s = 0.0
                 for a in range(d):
                     s += thetas[jj, lam, a] * phi[a]
-                yk[jj] = s
+                yk[jj] = clipped(s, lower[outputs[jj]], upper[outputs[jj]])
+                held[jj] = yk[jj] != s
             for jj in range(n_out):
                 err = yk[jj] - y[e, k, outputs[jj]]
                 cost += err * err
@@ -101,6 +107,8 @@ def sensitivity_block(y: np.ndarray, u: np.ndarray, lengths: np.ndarray, warmup:
                 for jj in range(n_out):
                     row = rows[base + jj]
                     row[:] = 0.0
+                    if held[jj]:  # a limit: ŷ_j(k) does not move with p
+                        continue
                     lam = region[jj]
                     for a in range(d):
                         if phi[a] != 0.0:

@@ -99,9 +99,10 @@ class OutputErrorRefinement(BaseEstimator):
 
     @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, thetas: np.ndarray, u: list[Float2D], y: list[Float2D], na: int, nb: int,
-            affine: bool, region_of: Callable | None = None) -> "OutputErrorRefinement":
+            affine: bool, region_of: Callable | None = None,
+            limits: Float2D | None = None) -> "OutputErrorRefinement":
         """Refine ``thetas`` on the experiments ``(u, y)``; arguments as
-        `refine_output_error`."""
+        `refine_output_error` (``limits``: the outputs' limits, `pwa_pipeline.pwa.limits`)."""
         self._validate_params()  # also when an estimator fits it nested (sklearn skips then)
         warmup = self.run_warmup(na, nb)
         n = len(u)
@@ -112,7 +113,7 @@ class OutputErrorRefinement(BaseEstimator):
             thetas, u[fit], y[fit], na, nb, affine, region_of=region_of, warmup=warmup,
             max_iter=self.max_iter, max_seconds=self.max_seconds, tol=self.tol,
             validation=(u[held], y[held]) if n_val else None, patience=self.patience,
-            one_step_weight=self.one_step_weight)
+            one_step_weight=self.one_step_weight, limits=limits)
         self.thetas_ = result.thetas
         self.cost_start_, self.cost_ = result.cost_start, result.cost
         self.validation_cost_start_ = result.validation_start

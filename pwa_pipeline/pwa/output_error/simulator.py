@@ -43,11 +43,13 @@ class FreeRuns:
 
     ``simulated`` (default: every output) are the outputs that run free; the others keep
     their measured values (with decoupled per-output models they do not enter the
-    simulated ones).
+    simulated ones). ``limits`` (2, m; `pwa_pipeline.pwa.limits`) clip every simulated
+    output, whose sensitivities are 0 while it sits at a limit.
     """
 
     def __init__(self, u: list[Float2D], y: list[Float2D], na: int, nb: int, affine: bool,
-                 warmup: int, simulated: list[int] | None = None):
+                 warmup: int, simulated: list[int] | None = None,
+                 limits: Float2D | None = None):
         self.na, self.nb, self.affine, self.warmup = na, nb, affine, warmup
         self.lengths = np.array([len(e) for e in y])
         n, e = self.lengths.max(), len(y)
@@ -56,6 +58,9 @@ class FreeRuns:
         for i, (ue, ye) in enumerate(zip(u, y, strict=True)):
             self.u[i, :len(ue)], self.y[i, :len(ye)] = ue, ye
         self.simulated = list(range(self.y.shape[2]) if simulated is None else simulated)
+        m = self.y.shape[2]
+        self.lower, self.upper = (np.full(m, -np.inf), np.full(m, np.inf)) \
+            if limits is None else (np.asarray(limits[0], float), np.asarray(limits[1], float))
         self.n_scored = int(np.maximum(self.lengths - warmup, 0).sum()) * len(self.simulated)
 
     def phi(self, ysim: np.ndarray, k: int) -> Float2D:
@@ -103,7 +108,8 @@ class FreeRuns:
             active = self.lengths > k
             phi = self.phi(ysim, k)
             theta_k, direct = step(phi)
-            yk = np.einsum("ed,edj->ej", phi, theta_k)
+            raw = np.einsum("ed,edj->ej", phi, theta_k)
+            yk = np.clip(raw, self.lower[sim], self.upper[sim])
             target = self.y[:, k][:, sim]
             ysim[:, k, sim] = np.where(active[:, None], yk, target)
             r = np.where(active[:, None], yk - target, 0.0)
@@ -119,6 +125,7 @@ class FreeRuns:
                 a = theta_k[:, lag_rows[lag - 1], :]                   # (e, q, j)
                 sk += np.einsum("eqj,eqp->ejp", a, sens[(k - lag) % (na + 1)])
             sk[~active] = 0.0
+            sk[yk != raw] = 0.0  # held at a limit
             sens[k % (na + 1)] = sk
             normal.add(sk.reshape(-1, n_params), r.ravel(), last=k == n - 1)
         if not sensitivities:
@@ -135,8 +142,8 @@ class OutputFreeRuns(FreeRuns):
     """
 
     def __init__(self, u, y, lags: int, nb: int, affine: bool, warmup: int,
-                 models: list, simulated: list[int]):
-        super().__init__(u, y, lags, nb, affine, warmup, simulated)
+                 models: list, simulated: list[int], limits: Float2D | None = None):
+        super().__init__(u, y, lags, nb, affine, warmup, simulated, limits)
         self.models = models
         self.g = [models[j].G() for j in self.simulated]
         self.offsets = np.cumsum([0] + [g.shape[2] for g in self.g])
@@ -202,7 +209,8 @@ class OutputFreeRuns(FreeRuns):
         for k0 in range(self.warmup, n, BLOCK):
             k1 = min(n, k0 + BLOCK)
             cost += sensitivity_block(self.y, self.u, lengths, self.warmup, self.na, self.nb,
-                                      outputs, packed, gmat, offsets, *regions, k0, k1,
+                                      outputs, packed, gmat, offsets, *regions,
+                                      self.lower, self.upper, k0, k1,
                                       ysim, ring, rows, residuals, sensitivities)
             if not np.isfinite(cost):
                 return np.inf, None, None

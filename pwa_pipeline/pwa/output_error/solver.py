@@ -151,7 +151,8 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
                         warmup: int | None = None, max_iter: int = 20,
                         max_seconds: float = 240.0, tol: float = 1e-4,
                         validation: tuple[list[Float2D], list[Float2D]] | None = None,
-                        patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
+                        patience: int = 3, one_step_weight: float = 0.0,
+                        limits: Float2D | None = None) -> OutputErrorResult:
     """Minimise the free-run error over the training experiments, or J_w with a one-step
     weight (`pwa_pipeline.pwa.output_error`).
 
@@ -180,6 +181,8 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
     patience : int
     one_step_weight : float
         w of J_w (`pwa_pipeline.pwa.output_error`); 0: the free-run error alone.
+    limits : ndarray of shape (2, m), optional
+        The outputs' limits (`pwa_pipeline.pwa.limits`): the free run is clipped to them.
 
     Returns
     -------
@@ -195,7 +198,7 @@ def refine_output_error(thetas: np.ndarray, u: list[Float2D], y: list[Float2D], 
     warmup = max(na, nb) if warmup is None else warmup
 
     def errors(u: list[Float2D], y: list[Float2D]) -> RefinementErrors:
-        runs = FreeRuns(u, y, na, nb, affine, warmup)
+        runs = FreeRuns(u, y, na, nb, affine, warmup, limits=limits)
         return RefinementErrors(
             lambda t, sens: runs.simulate(t.reshape(thetas.shape), region_of, sens),
             runs.n_scored, OneStepError.of_thetas(u, y, na, nb, affine, region_of, thetas.shape))
@@ -209,10 +212,12 @@ def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list
                    lags: int, nb: int, affine: bool, warmup: int,
                    validation: tuple[list[Float2D], list[Float2D]] | None = None,
                    max_iter: int = 20, max_seconds: float = 240.0, tol: float = 1e-4,
-                   patience: int = 3, one_step_weight: float = 0.0) -> OutputErrorResult:
+                   patience: int = 3, one_step_weight: float = 0.0,
+                   limits: Float2D | None = None) -> OutputErrorResult:
     """Refine the p_j of the per-output models ``models[j]``, j in ``simulated``, on their
     free-run error, or J_w with ``one_step_weight`` (`pwa_pipeline.pwa.output_error`, with the models of
-    `pwa_pipeline.pwa.structures`); the regions stay fixed as functions of φ.
+    `pwa_pipeline.pwa.structures`); the regions stay fixed as functions of φ, the free run
+    clipped to the outputs' ``limits`` (2, m; `pwa_pipeline.pwa.limits`) when given.
 
     Returns
     -------
@@ -220,7 +225,7 @@ def refine_outputs(models: list, simulated: list[int], u: list[Float2D], y: list
         ``thetas`` holds the concatenated p_j of the simulated outputs.
     """
     def errors(u: list[Float2D], y: list[Float2D]) -> RefinementErrors:
-        runs = OutputFreeRuns(u, y, lags, nb, affine, warmup, models, simulated)
+        runs = OutputFreeRuns(u, y, lags, nb, affine, warmup, models, simulated, limits)
         return RefinementErrors(runs.simulate, runs.n_scored,
                                 OneStepError.of_outputs(u, y, lags, nb, affine, models,
                                                         simulated))

@@ -312,9 +312,10 @@ def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
 class _HeldOut:
     """The held-out experiments, simulated in lockstep for the NRMSE of candidate models."""
 
-    def __init__(self, experiments: list, lags: int, nb: int, warmup: int):
+    def __init__(self, experiments: list, lags: int, nb: int, warmup: int,
+                 limits: Float2D | None = None):
         u, y = [e[0] for e in experiments], [e[1] for e in experiments]
-        self.runs = FreeRuns(u, y, lags, nb, True, warmup)
+        self.runs = FreeRuns(u, y, lags, nb, True, warmup, limits=limits)
         self.warmup = warmup
         scored = np.vstack([ye[warmup:] for ye in y])
         self.std = scored.std(axis=0)
@@ -349,7 +350,7 @@ class _HeldOut:
             packed_t[jj, :len(t)] = t
         return region_free_run(runs.y, runs.u, runs.lengths.astype(np.int64), self.warmup,
                                runs.na, runs.nb, np.array(group, dtype=np.int64), packed_t,
-                               *pack_regions(forms, d))
+                               *pack_regions(forms, d), runs.lower, runs.upper)
 
     def simulated_sse(self, models: dict[int, OutputModel], group: list[int]) -> np.ndarray:
         """Sums of squared free-run errors of any models, every experiment in lockstep
@@ -363,7 +364,8 @@ class _HeldOut:
                 active = runs.lengths > k
                 phi = runs.phi(ysim, k)
                 for jj, j in enumerate(group):
-                    yk = np.einsum("ed,ed->e", phi, thetas[jj][models[j].regions(phi)])
+                    yk = np.clip(np.einsum("ed,ed->e", phi, thetas[jj][models[j].regions(phi)]),
+                                 runs.lower[j], runs.upper[j])
                     target = runs.y[:, k, j]
                     ysim[:, k, j] = np.where(active, yk, target)
                     sse[jj] += float(np.sum(np.where(active, yk - target, 0.0) ** 2))
@@ -397,11 +399,11 @@ class _Fold:
     experiments its refinements run on (`windows`) and its held-out block."""
 
     def __init__(self, fit: list, held: list, lags: int, nb: int, warmup: int,
-                 max_samples: int | None):
+                 max_samples: int | None, limits: Float2D | None = None):
         train = windows(fit, max_samples)
         self.u, self.y = [e[0] for e in train], [e[1] for e in train]
         self.reg = build_regressors(fit, lags, nb, True)
-        self.held = _HeldOut(held, lags, nb, warmup)
+        self.held = _HeldOut(held, lags, nb, warmup, limits)
 
     def cost(self, models: dict[int, OutputModel], group: list[int]) -> float:
         """Held-out free-run NRMSE of the group's models, mean over its outputs."""
@@ -547,8 +549,8 @@ class StructureSearch(BaseEstimator):
         return self.refinement
 
     def search(self, experiments: list[tuple[Float2D, Float2D]], na: int, nb: int,
-               cluster: Callable | None = None, default: Callable | None = None
-               ) -> tuple[StructureFit, SearchReport]:
+               cluster: Callable | None = None, default: Callable | None = None,
+               limits: Float2D | None = None) -> tuple[StructureFit, SearchReport]:
         """Search the structure (module doc) on the experiments, orders up to (na, nb).
 
         Parameters
@@ -564,6 +566,9 @@ class StructureSearch(BaseEstimator):
             As ``cluster``, the library default's steps on eq. (3)'s φ: the default PWARX
             of orders (na, nb) the result must not be worse than (the estimator passes
             it); None: no such check.
+        limits : ndarray of shape (2, m), optional
+            The outputs' limits (`pwa_pipeline.pwa.limits`): every candidate's free run,
+            held out or refined, is clipped to them.
 
         Returns
         -------
@@ -579,15 +584,16 @@ class StructureSearch(BaseEstimator):
         if na < 1 or nb < 1:
             raise ValueError(f"the structure search needs na >= 1 and nb >= 1 as its largest "
                              f"orders; got na={na}, nb={nb}")
-        return _Search(self, experiments, na, nb, cluster, default).run()
+        return _Search(self, experiments, na, nb, cluster, default, limits).run()
 
 
 class _Search:
     """One run of [`StructureSearch.search`][pwa_pipeline.pwa.StructureSearch.search]."""
 
     def __init__(self, params: StructureSearch, experiments: list, na: int, nb: int,
-                 cluster: Callable | None, default: Callable | None):
-        self.p, self.na, self.nb = params, na, nb
+                 cluster: Callable | None, default: Callable | None,
+                 limits: Float2D | None = None):
+        self.p, self.na, self.nb, self.limits = params, na, nb, limits
         self.cluster, self.default = cluster, default
         self.t0 = time.perf_counter()
         self.lags = na + 1
@@ -607,7 +613,7 @@ class _Search:
                     f"the last {len(self.held_exp)} of {len(experiments)}); lengthen it, "
                     f"join it to another or leave it out")
         self.n_fit = len(self.fit_exp)
-        self.folds = [_Fold(fit, held, self.lags, nb, self.warmup, params.max_rows)
+        self.folds = [_Fold(fit, held, self.lags, nb, self.warmup, params.max_rows, limits)
                       for fit, held in blocks]
         full, self.held = self.folds[0].reg, self.folds[0].held
         if full.phi.shape[0] < 2 * full.phi.shape[1]:
@@ -1160,7 +1166,8 @@ class _Search:
                                  self.warmup, validation=(fold.held.u, fold.held.y),
                                  max_iter=step.max_iter,
                                  max_seconds=min(step.max_seconds, remaining), tol=step.tol,
-                                 patience=step.patience, one_step_weight=step.one_step_weight)
+                                 patience=step.patience, one_step_weight=step.one_step_weight,
+                                 limits=self.limits)
         except ValueError as exc:
             return cost0, models, None, str(exc)
         start = {j: models[j].p for j in group}
@@ -1208,7 +1215,8 @@ class _Search:
                                          self.warmup, max_iter=step.max_iter,
                                          max_seconds=min(step.max_seconds, remaining),
                                          tol=step.tol,
-                                         one_step_weight=step.one_step_weight)
+                                         one_step_weight=step.one_step_weight,
+                                         limits=self.limits)
                 except ValueError as exc:
                     self.rows.append({"stage": "refit", "outputs": _outputs(group),
                                       "outcome": f"kept as fitted without the held-out "
