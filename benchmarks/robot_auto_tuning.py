@@ -25,6 +25,7 @@ VARIANTS = {
     "min_gain = 0.05": {"min_gain": 0.05},
     "one variable per output (max_variables = 1)": {"max_variables": 1},
     "no oblique boundaries (oblique=False)": {"oblique": False},
+    "candidates fitted on at most 20,000 rows (max_rows=20000)": {"max_rows": 20000},
 }
 
 
