@@ -241,6 +241,12 @@ class PWAStateSpace:
         return self.A.shape[0]
 
     @property
+    def held(self) -> np.ndarray:
+        """Which outputs each mode holds constant (no state or input enters them: y_p =
+        g_p), shape (s, m): the modes an output limit adds (`pwa_pipeline.pwa.limits`)."""
+        return np.all(self.C == 0, axis=2) & np.all(self.D == 0, axis=2)
+
+    @property
     def n_states(self) -> int:
         """n = m·L + r·nb."""
         return self.A.shape[1]

@@ -477,7 +477,8 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
     `score_metrics` names them; the mean over the outputs, to 4 significant digits, where
     MLflow's UI may show 2 decimals; a diverged free run as `score_text` shows it,
     with where it diverged), and from its parameters (`params`, `MODEL` facts) a PWA
-    model's sub-models and whether a linear ARX model has a constant."""
+    model's sub-models and output limits and whether a linear ARX model has a
+    constant."""
     params = params or {}
     parts = [f"The {method} model of data set {dataset}, hyper-parameter set {hparams}."]
     shown = [f"{label} {name} {metrics[key]:.4g}" for label, name, key in (
@@ -491,6 +492,8 @@ def model_description(dataset: str, hparams: str, method: str, metrics: dict[str
         parts.append("Held-out " + ", ".join(shown) + " (mean over the outputs).")
     if f"{MODEL}n_submodels" in params:
         parts.append(f"{params[f'{MODEL}n_submodels']} sub-model(s).")
+    if limits := params.get(f"{MODEL}limits"):
+        parts.append(f"Outputs held at their limits where they reach them: {limits}.")
     if constant := params.get(f"{MODEL}constant"):
         parts.append(f"{constant[0].upper()}{constant[1:]}.")
     if "fit_seconds" in metrics:

@@ -103,7 +103,8 @@ class PartitionDisplay:
         what = textwrap.fill(f"Regions of the state-space model in the slice ({names[i]}, "
                              f"{names[j]}), {others}", width=90)
         if empty:
-            what += f"\n{len(empty)} of {ss.n_modes} modes do not meet this slice"
+            what += (f"\n{len(empty)} of {ss.n_modes} modes "
+                     f"{'does' if len(empty) == 1 else 'do'} not meet this slice")
         suptitle(fig, context, what, fontsize=10)
         self.figure_ = fig
         return self

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..pwa.limits import LIMITED, bounds
 from ..regressors import lagged_matrix, n_initial, regressor_names
 from ..scoring.metrics import match_submodels
 from .style import MAX_HEIGHT, MAX_LEVELS, MAX_WIDTH, colour, figure, shown, suptitle
@@ -28,9 +29,11 @@ class Lane:
     outputs : str
         The group's outputs, named.
     structure : str
-        Their structures in words (``model.structures_``).
+        Their structures in words (``model.structures_``, without their limits).
     variables : str
         What its regions are the signs of (``z = q1(k-1) − q1(k-2)``), or ``""``.
+    limits : str
+        Their limits (``"y ≤ 10"``, `pwa_pipeline.pwa.limits`), or ``""``.
     """
 
     region: np.ndarray
@@ -38,6 +41,7 @@ class Lane:
     outputs: str
     structure: str
     variables: str = ""
+    limits: str = ""
 
 
 class SwitchingDisplay:
@@ -136,15 +140,19 @@ class SwitchingDisplay:
         phi = lagged_matrix(u, y, lags, nb, affine)
         names = regressor_names(list(y_names), list(u_names), lags, nb, affine)
         lanes = []
+        limits = getattr(model, "output_limits_", None)
         for group in model.groups_:
             w = getattr(group.regions, "weights", None)
             lanes.append(Lane(
                 region=np.asarray(group.regions.predict(phi)), n_regions=group.n_regions,
                 outputs=", ".join(y_names[j] for j in group.outputs),
-                structure="; ".join(dict.fromkeys(model.structures_[j] for j in group.outputs)),
+                structure="; ".join(dict.fromkeys(model.structures_[j].partition(LIMITED)[0]
+                                                  for j in group.outputs)),
                 variables="" if w is None else ", ".join(
                     f"z{v + 1 if len(w) > 1 else ''} = {_combination(row, names)}"
-                    for v, row in enumerate(w))))
+                    for v, row in enumerate(w)),
+                limits="" if limits is None else ", ".join(filter(None, (
+                    bounds(limits, j, y_names[j]) for j in group.outputs)))))
         k = np.arange(n_initial(lags, nb), y.shape[0])
         if true_modes is None:
             return cls(k, lanes)
@@ -175,6 +183,13 @@ class SwitchingDisplay:
         """Whether any output group has more than one region (the model is piecewise)."""
         return any(s > 1 for s in self.n_regions)
 
+    @property
+    def held(self) -> str:
+        """The outputs' limits in words for a title's end (``"; held at y ≤ 10 where it
+        reaches it"``), empty without any."""
+        limits = ", ".join(lane.limits for lane in self.lanes if lane.limits)
+        return f"; outputs held at their limits ({limits})" if limits else ""
+
     def plot(self, context: str = "") -> SwitchingDisplay:
         """Draw the figure (``figure_``) with ``context`` (data set, set, method) as the
         title's first line; returns self. A model of one region per output group (a
@@ -198,8 +213,8 @@ def _no_switching(sw: SwitchingDisplay, context: str) -> Figure:
     fig = figure(MAX_WIDTH, 1.2 + 0.25 * len(sw.lanes) + (0.3 if context else 0.0))
     lines = [f"{lane.outputs}: {lane.structure}" for lane in sw.lanes]
     fig.text(0.5, 0.35, "\n".join(lines), ha="center", va="center", fontsize=9, color="0.3")
-    suptitle(fig, context, f"{NO_SWITCHING}, held-out experiment 1 ({sw.k.size} samples)",
-             fontsize=11)
+    suptitle(fig, context, f"{NO_SWITCHING}, held-out experiment 1 ({sw.k.size} samples)"
+                           f"{sw.held}", fontsize=11)
     return fig
 
 
@@ -221,7 +236,7 @@ def _one_lane(sw: SwitchingDisplay, context: str) -> Figure:
                       f"estimated region\n({levels.size} of {s} visited)")
         ax.set_xlabel("sample k")
         suptitle(fig, context, "Estimated region H_i, held-out experiment 1"
-                                + (which or f", all {k.size} samples"), fontsize=11)
+                                + (which or f", all {k.size} samples") + sw.held, fontsize=11)
         return fig
     true, mode_of, s_true = sw.true, sw.mode_of, sw.n_modes
     mapped = mode_of[region]
@@ -251,7 +266,8 @@ def _one_lane(sw: SwitchingDisplay, context: str) -> Figure:
     ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.28), fontsize=8, frameon=False)
     suptitle(fig, context, f"Estimated region vs true mode, held-out experiment 1: agreement "
                             f"{sw.agreement:.1f} % over all {k.size} samples"
-                            + (f", the first {rows.sum()} shown" if which else ""), fontsize=11)
+                            + (f", the first {rows.sum()} shown" if which else "") + sw.held,
+             fontsize=11)
     return fig
 
 
@@ -289,7 +305,7 @@ def _panels(sw: SwitchingDisplay, context: str) -> Figure:
                      loc="left", pad=2)
     axes[-1].set_xlabel("sample k")
     suptitle(fig, context, "Region of each output group's model, held-out experiment 1"
-                            + (which or f", all {k.size} samples"), fontsize=11)
+                            + (which or f", all {k.size} samples") + sw.held, fontsize=11)
     return fig
 
 

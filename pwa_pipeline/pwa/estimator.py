@@ -15,7 +15,7 @@ from ..regressors import Regressors, build_regressors
 from .arx import ARXModelBase
 from .divergence import warn_if_diverging
 from .groups import OutputGroup
-from .limits import MEASURED, describe, has_limits, resolve_limits
+from .limits import MEASURED, bounds, describe, has_limits, resolve_limits
 from .memory import check_fit_memory
 from .search import StructureSearch
 from .steps.boundaries import ResidualRegions
@@ -464,9 +464,9 @@ class PWARX(ARXModelBase):
                "outputs": self.outputs,
                "output_limits": "none" if self.output_limits is None else
                str(self.output_limits) if isinstance(self.output_limits, str) else "given"}
-        out.update({f"output_limits_y{j + 1}": f"[{lo:.6g}, {hi:.6g}]"
-                    for j, (lo, hi) in enumerate(self.output_limits_.T)
-                    if np.isfinite(lo) or np.isfinite(hi)})
+        out.update({f"output_limits_y{j + 1}": bounds(self.output_limits_, j, f"y{j + 1}")
+                    for j in range(self.n_outputs_)
+                    if bounds(self.output_limits_, j, f"y{j + 1}")})
         options = {"scheduling": self.scheduling, "search": self.search,
                    "refinement": self.refinement}
         for name, option in options.items():

@@ -95,10 +95,22 @@ def has_limits(limits: Float2D | None) -> bool:
     return limits is not None and bool(np.any(np.isfinite(limits)))
 
 
-def describe(limits: Float2D, j: int, name: str) -> str:
-    """Output j's limits in words (``", limited to y1 ≤ 10"``), empty without any."""
+#: What `describe` puts before an output's limits in a structure's description.
+LIMITED = ", limited to "
+
+
+def bounds(limits: Float2D, j: int, name: str) -> str:
+    """Output j's limits as an inequality (``"y1 ≤ 10"``, ``"0 ≤ y1 ≤ 10"``), empty
+    without any."""
     lo, hi = limits[:, j]
     if not (np.isfinite(lo) or np.isfinite(hi)):
         return ""
     text = f"{lo:.4g} ≤ {name}" if np.isfinite(lo) else name
-    return ", limited to " + (f"{text} ≤ {hi:.4g}" if np.isfinite(hi) else text)
+    return f"{text} ≤ {hi:.4g}" if np.isfinite(hi) else text
+
+
+def describe(limits: Float2D, j: int, name: str) -> str:
+    """Output j's limits for its structure's description (``", limited to y1 ≤ 10"``),
+    empty without any."""
+    text = bounds(limits, j, name)
+    return LIMITED + text if text else ""

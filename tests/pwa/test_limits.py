@@ -75,7 +75,7 @@ def test_given_limits_clip_the_paper_route_and_its_refinement():
     u, y = _overflowing_tank(2)
     model = PWARX(na=1, nb=1, affine=True, output_limits=[[np.nan], [RIM]],
                   refinement=OutputErrorRefinement(max_iter=5)).fit(u, y)
-    assert model.resolved_params()["output_limits_y1"] == "[-inf, 2.5]"
+    assert model.resolved_params()["output_limits_y1"] == "y1 ≤ 2.5"
     phi = np.array([[RIM, 1.0, 1.0], [0.0, 0.0, 1.0]])  # past the rim, and well below it
     raw = np.einsum("nd,nd->n", phi, model.groups_[0].thetas[model.regions_.predict(phi), :, 0])
     pred = model.groups_[0].predict_phi(phi)[:, 0]
@@ -114,7 +114,37 @@ def test_the_state_space_export_holds_the_output_at_its_limit():
     ss = model.to_state_space()
     held = [i for i in range(ss.n_modes) if np.all(ss.C[i] == 0)]
     assert held and all(ss.g[i][0] == RIM and ss.f[i][0] == RIM for i in held)
+    np.testing.assert_array_equal(np.flatnonzero(ss.held[:, 0]), held)
     assert ss.n_modes == model.n_submodels_ + len(held)  # regions, and their held parts
     u_test, y_test = _overflowing_tank(5)
     np.testing.assert_allclose(ss.simulate(u_test, y_test[:2], outside="nearest"),
                                model.simulate(u_test, y_test[:2]), atol=1e-9)
+
+
+def test_the_switching_figure_of_a_limited_linear_model_says_where_it_is_held():
+    from pwa_pipeline.plotting import SwitchingDisplay
+    u, y = _overflowing_tank(6)
+    model = PWARX.auto(1, 1, max_variables=0, clustering=False, forms=["level"]).fit(u, y)
+    title = SwitchingDisplay.from_estimator(model, u, y).figure_.get_suptitle()
+    assert title.endswith("; outputs held at their limits (y1 ≤ 2.5)")
+    assert "limited to" not in title
+
+
+def test_the_mlflow_record_says_where_the_outputs_are_held():
+    from types import SimpleNamespace
+
+    from pwa_pipeline.datasets import Dataset
+    from pwa_pipeline.orchestration.run_records import method_run
+    from pwa_pipeline.scoring import evaluate
+
+    u, y = _overflowing_tank(7)
+    u_test, y_test = _overflowing_tank(8)
+    data = Dataset("tank", [u], [y], [u_test], [y_test], ["valve"], ["level"],
+                   units={"level": "m"})
+    model = _hinged("measured").fit(data.u_train, data.y_train)
+    record = method_run(SimpleNamespace(dataset="tank", hparams="limited", warmup=10), "pwa",
+                        model, evaluate(model, data.u_test, data.y_test), data)
+    assert record.params["model/limits"] == "level [m] ≤ 2.5"
+    assert record.params["output_limits_y1"] == "y1 ≤ 2.5"
+    assert "Outputs held at their limits where they reach them: level [m] ≤ 2.5." \
+        in record.description

@@ -77,10 +77,13 @@ def control_model_asset(partitions_def):
         figure = PartitionDisplay.from_state_space(
             ss, fixed, context_title(configuration.dataset, configuration.hparams,
                                      METHODS["pwa"].label), names).figure_
-        context.log.info(f"control_model: {ss.n_modes} region(s) in {ss.n_states} states; "
-                         f"{report.message}")
+        held = int(np.sum(ss.held.any(axis=1)))
+        modes = f"{ss.n_modes} region(s)" + (
+            f" ({held} with an output held at its limit)" if held else "")
+        context.log.info(f"control_model: {modes} in {ss.n_states} states; {report.message}")
         yield dg.Output(ControlModel(ss, report, files), metadata=rounded({
-            "exported": True, "n_modes": ss.n_modes, "n_states": ss.n_states,
+            "exported": True, "n_modes": ss.n_modes, "held_modes": held,
+            "n_states": ss.n_states,
             "dropped_modes": len(ss.dropped_modes), "envelope padding": ss.padding,
             "stability": report.message, "lyapunov_certified": report.certified,
             "max_spectral_radius": float(np.max(report.spectral_radius)),
@@ -91,7 +94,7 @@ def control_model_asset(partitions_def):
             "regions": dg.MetadataValue.md(to_markdown(figure))}))
         yield dg.AssetCheckResult(check_name="exported", passed=True,
                                   description=described(str(context.partition_key), True,
-                                                        f"{ss.n_modes} region(s) exported"),
+                                                        f"{modes} exported"),
                                   metadata=per_partition(str(context.partition_key),
                                                          {"n_modes": ss.n_modes}))
 

@@ -33,6 +33,7 @@ from ...plotting import (
     context_title,
 )
 from ...pwa import PWARX
+from ...pwa.limits import bounds
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
 from ..caches import SignedMemory, versions
@@ -278,8 +279,14 @@ def _described(model: PWARX, data: Dataset) -> list[str]:
 def switching_note(model) -> str | None:
     """What the page says of a model that never switches (one sub-model: a linear model,
     e.g. the one a structure search kept), beside its switching figure, which says so
-    too; None for a model that switches."""
-    return "none: one mode (a single linear model)" if model.n_submodels_ == 1 else None
+    too (with the outputs' limits, where they are held); None for a model that switches."""
+    if model.n_submodels_ != 1:
+        return None
+    limits = getattr(model, "output_limits_", None)
+    held = [] if limits is None else list(filter(None, (
+        bounds(limits, j, f"y{j + 1}") for j in range(limits.shape[1]))))
+    return "none: one mode (a single linear model)" + (
+        f", held at its limits ({', '.join(held)}) where it reaches them" if held else "")
 
 
 def _not_fitted(model: PWARX, asset: str) -> str:

@@ -75,6 +75,7 @@ from ..._typing import Float2D
 from ...regressors import build_regressors
 from ...scoring.evaluation import WARMUP
 from ..kernels.free_run import pack_regions, region_free_run
+from ..limits import bounds, has_limits
 from ..output_error import OutputErrorRefinement, held_out, refine_outputs
 from ..output_error.simulator import FreeRuns
 from ..partitions import SignRegions
@@ -640,6 +641,10 @@ class _Search:
             self.split += (f" (n_folds={params.n_folds} asked: only {len(self.folds)} whole "
                            f"block{'s' if len(self.folds) > 1 else ''} of the held-out "
                            f"size fit in the data)")
+        if has_limits(limits):
+            held = [bounds(limits, j, f"y{j + 1}") for j in range(self.m)]
+            self.split += (f"; every free run held at the outputs' limits "
+                           f"({', '.join(filter(None, held))})")
         self.names = phi_names(self.m, self.r, self.lags, nb, True)
         self.rows: list[dict] = []
         self.n_candidates = 0
