@@ -30,6 +30,13 @@ padded ranges. A cell whose Chebyshev ball inside the envelope has radius at mos
 `EMPTY_RADIUS` half-widths is dropped and listed in ``dropped_modes``;
 redundant rows are removed by linear programs (`irredundant_rows`).
 
+**Limits.** A model whose outputs have limits (``output_limits_``,
+`pwa_pipeline.pwa.limits`) splits each cell further by the hyperplanes Θ_{p,i}ᵀφ = lo_p,
+hi_p of each limited output p: the part within the limits keeps the sub-model, the parts
+past one hold ŷ_p at it (a zero row of C_i and of the state's lag-1 entry of p, g_p and f at
+the limit; `PWAStateSpace.held`), each kept when non-empty inside the envelope, with the
+cell's ``mode_regions``.
+
 **Ties.** The closed regions overlap on their boundaries. The modes keep the fitted model's
 order (its region index, lexicographically over partitions), so the rule "the
 lowest-numbered region that holds z" ([`PWAStateSpace.mode_of`][pwa_pipeline.control.PWAStateSpace.mode_of])
@@ -263,7 +270,6 @@ def to_state_space(model, u: Signals | None = None, y: Signals | None = None, *,
             regions.append(_irredundant(box, box_H, box_h, G, q, centre))
             mode_regions.append(labels)
     ss = PWAStateSpace(
-
         np.array(mats["A"]), np.array(mats["B"]), np.array(mats["f"]), np.array(mats["C"]),
         np.array(mats["g"]), regions, box.lower, box.upper, output_lags=lags, input_lags=nb,
         affine=affine, input_names=input_names, output_names=output_names, padding=padding,
@@ -306,7 +312,7 @@ def _limited_parts(theta: Float2D, limits: Float2D | None, G: Float2D, q: np.nda
         pieces += [([(-t, -hi)], hi)] if np.isfinite(hi) else []
         pieces += [([(t, lo)], lo)] if np.isfinite(lo) else []
         grown = []
-        for Gc, qc, centre_c, held in parts:
+        for Gc, qc, _, held in parts:
             for rows, level in pieces:
                 Gz, qz = _to_z(np.vstack([row for row, _ in rows]),
                                np.array([bound for _, bound in rows], dtype=float), n, r,
