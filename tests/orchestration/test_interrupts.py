@@ -81,7 +81,9 @@ def test_a_second_ctrl_c_stops_a_run_that_cannot_end_at_once():
 
         signal.signal(signal.SIGINT, lambda *a: None)  # every interrupt dropped
         t0 = time.monotonic()
-        with interrupts_redelivered(grace=0.3):
+        # one resend (at about 0.5 s), so that none coincides with the second Ctrl-C: two
+        # SIGINTs pending at once reach the process as one
+        with interrupts_redelivered(grace=0.3, resends=1):
             for n, delay in ((1, 0.2), (2, 1.0)):  # the second past a resend of the first
                 threading.Timer(delay, press, (n,)).start()
             while time.monotonic() - t0 < 20:
