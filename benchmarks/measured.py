@@ -29,6 +29,7 @@ from benchmarks._common import RESULTS, MachineLoad, Timer, describe_load, write
 from pwa_pipeline import PWARX, LinearARX, evaluate
 from pwa_pipeline.config import HParamsFile
 from pwa_pipeline.datasets import MEASURED, Dataset, load_dataset
+from pwa_pipeline.pwa.limits import bounds
 from pwa_pipeline.pwa.output_error import OutputErrorRefinement
 from pwa_pipeline.pwa.scheduling import SignScheduling
 from pwa_pipeline.scoring.conventions import single_run_scores
@@ -157,7 +158,7 @@ def main(argv: list[str] | None = None) -> None:
             model, knots = quartile_hinges(data, limits)
             with Timer() as t:
                 model.fit(data.u_train, data.y_train)
-            limited = model.structures_[0].partition(", limited to ")[2]
+            limited = bounds(model.output_limits_, 0, "y1")
             rows.append(score_row(name, f"PWARX(2, 2) continuous, hinges at y1 = {knots}, "
                                   "refined" + (f", limited to {limited} (measured)"
                                                if limited else ""),

@@ -11,7 +11,7 @@ from ..config import Configuration
 from ..datasets import Dataset
 from ..methods import METHODS
 from ..pwa import PWARX
-from ..pwa.limits import bounds
+from ..pwa.limits import all_bounds
 from ..scoring.conventions import single_run_scores
 from ..scoring.evaluation import Evaluation
 from .model_facts import constant_text, phi_names, shown_params, truth_metadata
@@ -79,10 +79,8 @@ def method_run(configuration: Configuration, method: str, model, evaluation: Eva
     if isinstance(model, PWARX):
         facts.update(n_submodels=model.n_submodels_, output_groups=len(model.groups_),
                      **truth_metadata(model, data))
-        held = [bounds(model.output_limits_, j, data.label(name))
-                for j, name in enumerate(data.y_names)]
-        if any(held):
-            facts["limits"] = ", ".join(filter(None, held))
+        if held := all_bounds(model.output_limits_, [data.label(y) for y in data.y_names]):
+            facts["limits"] = held
         if "clustering" in model.steps_:
             facts.update(noise_share=model.steps_["clustering"].noise_share_,
                          eps=model.steps_["clustering"].eps_)

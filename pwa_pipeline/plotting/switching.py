@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..pwa.limits import LIMITED, bounds
+from ..pwa.limits import LIMITED, all_bounds
 from ..regressors import lagged_matrix, n_initial, regressor_names
 from ..scoring.metrics import match_submodels
 from .style import MAX_HEIGHT, MAX_LEVELS, MAX_WIDTH, colour, figure, shown, suptitle
@@ -151,8 +151,7 @@ class SwitchingDisplay:
                 variables="" if w is None else ", ".join(
                     f"z{v + 1 if len(w) > 1 else ''} = {_combination(row, names)}"
                     for v, row in enumerate(w)),
-                limits="" if limits is None else ", ".join(filter(None, (
-                    bounds(limits, j, y_names[j]) for j in group.outputs)))))
+                limits=all_bounds(limits, y_names, group.outputs)))
         k = np.arange(n_initial(lags, nb), y.shape[0])
         if true_modes is None:
             return cls(k, lanes)

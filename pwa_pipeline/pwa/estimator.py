@@ -464,9 +464,9 @@ class PWARX(ARXModelBase):
                "outputs": self.outputs,
                "output_limits": "none" if self.output_limits is None else
                str(self.output_limits) if isinstance(self.output_limits, str) else "given"}
-        out.update({f"output_limits_y{j + 1}": bounds(self.output_limits_, j, f"y{j + 1}")
-                    for j in range(self.n_outputs_)
-                    if bounds(self.output_limits_, j, f"y{j + 1}")})
+        named = {f"output_limits_y{j + 1}": bounds(self.output_limits_, j, f"y{j + 1}")
+                 for j in range(self.n_outputs_)}
+        out.update({key: text for key, text in named.items() if text})
         options = {"scheduling": self.scheduling, "search": self.search,
                    "refinement": self.refinement}
         for name, option in options.items():

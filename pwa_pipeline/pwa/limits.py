@@ -109,6 +109,16 @@ def bounds(limits: Float2D, j: int, name: str) -> str:
     return f"{text} ≤ {hi:.4g}" if np.isfinite(hi) else text
 
 
+def all_bounds(limits: Float2D | None, names: list[str], outputs=None) -> str:
+    """The limits of the outputs ``outputs`` (default: all) that have any, as `bounds`
+    names them (``names[j]`` for output j), joined: ``"y1 ≤ 10, 0 ≤ y2"``; empty without
+    any (or without ``limits``)."""
+    if limits is None:
+        return ""
+    chosen = range(limits.shape[1]) if outputs is None else outputs
+    return ", ".join(filter(None, (bounds(limits, j, names[j]) for j in chosen)))
+
+
 def describe(limits: Float2D, j: int, name: str) -> str:
     """Output j's limits for its structure's description (``", limited to y1 ≤ 10"``),
     empty without any."""

@@ -128,6 +128,9 @@ def test_the_switching_figure_of_a_limited_linear_model_says_where_it_is_held():
     title = SwitchingDisplay.from_estimator(model, u, y).figure_.get_suptitle()
     assert title.endswith("; outputs held at their limits (y1 ≤ 2.5)")
     assert "limited to" not in title
+    from pwa_pipeline.orchestration.assets.identification import switching_note
+    assert switching_note(model) == ("none: one mode (a single linear model), held at its "
+                                     "limits (y1 ≤ 2.5) where it reaches them")
 
 
 def test_the_mlflow_record_says_where_the_outputs_are_held():

@@ -33,7 +33,7 @@ from ...plotting import (
     context_title,
 )
 from ...pwa import PWARX
-from ...pwa.limits import bounds
+from ...pwa.limits import all_bounds
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
 from ..caches import SignedMemory, versions
@@ -282,11 +282,10 @@ def switching_note(model) -> str | None:
     too (with the outputs' limits, where they are held); None for a model that switches."""
     if model.n_submodels_ != 1:
         return None
-    limits = getattr(model, "output_limits_", None)
-    held = [] if limits is None else list(filter(None, (
-        bounds(limits, j, f"y{j + 1}") for j in range(limits.shape[1]))))
+    held = all_bounds(getattr(model, "output_limits_", None),
+                      [f"y{j + 1}" for j in range(model.n_outputs_)])
     return "none: one mode (a single linear model)" + (
-        f", held at its limits ({', '.join(held)}) where it reaches them" if held else "")
+        f", held at its limits ({held}) where it reaches them" if held else "")
 
 
 def _not_fitted(model: PWARX, asset: str) -> str:

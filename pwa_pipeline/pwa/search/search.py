@@ -75,7 +75,7 @@ from ..._typing import Float2D
 from ...regressors import build_regressors
 from ...scoring.evaluation import WARMUP
 from ..kernels.free_run import pack_regions, region_free_run
-from ..limits import bounds, has_limits
+from ..limits import all_bounds, has_limits
 from ..output_error import OutputErrorRefinement, held_out, refine_outputs
 from ..output_error.simulator import FreeRuns
 from ..partitions import SignRegions
@@ -642,9 +642,8 @@ class _Search:
                            f"block{'s' if len(self.folds) > 1 else ''} of the held-out "
                            f"size fit in the data)")
         if has_limits(limits):
-            held = [bounds(limits, j, f"y{j + 1}") for j in range(self.m)]
-            self.split += (f"; every free run held at the outputs' limits "
-                           f"({', '.join(filter(None, held))})")
+            held = all_bounds(limits, [f"y{j + 1}" for j in range(self.m)])
+            self.split += f"; every free run held at the outputs' limits ({held})"
         self.names = phi_names(self.m, self.r, self.lags, nb, True)
         self.rows: list[dict] = []
         self.n_candidates = 0
