@@ -151,3 +151,10 @@ def test_the_mlflow_record_says_where_the_outputs_are_held():
     assert record.params["output_limits_y1"] == "y1 ≤ 2.5"
     assert "Outputs held at their limits where they reach them: level [m] ≤ 2.5." \
         in record.description
+
+
+def test_an_unknown_limits_option_is_refused_naming_the_choices():
+    u, y = _overflowing_tank(9, n=200)
+    with pytest.raises(ValueError, match=r"'output_limits' parameter of PWARX must be a str "
+                                         r"among \{'measured'\}, an array-like or None"):
+        PWARX(na=1, nb=1, output_limits="measure").fit(u, y)
