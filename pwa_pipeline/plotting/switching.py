@@ -184,10 +184,11 @@ class SwitchingDisplay:
 
     @property
     def held(self) -> str:
-        """The outputs' limits in words for a title's end (``"; held at y ≤ 10 where it
-        reaches it"``), empty without any."""
+        """The outputs' limits in words, a line of its own at a title's end (``"\noutputs
+        held at their limits (y ≤ 10)"``: the titles are already a figure's width), empty
+        without any."""
         limits = ", ".join(lane.limits for lane in self.lanes if lane.limits)
-        return f"; outputs held at their limits ({limits})" if limits else ""
+        return f"\noutputs held at their limits ({limits})" if limits else ""
 
     def plot(self, context: str = "") -> SwitchingDisplay:
         """Draw the figure (``figure_``) with ``context`` (data set, set, method) as the
@@ -209,7 +210,8 @@ NO_SWITCHING = "No switching: one mode (a single linear model) at every sample"
 def _no_switching(sw: SwitchingDisplay, context: str) -> Figure:
     """The figure of a model without switching: its title says so, its body each output
     group's structure, and no axes (there is no region to draw over the samples)."""
-    fig = figure(MAX_WIDTH, 1.2 + 0.25 * len(sw.lanes) + (0.3 if context else 0.0))
+    fig = figure(MAX_WIDTH, 1.2 + 0.25 * len(sw.lanes) + (0.3 if context else 0.0)
+                 + (0.25 if sw.held else 0.0))
     lines = [f"{lane.outputs}: {lane.structure}" for lane in sw.lanes]
     fig.text(0.5, 0.35, "\n".join(lines), ha="center", va="center", fontsize=9, color="0.3")
     suptitle(fig, context, f"{NO_SWITCHING}, held-out experiment 1 ({sw.k.size} samples)"

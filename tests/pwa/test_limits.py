@@ -126,7 +126,7 @@ def test_the_switching_figure_of_a_limited_linear_model_says_where_it_is_held():
     u, y = _overflowing_tank(6)
     model = PWARX.auto(1, 1, max_variables=0, clustering=False, forms=["level"]).fit(u, y)
     title = SwitchingDisplay.from_estimator(model, u, y).figure_.get_suptitle()
-    assert title.endswith("; outputs held at their limits (y1 ≤ 2.5)")
+    assert title.endswith("\noutputs held at their limits (y1 ≤ 2.5)")
     assert "limited to" not in title
     from pwa_pipeline.orchestration.assets.identification import switching_note
     assert switching_note(model) == ("none: one mode (a single linear model), held at its "
