@@ -3,6 +3,7 @@ experiment ([`SwitchingDisplay`][pwa_pipeline.plotting.SwitchingDisplay])."""
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -15,6 +16,14 @@ from .style import MAX_HEIGHT, MAX_LEVELS, MAX_WIDTH, colour, figure, shown, sup
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+
+#: A panel title's font size (points).
+PANEL_FONT = 8.5
+#: Characters of a panel title's line: the axes' width (a figure of ``MAX_WIDTH`` less its
+#: margins) at ``PANEL_FONT``, whose digits and symbols are about 0.07 inch wide.
+PANEL_CHARACTERS = int((MAX_WIDTH - 1.2) / 0.07)
+#: Height of a panel title's extra line (inches).
+TITLE_LINE = 0.15
 
 
 @dataclass(frozen=True)
@@ -280,7 +289,9 @@ def _panels(sw: SwitchingDisplay, context: str) -> Figure:
     m = len(sw.regions)
     levels = [np.arange(s) if s <= MAX_LEVELS else np.unique(r[rows])
               for r, s in zip(sw.regions, sw.n_regions, strict=True)]
-    heights = [0.3 + 0.22 * max(lv.size, 1) for lv in levels]
+    titles = [_panel_title(lane) for lane in sw.lanes]
+    heights = [0.3 + 0.22 * max(lv.size, 1) + TITLE_LINE * title.count("\n")
+               for lv, title in zip(levels, titles, strict=True)]
     body = min(sum(heights), MAX_HEIGHT - 1.3)
     fig = figure(MAX_WIDTH, body + 1.3)
     axes = fig.subplots(m, 1, sharex=True, squeeze=False, height_ratios=heights)[:, 0]
@@ -300,14 +311,19 @@ def _panels(sw: SwitchingDisplay, context: str) -> Figure:
             ticks = np.arange(0, lv.size, -(-lv.size // MAX_LEVELS))
             ax.set_yticks(ticks, [labels[lv[i]] for i in ticks], fontsize=7.5)
             ax.set_ylim(-0.6, lv.size - 0.4)
-        regions = f", regions by the sign of {sw.lanes[j].variables}" if sw.lanes[j].variables and s > 1 \
-            else ""
-        ax.set_title(f"{sw.lanes[j].outputs}: {sw.lanes[j].structure}{regions}", fontsize=8.5,
-                     loc="left", pad=2)
+        ax.set_title(titles[j], fontsize=PANEL_FONT, loc="left", pad=2)
     axes[-1].set_xlabel("sample k")
     suptitle(fig, context, "Region of each output group's model, held-out experiment 1"
                             + (which or f", all {k.size} samples") + sw.held, fontsize=11)
     return fig
+
+
+def _panel_title(lane: Lane) -> str:
+    """A panel's title: its outputs, their structure and what its regions are the signs
+    of, wrapped to the figure's width (an oblique boundary's combination is long)."""
+    regions = f", regions by the sign of {lane.variables}" if lane.variables \
+        and lane.n_regions > 1 else ""
+    return textwrap.fill(f"{lane.outputs}: {lane.structure}{regions}", PANEL_CHARACTERS)
 
 
 def _combination(weights: np.ndarray, names: list[str]) -> str:
@@ -320,7 +336,8 @@ def _combination(weights: np.ndarray, names: list[str]) -> str:
         size = "" if abs(w) == 1 else f"{abs(w):.3g}·"
         terms.append(f"{sign} {size}{name}")
     text = " ".join(terms)
-    return text[2:] if text.startswith("+ ") else text
+    return text[2:] if text.startswith("+ ") else "−" + text[2:] if text.startswith("− ") \
+        else text
 
 
 def _sign_labels(n_regions: int) -> list[str]:

@@ -613,6 +613,36 @@ def test_the_structured_switching_figure_shows_each_outputs_regions(fit, structu
         f"{MAX_SAMPLES - lags} of {phi.shape[0]} samples shown")
 
 
+def test_a_long_oblique_boundary_wraps_inside_the_figure(fit):
+    """Two oblique boundaries of every regressor (as the structure search writes them):
+    each panel's title wraps onto lines drawn inside the figure's width, and says all of
+    what it said on one line; a combination's leading coefficient keeps its minus sign."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+
+    names = ["y1(k-1)", "y2(k-1)", "u1(k-1)", "u2(k-1)"]
+    variables = [{**dict(zip(names, [0.9891, -0.2043, 0.2714, -0.1382], strict=True)), "1": -0.3471},
+                 {**dict(zip(names, [-0.4125, 0.8832, -0.0519, 0.3364], strict=True)), "1": 0.1287}]
+    model = PWARX(na=1, nb=1, affine=True, outputs="decoupled",
+                  scheduling=SignScheduling(variables=variables, switch="all")).fit(
+        fit.data.u_train[0], fit.data.y_train[0])
+    display = SwitchingDisplay.compute(model, fit.test.u, fit.test.y)
+    assert "z2 = −0.412·y1(k-1) + 0.883·y2(k-1)" in display.lanes[0].variables  # a leading minus
+    fig = display.plot(CONTEXT).figure_
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    texts = {t.get_text(): t for t in fig.findobj(Text)}
+    for ax, lane in zip(fig.axes, display.lanes, strict=True):
+        title = ax.get_title(loc="left")
+        assert "\n" in title
+        assert title.replace("\n", " ") == (
+            f"{lane.outputs}: {lane.structure}, regions by the sign of {lane.variables}")
+        box = texts[title].get_window_extent(renderer)
+        assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1, title
+
+
 def test_every_figure_fits_a_laptop_screen(fit, robot_like):
     """At 90 dpi no figure is wider than 900 px or higher than 650 px: six outputs of a
     structured model, the regions figure with its longest legend, the clusters figure."""
