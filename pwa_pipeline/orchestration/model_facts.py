@@ -7,6 +7,7 @@ from dataclasses import replace
 from ..baselines.linear import LinearARX
 from ..datasets import Dataset, GroundTruth
 from ..pwa import PWARX
+from ..pwa.limits import all_bounds
 from ..regressors import regressor_names
 from ..scoring.truth import embedded_thetas, ground_truth_scores
 from .mlflow_models import predictor_fingerprint
@@ -79,10 +80,21 @@ def model_note(model) -> str:
     """What a fitted model is when its method's name does not say it: the structure
     search's verdict (`SearchReport.verdict`, e.g. `"linear kept (no switching structure
     beat it)"`) for a searched PWARX, whether a linear ARX model has a constant
-    (`constant_text`), `""` for any other model. The scores tables carry it (column
+    (`constant_text`), `""` for any other model; then the outputs a PWARX holds at their
+    limits (``"outputs held at their limits (y1 ≤ 10)"``, named as its structures name
+    them), which its free run and its scores depend on. The scores tables carry it (column
     `model`) to the leaderboard."""
     report = getattr(model, "structure_search_", None)
-    return constant_text(model) if report is None else report.verdict
+    note = constant_text(model) if report is None else report.verdict
+    held = held_outputs(model)
+    return "; ".join(filter(None, (note, held and f"outputs held at their limits ({held})")))
+
+
+def held_outputs(model) -> str:
+    """A PWARX's output limits in words, its outputs named as its structures name them
+    (``"y1 ≤ 10"``); empty for a model without any."""
+    return all_bounds(getattr(model, "output_limits_", None),
+                      [f"y{j + 1}" for j in range(getattr(model, "n_outputs_", 0))])
 
 
 def prediction_key(model, data: Dataset) -> tuple[str, str]:

@@ -122,6 +122,8 @@ def test_the_state_space_export_holds_the_output_at_its_limit():
 
 
 def test_the_switching_figure_of_a_limited_linear_model_says_where_it_is_held():
+    """The figure's title, the page's switching note and the note of the leaderboard's
+    row each say where the output is held; a model without limits says nothing of it."""
     from pwa_pipeline.plotting import SwitchingDisplay
     u, y = _overflowing_tank(6)
     model = PWARX.auto(1, 1, max_variables=0, clustering=False, forms=["level"]).fit(u, y)
@@ -131,6 +133,11 @@ def test_the_switching_figure_of_a_limited_linear_model_says_where_it_is_held():
     from pwa_pipeline.orchestration.assets.identification import switching_note
     assert switching_note(model) == ("none: one mode (a single linear model), held at its "
                                      "limits (y1 ≤ 2.5) where it reaches them")
+    from pwa_pipeline.orchestration.model_facts import model_note
+    assert model_note(model) == ("linear kept (no switching structure beat it held out); "
+                                 "outputs held at their limits (y1 ≤ 2.5)")
+    model.set_params(output_limits=None).fit(u, y)  # the leaderboard's row and the CLI's line
+    assert model_note(model) == "linear kept (no switching structure beat it held out)"
 
 
 def test_the_mlflow_record_says_where_the_outputs_are_held():

@@ -33,7 +33,6 @@ from ...plotting import (
     context_title,
 )
 from ...pwa import PWARX
-from ...pwa.limits import all_bounds
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
 from ..caches import SignedMemory, versions
@@ -47,6 +46,8 @@ from ..checks import (
 from ..images import figures_fingerprint, to_markdown
 from ..model_facts import (
     ground_truth,
+    held_outputs,
+    model_note,
     phi_names,
     prediction_key,
     shown_params,
@@ -282,8 +283,7 @@ def switching_note(model) -> str | None:
     too (with the outputs' limits, where they are held); None for a model that switches."""
     if model.n_submodels_ != 1:
         return None
-    held = all_bounds(getattr(model, "output_limits_", None),
-                      [f"y{j + 1}" for j in range(model.n_outputs_)])
+    held = held_outputs(model)
     return "none: one mode (a single linear model)" + (
         f", held at its limits ({held}) where it reaches them" if held else "")
 
@@ -411,8 +411,9 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
     figures = model_figures(inputs, model, data, title)
     params, params_note = shown_params(model)
     return dg.Output(model, output_name="pwa_model", metadata=rounded({
-        # what the model is, first: the search's verdict (e.g. the linear model kept)
-        **({} if report is None else {"model": report.verdict}),
+        # what the model is, first: the search's verdict (e.g. the linear model kept) and
+        # its outputs' limits, the line of its leaderboard row
+        **({} if report is None else {"model": model_note(model)}),
         "n_submodels": model.n_submodels_,
         **({} if (note := switching_note(model)) is None else {"switching": note}),
         "output_groups": len(model.groups_),
