@@ -10,8 +10,9 @@ structures of [`structures`][pwa_pipeline.pwa.SearchReport.structures] and keeps
 1. **Hold out.** The last ``validation_fraction`` of the training experiments are held out
    (one record alone is split in time, `split_experiments`); everything is fitted on
    the others and judged by the free-run NRMSE (RMSE over the standard deviation, per
-   output) on the held-out ones. The test record plays no part. With ``n_folds`` above 1
-   the shortlisted structures of steps 5–7 are also fitted without each earlier block and
+   output) on the held-out ones. The test record plays no part. When the held-out part
+   is short (below 1,000 samples: a single short record) or ``n_folds`` asks for it, the
+   shortlisted structures of steps 5–7 are also fitted without each earlier block and
    judged on it in turn (`folds`), and the lowest mean wins. A record longer than
    ``max_rows`` regressor rows is searched on an even subsample of its rows and refined on
    windows of it (`windows`); the shortlisted structures are fitted on every row.
@@ -105,6 +106,10 @@ HINGE_STEPS = 3
 WINDOW = 2000
 #: Fewest training rows a scheduled region needs per parameter it switches.
 ROWS_PER_PARAMETER = 3
+#: Held-out samples the shortlist is judged on at least with ``n_folds="auto"``: as many
+#: held-out blocks as it takes, at most `AUTO_FOLDS` (`folds`).
+JUDGED = 1000
+AUTO_FOLDS = 5
 #: The standard-library logger of the search's progress: a line per stage at INFO.
 SEARCH_LOG = __name__
 _log = logging.getLogger(SEARCH_LOG)
@@ -274,11 +279,17 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
             f"a single record: its last {len(y) - cut} of {len(y)} samples held out")
 
 
-def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
+def folds(experiments: list, fraction: float, n_folds: int | str, min_samples: int
           ) -> tuple[list[tuple[list, list]], str]:
     """Blocked cross-validation folds: (fit, held) pairs, the first that of
     `split_experiments`, each next one holding out the block before; with the first
     split in words (as `split_experiments` says it).
+
+    ``n_folds="auto"`` takes as many as hold out `JUDGED` samples in all, at most
+    `AUTO_FOLDS`: five blocks of a 1,000-sample record's 200, one block where the held-out
+    experiments hold 1,000 samples or more. A short held-out part ranks the candidates by
+    a few hundred samples, and its best candidate is often the one that fits them by
+    chance.
 
     Blocks keep time order (no sample is predicted from its future's fit, and a drift is
     judged over a whole block): with several experiments a block is ``round(fraction·n)``
@@ -288,6 +299,8 @@ def folds(experiments: list, fraction: float, n_folds: int, min_samples: int
     whole blocks fit in the data.
     """
     fit, held, how = split_experiments(experiments, fraction, min_samples)
+    if n_folds == "auto":
+        n_folds = min(AUTO_FOLDS, -(-JUDGED // sum(len(y) for _, y in held)))
     out = [(fit, held)]
     n = len(experiments)
     if n >= 2:
@@ -452,18 +465,22 @@ class StructureSearch(BaseEstimator):
         ``OutputErrorRefinement(max_iter=30, one_step_weight=0.001)``.
     validation_fraction : float, default 0.2
         Share of the training experiments held out (the last ones).
-    n_folds : int, default 1
+    n_folds : int or "auto", default "auto"
         Held-out blocks the shortlisted structures are judged on in turn (blocked
         cross-validation, `folds`): the search proposes on the first (the last
         ``validation_fraction`` of the data), then the linear reference, the refined
         candidates and the default PWARX are fitted again without each other block,
         refined and judged on it, and the lowest mean held-out NRMSE wins. At most as many
-        as whole blocks fit in the data. 1 (the default) judges on the first block alone:
-        with 5 folds the simulated machines' tuning seeds (``benchmarks/auto_tuning.py``)
-        got the same models on 7 of 9 seeds, a better one on one (the DC motor, 0.110 to
-        0.107) and a worse one on another (the arm, 0.115 to 0.121), the robot's training
-        experiments (``benchmarks/robot_auto_tuning.py``) 0.699 against 0.692, and the
-        cascaded tanks the same structure, at about twice the search's time.
+        as whole blocks fit in the data. ``"auto"`` takes as many blocks as hold out 1,000
+        samples in all (`JUDGED`), at most 5: five of a 1,000-sample record, three of a
+        2,000-sample one, one wherever the held-out experiments hold 1,000 samples (the
+        robot's, EMPS', the simulated machines' 40 experiments). On single records of the
+        simulated machines' tuning seeds (``benchmarks/auto_tuning.py``, 1,000 samples)
+        one block let the search lose to the best linear ARX on one seed in 18 (0.488
+        against 0.318) and five blocks on none; with many experiments five blocks chose
+        the same model on 7 of 9 seeds, a worse one on one, and scored the robot's training
+        experiments 0.699 against 0.692 at twice the search's time, so there one block
+        judges.
     max_rows : int or None, default 50000
         Regressor rows the candidates are fitted on at most, and samples the refinements
         run on: past it the candidates are fitted on one row in k (an even subsample,
@@ -507,7 +524,7 @@ class StructureSearch(BaseEstimator):
         "clustering": ["boolean"],
         "refinement": [HasMethods(["fit"]), None, StrOptions({"none"})],
         "validation_fraction": [Interval(Real, 0, 1, closed="neither")],
-        "n_folds": [Interval(Integral, 1, None, closed="left")],
+        "n_folds": [Interval(Integral, 1, None, closed="left"), StrOptions({"auto"})],
         "max_rows": [Interval(Integral, 100, None, closed="left"), None],
         "refit": ["boolean"],
         "max_candidates": [Interval(Integral, 1, None, closed="left")],
@@ -518,7 +535,7 @@ class StructureSearch(BaseEstimator):
                  switches=SWITCHES, min_gain: float = 0.02, oblique: bool = True,
                  clustering: bool = True,
                  refinement: BaseEstimator | str | None = None,
-                 validation_fraction: float = 0.2, n_folds: int = 1,
+                 validation_fraction: float = 0.2, n_folds: int | str = "auto",
                  max_rows: int | None = 50000, refit: bool = False,
                  max_candidates: int = 2000, max_seconds: float = 900.0):
         self.forms = forms
@@ -637,7 +654,7 @@ class _Search:
         if len(self.folds) > 1:
             self.split += (f"; the shortlisted structures judged on {len(self.folds)} "
                            f"held-out blocks in turn")
-        if len(self.folds) < params.n_folds:
+        if params.n_folds != "auto" and len(self.folds) < params.n_folds:
             self.split += (f" (n_folds={params.n_folds} asked: only {len(self.folds)} whole "
                            f"block{'s' if len(self.folds) > 1 else ''} of the held-out "
                            f"size fit in the data)")

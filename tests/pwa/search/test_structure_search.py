@@ -233,7 +233,7 @@ def test_the_linear_fallback_wins_over_a_switching_structure_worse_on_held_out_d
 
 def test_one_record_is_split_in_time_and_a_short_one_is_refused():
     u, y = friction_machine(n_experiments=1, n=1200)
-    model = PWARX.auto(na=2, nb=1, **FAST).fit(u[0], y[0])
+    model = PWARX.auto(na=2, nb=1, n_folds=1, **FAST).fit(u[0], y[0])
     assert "a single record: its last 240 of 1200 samples held out" in \
         model.structure_search_.choice
     # the candidates judged on that held-out part, not on held-out experiments
@@ -261,6 +261,28 @@ def test_folds_hold_out_each_block_of_experiments_in_turn():
     assert (*blocks[0], how) == split_experiments(exps, 0.2, min_samples=3)
     assert len(folds(exps, 0.2, n_folds=3, min_samples=3)[0]) == 3
     assert len(folds(exps, 0.3, n_folds=9, min_samples=3)[0]) == 3  # 3 whole blocks of 3
+
+
+def test_auto_folds_judge_on_a_thousand_held_out_samples_at_least():
+    """``n_folds="auto"``: five blocks of a 1,000-sample record's 200 held-out samples, three
+    of a 2,000-sample record's 400, one where the held-out experiments hold 1,000 samples;
+    and the search's report says how many it judged on."""
+    def record(n):
+        return [(np.zeros((n, 1)), np.arange(n, dtype=float)[:, None])]
+
+    assert len(folds(record(1000), 0.2, n_folds="auto", min_samples=30)[0]) == 5
+    assert len(folds(record(2000), 0.2, n_folds="auto", min_samples=30)[0]) == 3
+    assert len(folds(record(5000), 0.2, n_folds="auto", min_samples=30)[0]) == 1
+    exps = [(np.zeros((500, 1)), np.zeros((500, 1))) for _ in range(10)]  # 2 held out
+    assert len(folds(exps, 0.2, n_folds="auto", min_samples=30)[0]) == 1
+    assert len(folds(exps[:5], 0.2, n_folds="auto", min_samples=30)[0]) == 2
+    u, y = friction_machine(n_experiments=1, n=1200)
+    report = PWARX.auto(na=2, nb=1, **FAST).fit(u[0], y[0]).structure_search_
+    assert "its last 240 of 1200 samples held out; the shortlisted structures judged on 5 " \
+        "held-out blocks in turn. " in report.choice
+    chosen = report.table.query("stage == 'chosen'").outcome.item()
+    assert chosen == "chosen: beats the linear model on the held-out blocks of 5 folds"
+    assert "asked" not in report.choice
 
 
 def test_more_folds_than_whole_blocks_are_said_so():
@@ -300,9 +322,11 @@ def test_a_long_record_is_refined_on_windows_evenly_spread():
 
 def test_max_rows_fits_candidates_on_a_subsample_and_finds_the_same_structure(friction_fit):
     """Past ``max_rows`` the candidates are fitted on one regressor row in k and refined on
-    windows; the friction offset is found all the same, its constants within noise."""
-    full, (u, y) = friction_fit
-    model = PWARX.auto(na=2, nb=1, max_rows=1000, **FAST).fit(u, y)
+    windows; the friction offset is found all the same, its constants within noise (judged
+    on one held-out block, as the fit on every row it is compared with)."""
+    _, (u, y) = friction_fit
+    full = PWARX.auto(na=2, nb=1, n_folds=1, **FAST).fit(u, y)
+    model = PWARX.auto(na=2, nb=1, max_rows=1000, n_folds=1, **FAST).fit(u, y)
     report = model.structure_search_
     assert "candidates fitted on one in 3 of the 2970 regressor rows (max_rows), the " \
         "shortlisted ones on all and refined on 900 samples" in report.choice
@@ -326,7 +350,7 @@ def test_the_choice_is_the_lowest_mean_over_the_folds_not_the_first_block(monkey
     monkeypatch.setattr(structure_search._Search, "cross_validated", worse_elsewhere)
     u, y = friction_machine()
     five = PWARX.auto(na=2, nb=1, n_folds=5, **FAST).fit(u, y).structure_search_
-    one = PWARX.auto(na=2, nb=1, **FAST).fit(u, y).structure_search_
+    one = PWARX.auto(na=2, nb=1, n_folds=1, **FAST).fit(u, y).structure_search_
     assert five.linear and not one.linear
     rows = five.table[five.table.stage == "cross-validated"]
     switching = rows[~rows.structure.str.endswith("linear")]
@@ -364,8 +388,8 @@ def test_a_time_limit_after_the_proposals_keeps_the_best_measured_candidate(monk
 
     monkeypatch.setattr(structure_search._Search, "scheduled_stage", then_late)
     u, y = friction_machine()
-    with pytest.warns(SearchTimeLimit):
-        model = PWARX.auto(na=2, nb=1, **FAST).fit(u, y)
+    with pytest.warns(SearchTimeLimit):  # one block: the unrefined figure is the kept one
+        model = PWARX.auto(na=2, nb=1, n_folds=1, **FAST).fit(u, y)
     report = model.structure_search_
     assert report.time_limited and report.linear is False
     assert report.verdict == ("switching structure kept: the search stopped at its time "
@@ -401,7 +425,7 @@ def test_a_spent_budget_on_a_linear_result_says_why_linear_was_kept():
         model = PWARX.auto(na=2, nb=1, max_candidates=4, **FAST).fit(u, y)
     chosen = model.structure_search_.table.query("stage == 'chosen'").outcome.item()
     assert chosen == ("chosen: linear (no switching structure measured beat it on the held-out "
-                      "experiments; stopped by the budget of 4 candidates)")
+                      "blocks of 2 folds; stopped by the budget of 4 candidates)")
     assert "No switching candidate was measured (stopped by the budget of 4 candidates)." \
         in model.structure_search_.choice
     assert model.structure_search_.verdict == ("linear kept: the search spent its budget of "
@@ -458,7 +482,7 @@ def test_the_search_is_never_worse_than_the_default_pwarx():
     chosen = table[table.stage == "chosen"]
     assert len(chosen) == 1 and chosen.outcome.item().startswith("chosen: the default PWARX")
     assert "The default PWARX (level (1, 1), clustered (4 regions)) beats the search's " \
-        "choice on the held-out part of the record" in report.choice
+        "choice on the held-out blocks of 4 folds" in report.choice
     assert model.structures_ == ["level (1, 1), clustered (4 regions)"] * 2
     # φ of the search holds y(k-2) and the constant too, at zero; on the others each of the
     # paper's four modes is found within 0.05
