@@ -12,7 +12,8 @@ the estimation record (`quartile_hinges`), without and with the level's measured
 (``output_limits="measured"``: 10 V, where the record sits flat), on EMPS the data set's own physical model
 (`emps_physical_model`), and the published figures in the same convention (PUBLISHED,
 sources in docs/measured.md). Writes
-results/measured.csv and results/measured.md (with the machine's load while it ran).
+results/measured.csv and results/measured.md (with the machine's load while it ran), and
+results/measured_search.md (what the search chose on each and why, `write_searches`).
 
 Usage: python -m benchmarks.measured [--datasets cascaded_tanks emps]
 """
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--datasets", nargs="+", default=list(MEASURED), choices=list(MEASURED))
     args = parser.parse_args(argv)
-    hparams, rows, load = HParamsFile(), [], MachineLoad()
+    hparams, rows, load, searches = HParamsFile(), [], MachineLoad(), {}
     for name in args.datasets:
         data = load_dataset(name)
         warmup = data.convention.warmup
@@ -150,6 +151,7 @@ def main(argv: list[str] | None = None) -> None:
         label = "PWARX.auto(2, 2)" + (" [linear kept]" if model.structure_search_.linear else "")
         rows.append(score_row(name, label, model, data, t.seconds, warmup))
         print(rows[-1], flush=True)
+        searches[name] = model.structure_search_
         with Timer() as t:
             model, orders = best_linear(data)
         rows.append(score_row(name, f"best linear ARX {orders}", model, data, t.seconds, warmup))
@@ -175,6 +177,18 @@ def main(argv: list[str] | None = None) -> None:
     with open(RESULTS / "measured.md", "a") as md:  # the fit times are wall-clock seconds
         md.write(f"\nMachine: {describe_load(load.summary())}.\n")
     print((RESULTS / "measured.md").read_text())
+    write_searches(searches)
+
+
+def write_searches(searches: dict) -> None:
+    """``results/measured_search.md``: what ``PWARX.auto(2, 2)`` chose on each benchmark and
+    why (its report's choice and the rows that decided, held-out figures of each fold)."""
+    parts = []
+    for name, report in searches.items():
+        rows = report.summary()[["stage", "structure", "validation_nrmse", "outcome"]]
+        parts.append(f"## {name}\n\n{report.choice}\n\n"
+                     + rows.to_markdown(index=False, floatfmt=".4g"))
+    (RESULTS / "measured_search.md").write_text("\n\n".join(parts) + "\n")
 
 
 if __name__ == "__main__":

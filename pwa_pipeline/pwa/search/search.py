@@ -228,13 +228,15 @@ class SearchReport:
 
     def summary(self) -> pd.DataFrame:
         """The rows that decided: the best linear candidate of each coupling, the variables
-        kept, the clustered candidates, the refinements and the choices (a linear row's
-        outcome says which coupling it is the best of)."""
+        kept, the clustered candidates, the refinements, each shortlisted structure over the
+        held-out blocks (with several) and the choices (a linear row's outcome says which
+        coupling it is the best of)."""
         t = self.table
         linear = t[t.stage == "linear"]
         best = [g.validation_nrmse.idxmin() for _, g in linear.groupby(["outputs", "outcome"])
                 if g.validation_nrmse.notna().any()]
-        decided = t.stage.isin(["clustered", "refined", "default", "searched", "chosen"]) \
+        decided = t.stage.isin(["clustered", "refined", "cross-validated", "default",
+                                "searched", "chosen"]) \
             | t.outcome.str.startswith("kept")
         out = t.loc[sorted(set(best) | set(t.index[decided]))].copy()
         out.loc[out.stage == "linear", "outcome"] = \

@@ -542,6 +542,11 @@ def test_the_report_lists_every_candidate_with_its_outcome(friction_fit):
         scheduled.structure.str.contains("all on").sum() > 5
     summary = model.structure_search_.summary()
     assert summary.outcome.str.startswith("kept").sum() == 1
+    # judged on two held-out blocks (n_folds="auto": 600 held-out samples), each
+    # shortlisted structure's row with the figure of each block is among those that decided
+    folds = table[table.stage == "cross-validated"]
+    assert len(folds) >= 2 and folds.index.isin(summary.index).all()
+    assert folds.outcome.str.fullmatch(r"mean of 2 folds: [0-9.]+, [0-9.]+").all()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert len(summary) < len(table)
