@@ -3,6 +3,7 @@ experiment ([`SwitchingDisplay`][pwa_pipeline.plotting.SwitchingDisplay])."""
 
 from __future__ import annotations
 
+import re
 import textwrap
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -20,8 +21,8 @@ if TYPE_CHECKING:
 #: A panel title's font size (points).
 PANEL_FONT = 8.5
 #: Characters of a panel title's line: the axes' width (a figure of ``MAX_WIDTH`` less its
-#: margins) at ``PANEL_FONT``, whose digits and symbols are about 0.07 inch wide.
-PANEL_CHARACTERS = int((MAX_WIDTH - 1.2) / 0.07)
+#: margins) at ``PANEL_FONT``, whose characters are about 0.064 inch wide on average.
+PANEL_CHARACTERS = int((MAX_WIDTH - 1.2) / 0.064)
 #: Height of a panel title's extra line (inches).
 TITLE_LINE = 0.15
 
@@ -320,19 +321,29 @@ def _panels(sw: SwitchingDisplay, context: str) -> Figure:
 
 def _panel_title(lane: Lane) -> str:
     """A panel's title: its outputs, their structure and what its regions are the signs
-    of, wrapped to the figure's width (an oblique boundary's combination is long)."""
-    regions = f", regions by the sign of {lane.variables}" if lane.variables \
-        and lane.n_regions > 1 else ""
-    return textwrap.fill(f"{lane.outputs}: {lane.structure}{regions}", PANEL_CHARACTERS)
+    of, wrapped to the figure's width (an oblique boundary's combination is long). Where
+    the signs are written out, the structure's own list of its boundaries (``… all on
+    [ŷ1: y1(k-1) + … > 8.566, …]``, in the model's names y1, u1) is left out: the signs
+    say the same in the data's names."""
+    if lane.variables and lane.n_regions > 1:
+        structure = re.sub(r" (on|at) \[.*\]", "", lane.structure)
+        text = f"{lane.outputs}: {structure}, regions by the sign of {lane.variables}"
+    else:
+        text = f"{lane.outputs}: {lane.structure}"
+    return textwrap.fill(text, PANEL_CHARACTERS)
 
 
 def _combination(weights: np.ndarray, names: list[str]) -> str:
-    """``w·φ`` written out, e.g. ``q1(k-1) − q1(k-2)``."""
+    """``w·φ`` written out, e.g. ``q1(k-1) − q1(k-2)``; the constant entry ``1`` as its
+    coefficient alone (``q1(k-1) − 8.47``)."""
     terms = []
     for w, name in zip(weights, names, strict=True):
         if w == 0:
             continue
         sign = "−" if w < 0 else "+"
+        if name == "1":
+            terms.append(f"{sign} {abs(w):.3g}")
+            continue
         size = "" if abs(w) == 1 else f"{abs(w):.3g}·"
         terms.append(f"{sign} {size}{name}")
     text = " ".join(terms)

@@ -630,6 +630,7 @@ def test_a_long_oblique_boundary_wraps_inside_the_figure(fit):
         fit.data.u_train[0], fit.data.y_train[0])
     display = SwitchingDisplay.compute(model, fit.test.u, fit.test.y)
     assert "z2 = −0.412·y1(k-1) + 0.883·y2(k-1)" in display.lanes[0].variables  # a leading minus
+    assert "− 0.138·u2(k-1) − 0.347, z2" in display.lanes[0].variables  # the constant alone
     fig = display.plot(CONTEXT).figure_
     renderer = FigureCanvasAgg(fig).get_renderer()
     fig.draw(renderer)
@@ -641,6 +642,24 @@ def test_a_long_oblique_boundary_wraps_inside_the_figure(fit):
             f"{lane.outputs}: {lane.structure}, regions by the sign of {lane.variables}")
         box = texts[title].get_window_extent(renderer)
         assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1, title
+
+
+def test_a_searched_structure_leaves_its_boundary_list_to_the_signs():
+    """A search's structure lists its boundaries in the model's names (``[ŷ1: y1(k-1) …]``);
+    the panel's title writes them once, as the signs in the data's names, and a structure
+    with no signs written keeps its own text."""
+    from pwa_pipeline.plotting.switching import Lane
+
+    k = np.arange(2, 50)
+    structure = ("level (1, 2), all on [ŷ1: y1(k-1) + 0.274·u1(k-2) - 0.207·u1(k-1) > "
+                 "8.566, u1(k-1) > 3.72] (4 regions)")
+    lanes = [Lane(k % 4, 4, "level", structure,
+                  "z1 = 0.989·level(k-1) − 0.204·pump(k-1) − 8.47, z2 = pump(k-1) − 3.72"),
+             Lane(np.zeros(k.size, int), 1, "flow", "level (1, 2), linear")]
+    fig = SwitchingDisplay(k, lanes).plot(CONTEXT).figure_
+    assert [ax.get_title(loc="left").replace("\n", " ") for ax in fig.axes] == [
+        "level: level (1, 2), all (4 regions), regions by the sign of z1 = 0.989·level(k-1) "
+        "− 0.204·pump(k-1) − 8.47, z2 = pump(k-1) − 3.72", "flow: level (1, 2), linear"]
 
 
 def test_every_figure_fits_a_laptop_screen(fit, robot_like):
