@@ -171,8 +171,10 @@ class SearchReport:
     Attributes
     ----------
     table : pandas.DataFrame
-        One row per candidate: ``stage`` (linear, scheduled, clustered, refined, default,
-        chosen; ``searched`` for the search's own choice when the default PWARX beat it),
+        One row per candidate: ``stage`` (linear, scheduled, clustered, refined,
+        cross-validated (a shortlisted structure over the held-out blocks, each block's
+        figure in ``outcome``), default, chosen; ``searched`` for the search's own choice
+        when the default PWARX beat it),
         ``outputs``, ``structure`` (form, orders, regions), ``regions`` (count),
         ``validation_nrmse`` (held-out free run, mean over the outputs), ``outcome``,
         ``seconds`` (since the search started).
