@@ -500,6 +500,8 @@ def test_the_search_is_never_worse_than_the_default_pwarx():
     ({"max_variables": 9}, "max_variables"),
     ({"switches": ["hinge"]},
      r"switches must be a non-empty list of \['offset', 'all', 'continuous'\]"),
+    ({"n_folds": "five"}, r"'n_folds' parameter of StructureSearch must be an int in the "
+                          r"range \[1, inf\) or a str among \{'auto'\}"),
 ])
 def test_bad_search_parameters_are_named(kwargs, message):
     u, y = friction_machine(n_experiments=3, n=100)
