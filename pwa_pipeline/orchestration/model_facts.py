@@ -90,6 +90,17 @@ def model_note(model) -> str:
     return "; ".join(filter(None, (note, held and f"outputs held at their limits ({held})")))
 
 
+def model_names(data: Dataset) -> str:
+    """The data's channels under the names the model's structures and limits use
+    (``"y1 = q1 [deg], …, u1 = tau1 [N·m], …"``: the estimator knows its outputs and inputs
+    by position); empty when the data's names are those already."""
+    pairs = [(f"y{j + 1}", name) for j, name in enumerate(data.y_names)]
+    pairs += [(f"u{q + 1}", name) for q, name in enumerate(data.u_names)]
+    if all(own == name for own, name in pairs):
+        return ""
+    return ", ".join(f"{own} = {data.label(name)}" for own, name in pairs)
+
+
 def held_outputs(model) -> str:
     """A PWARX's output limits in words, its outputs named as its structures name them
     (``"y1 ≤ 10"``); empty for a model without any."""

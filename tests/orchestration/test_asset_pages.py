@@ -97,7 +97,8 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     """A structure chosen per output on held-out training experiments: the page lists each
     output's structure and group, and a table with one short column per candidate (its
     held-out free-run MSE), in order of richness, said in a line above it; the outputs
-    carry their units."""
+    carry their units; channels the data names otherwise than the model (y1…, u1…) are
+    given under the model's names."""
     record = make_hure_vasak(n_samples=2400, snr_db=30, seed=0)
     test = make_hure_vasak(n_samples=600, snr_db=30, seed=1000)
     data = Dataset("hure_vasak", np.split(record.u_train[0], 4), np.split(record.y_train[0], 4),
@@ -123,6 +124,14 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     assert [r.split("|")[1].strip() for r in rows] == ["y1 [V]", "y2"]
     assert output.metadata[SWITCHING].value.startswith("![hure_vasak | set select | PWA ")
     assert output.metadata[REGIONS].value.startswith("![hure_vasak | set select | PWA ")
+    # the data's channels named as the model names them (y1…, u1…): no key to give
+    assert "names in the structures" not in output.metadata
+    named = Dataset("hure_vasak", data.u_train, data.y_train, data.u_test, data.y_test,
+                    ["tau1", "tau2"], ["q1", "q2"], units={"q1": "deg"})
+    output = model_output(context, PipelineSettings(cache_dir=str(tmp_path / "cache2")),
+                          configuration, model, named, cached=set(), phi=phi)
+    assert output.metadata["names in the structures"].value == \
+        "y1 = q1 [deg], y2 = q2, u1 = tau1, u2 = tau2"
 
 
 def test_a_model_without_switching_says_so_on_its_page(default_30db, sim_30db):

@@ -47,6 +47,7 @@ from ..images import figures_fingerprint, to_markdown
 from ..model_facts import (
     ground_truth,
     held_outputs,
+    model_names,
     model_note,
     phi_names,
     prediction_key,
@@ -422,6 +423,8 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
         "steps_from_cache": "all (the fitted model reused)" if reused
         else ", ".join(sorted(cached)) or "none",
         "structure per output": markdown(structure.set_index("output")),
+        # the structures, the search's report and the limits name the channels y1…, u1…
+        **({"names in the structures": names} if (names := model_names(data)) else {}),
         **found,
         "resolved parameters": dg.MetadataValue.md(
             "\n\n".join(filter(None, [params_note, params_table(params).to_markdown(
