@@ -13,6 +13,8 @@ from .style import MAX_WIDTH, colour, figure, suptitle
 
 #: Entries of a legend column (more fit beside the 5.2-inch axes).
 _LEGEND_ROWS = 22
+#: Legend columns at most: the axes and their legend within ``MAX_WIDTH``.
+_LEGEND_COLUMNS = 3
 
 
 @dataclass
@@ -26,7 +28,9 @@ class RegionsDisplay:
     The regions are filled, and training rows drawn on top coloured by their sub-model
     (−1 grey). Rows lie off the slice in the other regressors, so some sit in a region other
     than their own. A long legend takes further columns to the right, the figure widened for
-    each (at most 900 px at 90 dpi).
+    each (at most 900 px at 90 dpi); one longer than three columns (a model of several
+    output groups has the product of their regions) lists the regions the slice shows and
+    the rows in one entry.
 
     Attributes
     ----------
@@ -141,26 +145,39 @@ class RegionsDisplay:
             raise ValueError(f"{len(names)} names for {self.d} regressors")
         units = units or {}
         s, labels = self.n_regions, self.labels
-        # one legend column per _LEGEND_ROWS entries, the figure widened for each further one
-        columns = -(-(s + np.unique(labels).size) // _LEGEND_ROWS)
+        # every region and every sub-model's rows when they fit in _LEGEND_COLUMNS columns;
+        # past that (a search's model of several groups has the product of their regions,
+        # e.g. 192) the regions the slice shows, and the rows in one entry
+        listed = s + np.unique(labels).size <= _LEGEND_COLUMNS * _LEGEND_ROWS
+        shown = np.arange(s) if listed else np.unique(self.z)[:_LEGEND_COLUMNS * _LEGEND_ROWS
+                                                                - 1]
+        columns = -(-(shown.size + (np.unique(labels).size if listed else 1)) // _LEGEND_ROWS)
         fig = figure(min(7.4 + 1.3 * (columns - 1), MAX_WIDTH), 5.2)
         ax = fig.subplots()
         ax.contourf(self.gx, self.gy, self.z, levels=np.arange(s + 1) - 0.5,
                     colors=[colour(r) for r in range(s)], alpha=0.25)
         from matplotlib.patches import Patch
 
-        handles = [Patch(color=colour(r), alpha=0.4, label=f"H{r + 1}") for r in range(s)]
+        handles = [Patch(color=colour(r), alpha=0.4, label=f"H{r + 1}") for r in shown]
         for c in np.unique(labels):
             at = labels == c
-            handles.append(ax.scatter(self.points[at, 0], self.points[at, 1], s=6, color=colour(c),
-                                      lw=0.2, edgecolor="black", alpha=0.8,
-                                      label="noise" if c < 0 else f"rows of θ{c + 1}"))
+            dots = ax.scatter(self.points[at, 0], self.points[at, 1], s=6, color=colour(c),
+                              lw=0.2, edgecolor="black", alpha=0.8,
+                              label="noise" if c < 0 else f"rows of θ{c + 1}")
+            if listed:
+                handles.append(dots)
+        if not listed:
+            handles.append(ax.scatter([], [], s=6, color="0.5", lw=0.2, edgecolor="black",
+                                      label="training rows, coloured by\nsub-model "
+                                            "(colours repeat)"))
         ax.set_xlim(self.gx.min(), self.gx.max())
         ax.set_ylim(self.gy.min(), self.gy.max())
         ax.set_xlabel(with_unit(names[self.i], units))
         ax.set_ylabel(with_unit(names[self.j], units))
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-                  frameon=False, ncols=columns)
+                  frameon=False, ncols=columns,
+                  title=None if listed else f"{np.unique(self.z).size} of {s} regions\n"
+                                            f"in this slice", title_fontsize=8)
         others = "others at their median" if self.d > 2 else "no other regressors"
         suptitle(fig, context, f"Step 6: regions H_i in the slice ({names[self.i]}, {names[self.j]}), "
                                 f"{others}", fontsize=10)

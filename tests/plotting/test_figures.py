@@ -287,6 +287,36 @@ def test_regions_figure_keeps_a_long_legend_inside_the_figure():
             box.y1 <= page.y1, text.get_text()
 
 
+def test_regions_figure_of_192_regions_lists_those_in_its_slice_inside_the_figure():
+    """192 regions (a structure search's model of five output groups: the product of their
+    regions) with rows of each: the legend lists the regions the slice shows and the rows in
+    one entry, drawn inside the figure, its title saying how many of the 192 the slice
+    crosses."""
+    rng = np.random.default_rng(1)
+    coef = rng.normal(size=(192, 4))
+    regions = SimpleNamespace(n_regions_=192, predict=lambda x: np.argmax(x @ coef.T, axis=1),
+                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(192)))
+    phi = rng.normal(size=(3000, 4))
+    model = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
+    display = RegionsDisplay.from_estimator(model, phi, ["a", "b", "c", "d"],
+                                            labels=rng.integers(0, 192, 3000))
+    fig = display.figure_
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        to_png(fig)
+    legend = fig.axes[0].get_legend()
+    in_slice = np.unique(display.z)
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert texts == [f"H{r + 1}" for r in in_slice[:65]] + [
+        "training rows, coloured by\nsub-model (colours repeat)"]
+    assert legend.get_title().get_text() == f"{in_slice.size} of 192 regions\nin this slice"
+    page = fig.bbox
+    for text in [*legend.get_texts(), legend.get_title()]:
+        box = text.get_window_extent()
+        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and \
+            box.y1 <= page.y1, text.get_text()
+
+
 def _twenty_seven_clusters():
     """Fitted local-model and clustering steps as the figure reads them: 27 clusters (the
     paper's setting on the robot) of 22–48 local models each, and 60 noise ones."""
