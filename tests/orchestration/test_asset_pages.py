@@ -116,6 +116,9 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
                           configuration, model, data, cached=set(), phi=phi)
     structure = output.metadata["structure per output"].value
     assert _header(structure) == ["output", "structure", "group"]
+    # numbered from 1, as the search's report numbers them ("experiment 4 of 4 held out")
+    assert model.structure_fit_.validation_experiments == [3]
+    assert output.metadata["validation_experiments"].value == "4 of 4"
     table = output.metadata["candidates"].value
     assert table.startswith("Held-out free-run MSE of each candidate structure")
     line = next(line for line in table.splitlines() if line.startswith("|  "))

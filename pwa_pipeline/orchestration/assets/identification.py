@@ -376,8 +376,12 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
     found = {}
     fit = getattr(model, "structure_fit_", None)
     if fit is not None:
-        found["validation_experiments"] = ", ".join(map(str, fit.validation_experiments)) \
-            or "none: one record, split in time"
+        # numbered from 1, as the search's report numbers them (the library's are indices)
+        held, n = fit.validation_experiments, len(data.u_train)
+        found["validation_experiments"] = (
+            "none: one record, split in time" if not held
+            else f"{held[0] + 1} of {n}" if len(held) == 1
+            else f"{held[0] + 1}–{held[-1] + 1} of {n}")
         kinds = {k for costs in fit.validation_cost.values() for k in costs}
         if kinds:
             costs = pd.DataFrame({kind: [fit.validation_cost[j].get(kind, float("nan"))

@@ -269,8 +269,9 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
     n = len(experiments)
     if n >= 2:
         n_val = held_out(n, fraction)
-        return (experiments[:n - n_val], experiments[n - n_val:],
-                f"experiments {n - n_val + 1}–{n} of {n} held out")
+        which = f"experiment {n} of {n}" if n_val == 1 else \
+            f"experiments {n - n_val + 1}–{n} of {n}"
+        return experiments[:n - n_val], experiments[n - n_val:], f"{which} held out"
     u, y = experiments[0]
     cut = int(round(len(y) * (1 - fraction)))
     if cut < min_samples or len(y) - cut < min_samples:

@@ -250,6 +250,7 @@ def test_split_holds_out_the_last_experiments():
     fit, held, how = split_experiments(exps, 0.2, min_samples=3)
     assert [e[1][0, 0] for e in held] == [8, 9] and len(fit) == 8
     assert how == "experiments 9–10 of 10 held out"
+    assert split_experiments(exps[:4], 0.2, min_samples=3)[2] == "experiment 4 of 4 held out"
 
 
 def test_folds_hold_out_each_block_of_experiments_in_turn():
