@@ -53,18 +53,23 @@ def shown_params(model) -> tuple[dict, str]:
     left out: `resolved_params()` without the paper's steps (local models, clustering,
     sub-models, regions) when none of them ran (a structure search that kept no
     clustered regions): the values those steps choose from the data (n_ρ, ε, MinPts)
-    were never chosen, and would show as None. The note says why they are missing
-    (`""` when nothing is)."""
+    were never chosen, and would show as None. The note says why they are missing, and,
+    for a searched model, that its ``na``, ``nb``, ``form`` and ``outputs`` are bounds or
+    unused (the structures hold what it chose); `""` for any other model."""
     params = model.resolved_params()
-    if not isinstance(model, PWARX) or model.search is None or any(
-            g.steps for g in model.groups_):
+    if not isinstance(model, PWARX) or model.search is None:
         return params, ""
+    searched = ("The structure search chose the model: na and nb are the largest orders it "
+                "tried, form and outputs were not used, and each output's form, orders and "
+                "regions are its structure_y1 … .")
+    if any(g.steps for g in model.groups_):
+        return params, searched
     steps = tuple(model.step_objects())
     kept = {k: v for k, v in params.items() if k.split("__")[0] not in steps}
     return kept, (f"The paper's steps ({', '.join(steps)}) did not run: the structure search "
                   f"kept no clustered regions, so their parameters (n_rho, eps and min_pts "
                   f"among them, which those steps choose from the data) do not apply and "
-                  f"are left out.")
+                  f"are left out. {searched}")
 
 
 def constant_text(model) -> str:

@@ -119,6 +119,21 @@ def test_the_structure_table_is_narrow_with_a_column_per_candidate(tmp_path):
     # numbered from 1, as the search's report numbers them ("experiment 4 of 4 held out")
     assert model.structure_fit_.validation_experiments == [3]
     assert output.metadata["validation_experiments"].value == "4 of 4"
+    assert "regions per output group" not in output.metadata  # one output group
+    # two output groups: their regions, and the modes of the model as one map
+    from pwa_pipeline import PWARX
+    from pwa_pipeline.pwa.scheduling import SignScheduling
+    grouped = PWARX(na=1, nb=1, affine=True, form="velocity", outputs="decoupled",
+                    scheduling=SignScheduling(switch="offset")).fit(data.u_train, data.y_train)
+    sizes = [g.n_regions for g in grouped.groups_]
+    assert sizes == [2, 2] and grouped.n_submodels_ == 4
+    page = model_output(context, PipelineSettings(cache_dir=str(tmp_path / "cache3")),
+                        configuration, grouped, data, cached=set(),
+                        phi=build_regressors(list(zip(data.u_train, data.y_train, strict=True)),
+                                             grouped.output_lags_, grouped.nb,
+                                             grouped.affine).phi)
+    assert page.metadata["regions per output group"].value == (
+        "2, 2: the model as one PWA map (eq. 1) has their product, 4 modes (n_submodels)")
     table = output.metadata["candidates"].value
     assert table.startswith("Held-out free-run MSE of each candidate structure")
     line = next(line for line in table.splitlines() if line.startswith("|  "))

@@ -588,6 +588,8 @@ def test_the_auto_set_searches_the_structure_and_shows_what_it_tried(tmp_path,
     assert params.startswith("The paper's steps (local_models, clustering, submodels, "
                              "regions) did not run: the structure search kept no clustered "
                              "regions") and "| None " not in params.replace("search__", "")
+    assert "na and nb are the largest orders it tried, form and outputs were not used" \
+        in params.split("\n\n")[0]
     assert "clustering__eps" not in params and "search__max_variables" in params
     assert not {k for k in pwa_run.data.params if k.startswith("clustering")}
     # the true system compared on the search's larger regressor (na + 1 lags, a constant)

@@ -278,6 +278,13 @@ def _described(model: PWARX, data: Dataset) -> list[str]:
                                                     strict=True)]
 
 
+def _regions_per_group(model: PWARX) -> str:
+    """``"4, 4, 1, 3: the model as one PWA map (eq. 1) has their product, 48 modes"``."""
+    sizes = [g.n_regions for g in model.groups_]
+    return (f"{', '.join(map(str, sizes))}: the model as one PWA map (eq. 1) has their "
+            f"product, {model.n_submodels_} modes (n_submodels)")
+
+
 def switching_note(model) -> str | None:
     """What the page says of a model that never switches (one sub-model: a linear model,
     e.g. the one a structure search kept), beside its switching figure, which says so
@@ -422,6 +429,10 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
         "n_submodels": model.n_submodels_,
         **({} if (note := switching_note(model)) is None else {"switching": note}),
         "output_groups": len(model.groups_),
+        # n_submodels counts the modes of the model as one map (eq. 1): the product of the
+        # groups' regions, which the figures and the structures show group by group
+        **({"regions per output group": _regions_per_group(model)}
+           if len(model.groups_) > 1 else {}),
         "fit": REUSED if reused else "fitted",
         "fit_seconds": sum(model.timings_.values()),
         "steps_from_cache": "all (the fitted model reused)" if reused
