@@ -335,14 +335,15 @@ def _panel_title(lane: Lane) -> str:
 
 def _combination(weights: np.ndarray, names: list[str]) -> str:
     """``w·φ`` written out, e.g. ``q1(k-1) − q1(k-2)``; the constant entry ``1`` as its
-    coefficient alone (``q1(k-1) − 8.47``)."""
+    coefficient alone, to 4 digits as the structures write a threshold
+    (``q1(k-1) − 8.471``)."""
     terms = []
     for w, name in zip(weights, names, strict=True):
         if w == 0:
             continue
         sign = "−" if w < 0 else "+"
-        if name == "1":
-            terms.append(f"{sign} {abs(w):.3g}")
+        if name == "1":  # to 4 digits, as the structures write a threshold
+            terms.append(f"{sign} {abs(w):.4g}")
             continue
         size = "" if abs(w) == 1 else f"{abs(w):.3g}·"
         terms.append(f"{sign} {size}{name}")

@@ -660,7 +660,7 @@ def test_a_long_oblique_boundary_wraps_inside_the_figure(fit):
         fit.data.u_train[0], fit.data.y_train[0])
     display = SwitchingDisplay.compute(model, fit.test.u, fit.test.y)
     assert "z2 = −0.412·y1(k-1) + 0.883·y2(k-1)" in display.lanes[0].variables  # a leading minus
-    assert "− 0.138·u2(k-1) − 0.347, z2" in display.lanes[0].variables  # the constant alone
+    assert "− 0.138·u2(k-1) − 0.3471, z2" in display.lanes[0].variables  # the constant alone
     fig = display.plot(CONTEXT).figure_
     renderer = FigureCanvasAgg(fig).get_renderer()
     fig.draw(renderer)
