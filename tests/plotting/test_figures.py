@@ -264,15 +264,22 @@ def test_regions_slice_covers_every_region(fit):
         RegionsDisplay.from_estimator(model, fit.reg.phi, fit.names[:3]).figure_
 
 
+def _argmax_regions(n_regions: int, rng: np.random.Generator) -> SimpleNamespace:
+    """A fitted model as the regions figure reads it: ``n_regions`` regions of φ in R⁴,
+    each where its random linear score is the largest."""
+    coef = rng.normal(size=(n_regions, 4))
+    regions = SimpleNamespace(n_regions_=n_regions,
+                              predict=lambda x: np.argmax(x @ coef.T, axis=1),
+                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(n_regions)))
+    return SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
+
+
 def test_regions_figure_keeps_a_long_legend_inside_the_figure():
     """27 regions and their rows (as the paper's setting gives on the robot): 55 legend
     entries, drawn in columns inside the figure, and no layout warning."""
     rng = np.random.default_rng(0)
-    coef = rng.normal(size=(27, 4))
-    regions = SimpleNamespace(n_regions_=27, predict=lambda x: np.argmax(x @ coef.T, axis=1),
-                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
+    model = _argmax_regions(27, rng)
     phi = rng.normal(size=(2000, 4))
-    model = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
     fig = RegionsDisplay.from_estimator(model, phi, ["a", "b", "c", "d"], labels=np.r_[-1, rng.integers(0, 27,
                                                                                                         1999)]).figure_
     with warnings.catch_warnings():
@@ -293,11 +300,8 @@ def test_regions_figure_of_192_regions_lists_those_in_its_slice_inside_the_figur
     one entry, drawn inside the figure, its title saying how many of the 192 the slice
     crosses."""
     rng = np.random.default_rng(1)
-    coef = rng.normal(size=(192, 4))
-    regions = SimpleNamespace(n_regions_=192, predict=lambda x: np.argmax(x @ coef.T, axis=1),
-                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(192)))
+    model = _argmax_regions(192, rng)
     phi = rng.normal(size=(3000, 4))
-    model = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
     display = RegionsDisplay.from_estimator(model, phi, ["a", "b", "c", "d"],
                                             labels=rng.integers(0, 192, 3000))
     fig = display.figure_
@@ -700,10 +704,7 @@ def test_every_figure_fits_a_laptop_screen(fit, robot_like):
                                        y_names=data.y_names, u_names=data.u_names)
     assert len(outputs.regions) == 6
     rng = np.random.default_rng(0)
-    coef = rng.normal(size=(27, 4))
-    regions = SimpleNamespace(n_regions_=27, predict=lambda x: np.argmax(x @ coef.T, axis=1),
-                              halfspaces=lambda: argmax_halfspaces(coef, np.zeros(27)))
-    many = SimpleNamespace(regions_=regions, groups_=[SimpleNamespace(regions=regions)])
+    many = _argmax_regions(27, rng)
     local, step, labels = _twenty_seven_clusters()
     figs = [outputs.plot(CONTEXT).figure_,
             RegionsDisplay.from_estimator(many, rng.normal(size=(2000, 4)), ["a", "b", "c", "d"],
