@@ -60,8 +60,8 @@ def shown_params(model) -> tuple[dict, str]:
     if not isinstance(model, PWARX) or model.search is None:
         return params, ""
     searched = ("The structure search chose the model: na and nb are the largest orders it "
-                "tried, form and outputs were not used, and each output's form, orders and "
-                "regions are its structure_y1 … .")
+                "tried, form and outputs were not used, and structure_y1, structure_y2, … "
+                "give each output's form, orders and regions.")
     if any(g.steps for g in model.groups_):
         return params, searched
     steps = tuple(model.step_objects())
