@@ -33,6 +33,7 @@ from ...plotting import (
     context_title,
 )
 from ...pwa import PWARX
+from ...pwa.output_error import numbered
 from ...pwa.search import SEARCH_LOG
 from ...regressors import build_regressors
 from ..caches import SignedMemory, versions
@@ -384,11 +385,9 @@ def model_output(context: dg.AssetExecutionContext, settings: PipelineSettings,
     fit = getattr(model, "structure_fit_", None)
     if fit is not None:
         # numbered from 1, as the search's report numbers them (the library's are indices)
-        held, n = fit.validation_experiments, len(data.u_train)
-        found["validation_experiments"] = (
-            "none: one record, split in time" if not held
-            else f"{held[0] + 1} of {n}" if len(held) == 1
-            else f"{held[0] + 1}–{held[-1] + 1} of {n}")
+        held = fit.validation_experiments
+        found["validation_experiments"] = numbered(held, len(data.u_train)) if held \
+            else "none: one record, split in time"
         kinds = {k for costs in fit.validation_cost.values() for k in costs}
         if kinds:
             costs = pd.DataFrame({kind: [fit.validation_cost[j].get(kind, float("nan"))

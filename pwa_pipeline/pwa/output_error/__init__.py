@@ -39,11 +39,11 @@ J_w (`objective`), Levenberg–Marquardt on them (`solver`) and the step object
 (`estimator`).
 """
 
-from .estimator import VALIDATION_FRACTION, OutputErrorRefinement, held_out
+from .estimator import VALIDATION_FRACTION, OutputErrorRefinement, held_out, numbered
 from .objective import OneStepError, RefinementErrors
 from .simulator import FreeRuns, OutputFreeRuns
 from .solver import OutputErrorResult, levenberg_marquardt, refine_output_error, refine_outputs
 
 __all__ = ["VALIDATION_FRACTION", "FreeRuns", "OneStepError", "OutputErrorRefinement",
-           "OutputErrorResult", "OutputFreeRuns", "RefinementErrors", "held_out",
+           "OutputErrorResult", "OutputFreeRuns", "RefinementErrors", "held_out", "numbered",
            "levenberg_marquardt", "refine_output_error", "refine_outputs"]

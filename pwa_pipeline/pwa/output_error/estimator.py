@@ -21,6 +21,14 @@ def held_out(n: int, fraction: float) -> int:
     return min(max(1, round(fraction * n)), n - 1) if fraction > 0 and n >= 2 else 0
 
 
+def numbered(indices: list[int], n: int) -> str:
+    """Held-out experiments (``indices``: consecutive, 0-based) as a user counts them, from
+    1: ``"4 of 4"``, ``"54–66 of 66"``: what the search's report and the model's page
+    say."""
+    first, last = indices[0] + 1, indices[-1] + 1
+    return f"{first} of {n}" if first == last else f"{first}–{last} of {n}"
+
+
 class OutputErrorRefinement(BaseEstimator):
     """Simulation-error refinement as a step object (`pwa_pipeline.pwa.output_error`).
 

@@ -77,7 +77,7 @@ from ...regressors import build_regressors
 from ...scoring.evaluation import WARMUP
 from ..kernels.free_run import pack_regions, region_free_run
 from ..limits import all_bounds, has_limits
-from ..output_error import OutputErrorRefinement, held_out, refine_outputs
+from ..output_error import OutputErrorRefinement, held_out, numbered, refine_outputs
 from ..output_error.simulator import FreeRuns
 from ..partitions import SignRegions
 from ..structure_fit import StructureFit, clustered_models
@@ -269,9 +269,9 @@ def split_experiments(experiments: list, fraction: float, min_samples: int
     n = len(experiments)
     if n >= 2:
         n_val = held_out(n, fraction)
-        which = f"experiment {n} of {n}" if n_val == 1 else \
-            f"experiments {n - n_val + 1}–{n} of {n}"
-        return experiments[:n - n_val], experiments[n - n_val:], f"{which} held out"
+        return (experiments[:n - n_val], experiments[n - n_val:],
+                f"experiment{'s' if n_val > 1 else ''} "
+                f"{numbered(list(range(n - n_val, n)), n)} held out")
     u, y = experiments[0]
     cut = int(round(len(y) * (1 - fraction)))
     if cut < min_samples or len(y) - cut < min_samples:
