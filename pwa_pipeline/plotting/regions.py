@@ -145,13 +145,13 @@ class RegionsDisplay:
             raise ValueError(f"{len(names)} names for {self.d} regressors")
         units = units or {}
         s, labels = self.n_regions, self.labels
+        kinds, in_slice = np.unique(labels), np.unique(self.z)
         # every region and every sub-model's rows when they fit in _LEGEND_COLUMNS columns;
         # past that (a search's model of several groups has the product of their regions,
         # e.g. 192) the regions the slice shows, and the rows in one entry
-        listed = s + np.unique(labels).size <= _LEGEND_COLUMNS * _LEGEND_ROWS
-        shown = np.arange(s) if listed else np.unique(self.z)[:_LEGEND_COLUMNS * _LEGEND_ROWS
-                                                                - 1]
-        columns = -(-(shown.size + (np.unique(labels).size if listed else 1)) // _LEGEND_ROWS)
+        listed = s + kinds.size <= _LEGEND_COLUMNS * _LEGEND_ROWS
+        shown = np.arange(s) if listed else in_slice[:_LEGEND_COLUMNS * _LEGEND_ROWS - 1]
+        columns = -(-(shown.size + (kinds.size if listed else 1)) // _LEGEND_ROWS)
         fig = figure(min(7.4 + 1.3 * (columns - 1), MAX_WIDTH), 5.2)
         ax = fig.subplots()
         ax.contourf(self.gx, self.gy, self.z, levels=np.arange(s + 1) - 0.5,
@@ -159,7 +159,7 @@ class RegionsDisplay:
         from matplotlib.patches import Patch
 
         handles = [Patch(color=colour(r), alpha=0.4, label=f"H{r + 1}") for r in shown]
-        for c in np.unique(labels):
+        for c in kinds:
             at = labels == c
             dots = ax.scatter(self.points[at, 0], self.points[at, 1], s=6, color=colour(c),
                               lw=0.2, edgecolor="black", alpha=0.8,
@@ -176,8 +176,8 @@ class RegionsDisplay:
         ax.set_ylabel(with_unit(names[self.j], units))
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
                   frameon=False, ncols=columns,
-                  title=None if listed else f"{np.unique(self.z).size} of {s} regions\n"
-                                            f"in this slice", title_fontsize=8)
+                  title=None if listed else f"{in_slice.size} of {s} regions\nin this slice",
+                  title_fontsize=8)
         others = "others at their median" if self.d > 2 else "no other regressors"
         suptitle(fig, context, f"Step 6: regions H_i in the slice ({names[self.i]}, {names[self.j]}), "
                                 f"{others}", fontsize=10)

@@ -347,9 +347,10 @@ def _combination(weights: np.ndarray, names: list[str]) -> str:
             continue
         size = "" if abs(w) == 1 else f"{abs(w):.3g}·"
         terms.append(f"{sign} {size}{name}")
-    text = " ".join(terms)
-    return text[2:] if text.startswith("+ ") else "−" + text[2:] if text.startswith("− ") \
-        else text
+    text = " ".join(terms)  # the first term's sign joined to it: "x", "−x", not "+ x", "− x"
+    if text.startswith(("+ ", "− ")):
+        return text[2:] if text[0] == "+" else "−" + text[2:]
+    return text
 
 
 def _sign_labels(n_regions: int) -> list[str]:
