@@ -27,16 +27,8 @@ import itertools
 import pandas as pd
 
 from benchmarks._common import RESULTS, write_table
-from benchmarks.machines import (
-    N_SAMPLES,
-    N_TEST,
-    N_TRAIN,
-    ORDERS,
-    chosen,
-    fitted,
-    free_run,
-)
-from pwa_pipeline import PWARX, LinearARX
+from benchmarks.machines import N_SAMPLES, N_TEST, N_TRAIN, best_linear, fitted, free_run
+from pwa_pipeline import PWARX
 from pwa_pipeline.datasets.machines import MACHINES, make_machine
 
 SEEDS = range(3)
@@ -67,9 +59,7 @@ def one_record() -> None:
                          "free_run_nrmse": free_run(model, data.u_test, data.y_test)})
             print(rows[-1], flush=True)
 
-        (na, nb), _ = chosen(lambda o: LinearARX(na=o[0], nb=o[1], affine=True),
-                             list(itertools.product(ORDERS, ORDERS)), u, y)
-        record(LINEAR, *fitted(LinearARX(na=na, nb=nb, affine=True), u, y))
+        record(LINEAR, *best_linear(u, y)[:2])
         for name, options in ONE_RECORD_VARIANTS.items():
             record(f"PWARX.auto(2, 2) {name}",
                    *fitted(PWARX.auto(na=2, nb=2, **options), u, y))
